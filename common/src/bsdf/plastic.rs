@@ -1,0 +1,220 @@
+//! Plastics: a diffuse base under a dielectric coating, as Mitsuba's `plastic` (smooth coating,
+//! a delta specular lobe) and `roughplastic` (microfacet coating). The diffuse part accounts
+//! for the coating's transmittance on the way in and out and for internal reflection
+//! (`nonlinear` = false: the internal-reflection sum uses the average internal reflectance).
+
+use super::dielectric::RoughDielectric;
+use super::fresnel::{fresnel_diffuse_reflectance, fresnel_dielectric, reflect, reflect_z, refract};
+use super::microfacet::Microfacet;
+use super::{BsdfSample, TransportMode};
+use crate::math::{INV_PI, Rgb, mean, warp};
+use glam::{Vec2, Vec3};
+
+/// Smooth plastic.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plastic {
+    /// Coating index relative to the exterior.
+    pub eta: f32,
+    /// Albedo of the base.
+    pub diffuse_reflectance: Rgb,
+    /// Multiplier on the coating reflection.
+    pub specular_reflectance: Rgb,
+    /// Use Mitsuba's nonlinear internal scattering (colour-dependent saturation).
+    pub nonlinear: bool,
+    fdr_int: f32,
+    specular_sampling_weight: f32,
+}
+
+impl Plastic {
+    /// A smooth plastic; `specular_reflectance` of `None` means 1 (as in Mitsuba, it then does
+    /// not steer the lobe choice).
+    pub fn new(eta: f32, diffuse_reflectance: Rgb, specular_reflectance: Option<Rgb>, nonlinear: bool) -> Self {
+        let s_mean = specular_reflectance.map_or(1.0, mean);
+        Plastic {
+            eta,
+            diffuse_reflectance,
+            specular_reflectance: specular_reflectance.unwrap_or(Rgb::ONE),
+            nonlinear,
+            fdr_int: fresnel_diffuse_reflectance(1.0 / eta),
+            specular_sampling_weight: s_mean / (mean(diffuse_reflectance) + s_mean),
+        }
+    }
+
+    fn prob_specular(&self, f_i: f32) -> f32 {
+        let ps = f_i * self.specular_sampling_weight;
+        let pd = (1.0 - f_i) * (1.0 - self.specular_sampling_weight);
+        ps / (ps + pd)
+    }
+
+    fn diffuse_value(&self, f_i: f32, f_o: f32) -> Rgb {
+        let r = self.diffuse_reflectance;
+        let denom = if self.nonlinear { Rgb::ONE - r * self.fdr_int } else { Rgb::splat(1.0 - self.fdr_int) };
+        r / denom * ((1.0 - f_i) * (1.0 - f_o) * INV_PI / (self.eta * self.eta))
+    }
+
+    pub(super) fn sample(&self, wo: Vec3, uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let f_i = fresnel_dielectric(wo.z, self.eta).0;
+        let p_spec = self.prob_specular(f_i);
+        if uc < p_spec {
+            return Some(BsdfSample::delta(reflect_z(wo), self.specular_reflectance * (f_i / p_spec), p_spec, 1.0, false));
+        }
+        let wi = warp::square_to_cosine_hemisphere(u);
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let f_o = fresnel_dielectric(wi.z, self.eta).0;
+        BsdfSample::smooth(wo, wi, self.diffuse_value(f_i, f_o), (1.0 - p_spec) * warp::cosine_hemisphere_pdf(wi), 1.0)
+    }
+
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        self.diffuse_value(fresnel_dielectric(wo.z, self.eta).0, fresnel_dielectric(wi.z, self.eta).0)
+    }
+
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        (1.0 - self.prob_specular(fresnel_dielectric(wo.z, self.eta).0)) * warp::cosine_hemisphere_pdf(wi)
+    }
+}
+
+/// Resolution of the coating-transmittance table over cos θ (Mitsuba uses 64 too).
+const TRANSMITTANCE_RES: usize = 64;
+
+/// Rough plastic.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RoughPlastic {
+    /// Coating microfacet distribution.
+    pub distribution: Microfacet,
+    /// Coating index relative to the exterior.
+    pub eta: f32,
+    /// Albedo of the base.
+    pub diffuse_reflectance: Rgb,
+    /// Multiplier on the coating reflection.
+    pub specular_reflectance: Rgb,
+    /// Use nonlinear internal scattering.
+    pub nonlinear: bool,
+    specular_sampling_weight: f32,
+    internal_reflectance: f32,
+    external_transmittance: Vec<f32>,
+}
+
+impl RoughPlastic {
+    /// A rough plastic; precomputes the coating's transmittance table by quadrature.
+    pub fn new(distribution: Microfacet, eta: f32, diffuse_reflectance: Rgb, specular_reflectance: Option<Rgb>, nonlinear: bool) -> Self {
+        let s_mean = specular_reflectance.map_or(1.0, mean);
+        let outside = RoughDielectric { distribution, eta, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE };
+        let inside = RoughDielectric { distribution, eta: 1.0 / eta, ..outside.clone() };
+        let external_transmittance = (0..TRANSMITTANCE_RES)
+            .map(|i| coating_albedo(&outside, (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6), true))
+            .collect();
+        // 2 ∫ R(μ) μ dμ from inside, by the midpoint rule
+        let n = TRANSMITTANCE_RES;
+        let internal_reflectance = (0..n).map(|i| { let mu = (i as f32 + 0.5) / n as f32; 2.0 * coating_albedo(&inside, mu, false) * mu / n as f32 }).sum();
+        RoughPlastic {
+            distribution,
+            eta,
+            diffuse_reflectance,
+            specular_reflectance: specular_reflectance.unwrap_or(Rgb::ONE),
+            nonlinear,
+            specular_sampling_weight: s_mean / (mean(diffuse_reflectance) + s_mean),
+            internal_reflectance,
+            external_transmittance,
+        }
+    }
+
+    fn transmittance(&self, cos_theta: f32) -> f32 {
+        let x = cos_theta.clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
+        let i = (x as usize).min(TRANSMITTANCE_RES - 2);
+        let t = x - i as f32;
+        self.external_transmittance[i] * (1.0 - t) + self.external_transmittance[i + 1] * t
+    }
+
+    fn prob_specular(&self, cos_o: f32) -> f32 {
+        let t_i = self.transmittance(cos_o);
+        let ps = (1.0 - t_i) * self.specular_sampling_weight;
+        let pd = t_i * (1.0 - self.specular_sampling_weight);
+        ps / (ps + pd)
+    }
+
+    pub(super) fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        if wo.z <= 0.0 {
+            return None;
+        }
+        let wi = if uc < self.prob_specular(wo.z) {
+            reflect(wo, self.distribution.sample(wo, u))
+        } else {
+            warp::square_to_cosine_hemisphere(u)
+        };
+        if wi.z <= 0.0 {
+            return None;
+        }
+        BsdfSample::smooth(wo, wi, self.eval(wo, wi, mode), self.pdf(wo, wi), 1.0)
+    }
+
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let mut value = Rgb::ZERO;
+        if let Some(h) = (wo + wi).try_normalize() {
+            let d = self.distribution.d(h);
+            let f = fresnel_dielectric(wo.dot(h), self.eta).0;
+            let g = self.distribution.g(wo, wi, h);
+            value += self.specular_reflectance * (f * d * g / (4.0 * wo.z * wi.z));
+        }
+        let r = self.diffuse_reflectance;
+        let denom = if self.nonlinear { Rgb::ONE - r * self.internal_reflectance } else { Rgb::splat(1.0 - self.internal_reflectance) };
+        value + r / denom * (INV_PI / (self.eta * self.eta) * self.transmittance(wo.z) * self.transmittance(wi.z))
+    }
+
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let p_spec = self.prob_specular(wo.z);
+        let spec = match (wo + wi).try_normalize() {
+            Some(h) => self.distribution.pdf(wo, h) / (4.0 * wo.dot(h)),
+            None => 0.0,
+        };
+        p_spec * spec + (1.0 - p_spec) * warp::cosine_hemisphere_pdf(wi)
+    }
+}
+
+/// Fraction of light arriving at `cos_theta` that a rough interface transmits (`transmitted`)
+/// or reflects, by deterministic quadrature over the microfacet sampler's unit square.
+fn coating_albedo(interface: &RoughDielectric, cos_theta: f32, transmitted: bool) -> f32 {
+    let wo = Vec3::new((1.0 - cos_theta * cos_theta).max(0.0).sqrt(), 0.0, cos_theta);
+    let n = 48;
+    let mut sum = 0.0f64;
+    for i in 0..n {
+        for j in 0..n {
+            let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+            let m = interface.distribution.sample(wo, u);
+            let pdf_m = interface.distribution.pdf(wo, m);
+            if pdf_m <= 0.0 {
+                continue;
+            }
+            let f = fresnel_dielectric(wo.dot(m), interface.eta).0;
+            let wi = if transmitted { refract(wo, m, interface.eta).map(|(w, _)| w) } else { Some(reflect(wo, m)) };
+            let Some(wi) = wi else { continue };
+            if (wi.z * wo.z < 0.0) != transmitted || wi.z == 0.0 {
+                continue;
+            }
+            let pdf = interface.pdf(wo, wi);
+            let lobe_prob = if transmitted { 1.0 - f } else { f };
+            if pdf > 0.0 && lobe_prob > 0.0 {
+                // E[f |cos| / pdf_lobe] where pdf_lobe excludes the lobe-choice probability
+                let value = interface.eval(wo, wi, TransportMode::Importance).x * wi.z.abs() / (pdf / lobe_prob);
+                sum += (value * lobe_prob) as f64;
+            }
+        }
+    }
+    (sum / (n * n) as f64).clamp(0.0, 1.0) as f32
+}

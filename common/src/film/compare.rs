@@ -1,0 +1,146 @@
+//! Statistical comparison of a render with a reference image: a port of the shared
+//! `tools/exrcompare.py` so that tests and benchmarks apply the same method without Python.
+//!
+//! * `bias`: relative difference of the image means per channel;
+//! * `relmse`: mean over pixels and channels of (x − ref)² / (ref² + 1e-4), with the top 0.1 %
+//!   of per-pixel errors dropped;
+//! * with a second independent render: `noise_relmse` (half the relMSE between the two renders,
+//!   the part of `relmse` that noise explains), `ratio` = relmse / noise_relmse, and `bias_z`,
+//!   the bias of the mean of both renders in units of its standard error (including the
+//!   reference's own error of the mean).
+
+/// The outcome of [`compare`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Comparison {
+    /// Mean of each channel of the render (of both renders when two are given).
+    pub mean_rgb: [f64; 3],
+    /// Mean of each channel of the reference.
+    pub reference_mean_rgb: [f64; 3],
+    /// Relative bias of the mean per channel.
+    pub bias: [f64; 3],
+    /// relMSE of the first render against the reference.
+    pub relmse: f64,
+    /// Half the relMSE between the two renders.
+    pub noise_relmse: Option<f64>,
+    /// relmse / noise_relmse.
+    pub ratio: Option<f64>,
+    /// Bias in standard errors per channel.
+    pub bias_z: Option<[f64; 3]>,
+    /// Non-finite values in the render(s).
+    pub non_finite: usize,
+}
+
+impl Comparison {
+    /// `exrcompare.py`'s bias check: each channel has |bias| ≤ `max_bias` or |z| ≤ 4.
+    pub fn bias_ok(&self, max_bias: f64) -> bool {
+        let z = self.bias_z.unwrap_or([f64::INFINITY; 3]);
+        (0..3).all(|c| self.bias[c].abs() <= max_bias || z[c].abs() <= 4.0)
+    }
+}
+
+/// relMSE with the top `drop` fraction of per-pixel errors removed (numpy's linear quantile).
+pub fn relmse(a: &[[f32; 3]], reference: &[[f32; 3]], drop: f64) -> f64 {
+    let mut err: Vec<f64> = a
+        .iter()
+        .zip(reference)
+        .map(|(x, r)| (0..3).map(|c| { let (x, r) = (x[c] as f64, r[c] as f64); (x - r) * (x - r) / (r * r + 1e-4) }).sum::<f64>() / 3.0)
+        .collect();
+    if drop > 0.0 && err.len() > 1000 {
+        let mut sorted = err.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let pos = (1.0 - drop) * (sorted.len() - 1) as f64;
+        let (lo, frac) = (pos.floor() as usize, pos - pos.floor());
+        let cut = sorted[lo] + (sorted[(lo + 1).min(sorted.len() - 1)] - sorted[lo]) * frac;
+        err.retain(|&e| e <= cut);
+    }
+    err.iter().sum::<f64>() / err.len().max(1) as f64
+}
+
+fn channel_means(img: &[[f32; 3]]) -> [f64; 3] {
+    let mut m = [0.0f64; 3];
+    for p in img {
+        for c in 0..3 {
+            m[c] += p[c] as f64;
+        }
+    }
+    m.map(|v| v / img.len().max(1) as f64)
+}
+
+/// Compares `a` (and optionally an independent second render `b`) with `reference`;
+/// `reference_rel_err` is the relative standard error of the reference's image mean.
+pub fn compare(a: &[[f32; 3]], reference: &[[f32; 3]], b: Option<&[[f32; 3]]>, reference_rel_err: f64) -> Comparison {
+    assert_eq!(a.len(), reference.len(), "invariant: images of equal size");
+    let non_finite = a.iter().chain(b.unwrap_or(&[])).flatten().filter(|v| !v.is_finite()).count();
+    let ref_mean = channel_means(reference);
+    let mean_a = channel_means(a);
+    let mut out = Comparison {
+        mean_rgb: mean_a,
+        reference_mean_rgb: ref_mean,
+        bias: std::array::from_fn(|c| (mean_a[c] - ref_mean[c]) / ref_mean[c].max(1e-8)),
+        relmse: relmse(a, reference, 0.001),
+        noise_relmse: None,
+        ratio: None,
+        bias_z: None,
+        non_finite,
+    };
+    if let Some(b) = b {
+        let noise = relmse(a, b, 0.001) / 2.0;
+        out.noise_relmse = Some(noise);
+        out.ratio = Some(out.relmse / noise.max(1e-12));
+        let p = a.len() as f64;
+        let mut var_mean = [0.0f64; 3];
+        let mut both_mean = [0.0f64; 3];
+        for (x, y) in a.iter().zip(b) {
+            for c in 0..3 {
+                let (x, y) = (x[c] as f64, y[c] as f64);
+                var_mean[c] += (x - y) * (x - y) / 2.0;
+                both_mean[c] += (x + y) / 2.0;
+            }
+        }
+        let mut z = [0.0f64; 3];
+        for c in 0..3 {
+            let v = var_mean[c] / (p * p) / 2.0 + (reference_rel_err * ref_mean[c]).powi(2);
+            let diff = both_mean[c] / p - ref_mean[c];
+            out.bias[c] = diff / ref_mean[c].max(1e-8);
+            out.mean_rgb[c] = both_mean[c] / p;
+            z[c] = diff / v.max(1e-30).sqrt();
+        }
+        out.bias_z = Some(z);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::Sampler;
+
+    fn noisy(reference: &[[f32; 3]], seed: u64, sigma: f32, offset: f32) -> Vec<[f32; 3]> {
+        reference.iter().enumerate().map(|(i, r)| {
+            let mut s = Sampler::for_pixel(seed, i as u32, 0);
+            r.map(|v| {
+                // sum of 12 uniforms: approximately normal, unit variance
+                let g: f32 = (0..12).map(|_| s.next_1d()).sum::<f32>() - 6.0;
+                v * (1.0 + offset) + sigma * v * g
+            })
+        }).collect()
+    }
+
+    #[test]
+    fn unbiased_noise_gives_ratio_near_one_and_small_z() {
+        let reference: Vec<[f32; 3]> = (0..64 * 64).map(|i| [0.2 + (i % 7) as f32 * 0.1, 0.5, 0.3]).collect();
+        let (a, b) = (noisy(&reference, 1, 0.1, 0.0), noisy(&reference, 2, 0.1, 0.0));
+        let c = compare(&a, &reference, Some(&b), 0.0);
+        assert!((c.ratio.unwrap() - 1.0).abs() < 0.1, "{c:?}");
+        assert!(c.bias_ok(0.0), "{c:?}");
+    }
+
+    #[test]
+    fn a_two_percent_bias_is_detected() {
+        let reference: Vec<[f32; 3]> = (0..64 * 64).map(|i| [0.2 + (i % 7) as f32 * 0.1, 0.5, 0.3]).collect();
+        let (a, b) = (noisy(&reference, 1, 0.05, 0.02), noisy(&reference, 2, 0.05, 0.02));
+        let c = compare(&a, &reference, Some(&b), 0.0);
+        assert!(!c.bias_ok(0.01), "{c:?}");
+        assert!(c.ratio.unwrap() > 1.1, "{c:?}");
+    }
+}

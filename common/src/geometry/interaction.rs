@@ -1,0 +1,44 @@
+//! The record of a ray hitting a surface: position, normals, shading frame and what was hit.
+
+use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::math::{Frame, SHADOW_EPSILON};
+use glam::Vec3;
+
+/// A point on a surface as seen by an incoming ray.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction {
+    /// Position.
+    pub p: Vec3,
+    /// Distance along the ray that found it.
+    pub t: f32,
+    /// Geometric normal (of the triangle or sphere, after `flip_normals`).
+    pub n_geo: Vec3,
+    /// Shading frame; its normal is the interpolated shading normal.
+    pub frame: Frame,
+    /// Unit direction back towards the ray origin, in world space.
+    pub wo: Vec3,
+    /// Index of the shape that was hit.
+    pub shape: u32,
+    /// Index of the primitive within the shape (triangle index; 0 for spheres).
+    pub prim: u32,
+}
+
+impl SurfaceInteraction {
+    /// A ray leaving this point in direction `d`, offset off the surface.
+    #[inline]
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        Ray::new(offset_ray_origin(self.p, self.n_geo, d), d)
+    }
+
+    /// A shadow ray towards `target`, shortened so that it stops just before it. Returns the ray
+    /// and the unshortened distance.
+    #[inline]
+    pub fn spawn_ray_to(&self, target: Vec3) -> (Ray, f32) {
+        let delta = target - self.p;
+        let dist = delta.length();
+        let d = delta / dist;
+        let o = offset_ray_origin(self.p, self.n_geo, d);
+        let len = (target - o).length();
+        (Ray { o, d, tmax: len * (1.0 - SHADOW_EPSILON) }, dist)
+    }
+}

@@ -1,0 +1,193 @@
+//! `pt`: unidirectional path tracing with next-event estimation, matching Mitsuba's `path`.
+//!
+//! Parameters (from the scene's `<integrator type="path">`, or the command line):
+//! * `max_depth`: longest path in segments counting the camera ray (1 = emitters seen
+//!   directly, 2 = direct lighting; unlimited when absent or -1);
+//! * `rr_depth`: from this depth on, Russian roulette continues a path with probability
+//!   min(max channel of throughput · η², 0.95);
+//! * `hide_emitters`: camera rays pass through emitters and see no environment.
+//!
+//! Light sampling and BSDF sampling are combined with the power heuristic, as in Mitsuba;
+//! light sampling happens only at BSDFs with a non-delta lobe, and an emitter reached right
+//! after a delta bounce counts fully. Use it for anything that light reaches easily;
+//! caustics and light through small openings converge slowly (bidirectional methods help).
+
+use super::{Integrator, PathSettings, TileRequest};
+use crate::bsdf::TransportMode;
+use crate::film::TileAccum;
+use crate::geometry::{Ray, SurfaceInteraction};
+use crate::light::Light;
+use crate::math::{Rgb, max_component};
+use crate::sampler::Sampler;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+
+/// The path tracer.
+#[derive(Clone, Debug)]
+pub struct PathTracer {
+    /// Depth and emitter settings.
+    pub settings: PathSettings,
+}
+
+/// Power heuristic with exponent 2 for one sample from each of two strategies.
+#[inline]
+fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
+    let (a, b) = (pdf_a * pdf_a, pdf_b * pdf_b);
+    let w = a / (a + b);
+    if w.is_finite() { w } else { 0.0 }
+}
+
+impl PathTracer {
+    /// Radiance arriving along `ray` (a camera ray).
+    pub fn li(&self, scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Rgb {
+        let s = self.settings;
+        if s.max_depth == 0 {
+            return Rgb::ZERO;
+        }
+        let ctx = scene.light_context();
+        let mut ray = ray;
+        let mut result = Rgb::ZERO;
+        let mut throughput = Rgb::ONE;
+        let mut eta = 1.0f32;
+        let mut depth = 0u32;
+        let mut prev_p = ray.o;
+        let mut prev_pdf = 1.0f32;
+        let mut prev_delta = true;
+        let mut si = scene.intersect(&ray);
+        if s.hide_emitters {
+            // camera rays pass through emitting surfaces
+            while let Some(hit) = si.filter(|h| scene.shapes[h.shape as usize].light.is_some()) {
+                ray = hit.spawn_ray(ray.d);
+                si = scene.intersect(&ray);
+            }
+        }
+        loop {
+            // ---- emission found by the previous bounce (or the camera ray) ----
+            let emitted = match &si {
+                None if !(s.hide_emitters && depth == 0) => self.environment(scene, ray.d, prev_p, prev_pdf, prev_delta),
+                None => Rgb::ZERO,
+                Some(hit) => self.surface_emission(scene, hit, prev_p, prev_pdf, prev_delta),
+            };
+            result += throughput * emitted;
+            let Some(hit) = si else { break };
+            if depth + 1 >= s.max_depth {
+                break;
+            }
+            let material = &scene.materials[scene.shapes[hit.shape as usize].material as usize];
+            let wo = hit.frame.to_local(hit.wo);
+
+            // ---- next-event estimation ----
+            if material.has_smooth_lobe() {
+                let u_light = sampler.next_1d();
+                let u_pos = sampler.next_2d();
+                if let Some(contrib) = self.next_event(scene, &ctx, &hit, material, wo, u_light, u_pos) {
+                    result += throughput * contrib;
+                }
+            }
+
+            // ---- BSDF sampling ----
+            let (uc, u) = (sampler.next_1d(), sampler.next_2d());
+            let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            throughput *= bs.weight;
+            eta *= bs.eta;
+            prev_p = hit.p;
+            prev_pdf = bs.pdf;
+            prev_delta = bs.delta;
+            ray = hit.spawn_ray(hit.frame.to_world(bs.wi));
+            depth += 1;
+
+            // ---- Russian roulette ----
+            let t_max = max_component(throughput);
+            if depth >= s.rr_depth {
+                let q = (t_max * eta * eta).min(0.95);
+                if sampler.next_1d() >= q {
+                    break;
+                }
+                throughput /= q;
+            }
+            if t_max <= 0.0 || !throughput.is_finite() {
+                break;
+            }
+            si = scene.intersect(&ray);
+        }
+        result
+    }
+
+    /// Environment radiance for an escaped ray, MIS-weighted against light sampling.
+    fn environment(&self, scene: &Scene, d: Vec3, prev_p: Vec3, prev_pdf: f32, prev_delta: bool) -> Rgb {
+        let mut total = Rgb::ZERO;
+        for &i in &scene.infinite_lights {
+            let light = &scene.lights[i as usize];
+            let Light::Constant { radiance } = light else { continue };
+            let w = if prev_delta { 1.0 } else {
+                let pdf_light = scene.light_sampler.pmf(i as usize) * light.pdf_direct(&scene.light_context(), prev_p, prev_p + d, -d);
+                power_heuristic(prev_pdf, pdf_light)
+            };
+            total += *radiance * w;
+        }
+        total
+    }
+
+    /// Radiance emitted by a surface towards the path, MIS-weighted against light sampling.
+    fn surface_emission(&self, scene: &Scene, hit: &SurfaceInteraction, prev_p: Vec3, prev_pdf: f32, prev_delta: bool) -> Rgb {
+        let Some(li) = scene.shapes[hit.shape as usize].light else { return Rgb::ZERO };
+        let light = &scene.lights[li as usize];
+        let Light::Area { radiance, .. } = light else { return Rgb::ZERO };
+        let le = Light::eval_area(*radiance, hit.frame.n, hit.wo);
+        if le == Rgb::ZERO {
+            return le;
+        }
+        if prev_delta {
+            return le;
+        }
+        let pdf_light = scene.light_sampler.pmf(li as usize) * light.pdf_direct(&scene.light_context(), prev_p, hit.p, hit.n_geo);
+        le * power_heuristic(prev_pdf, pdf_light)
+    }
+
+    /// One light sample at `hit`: unoccluded radiance × BSDF × cosine / pdf, MIS-weighted.
+    #[allow(clippy::too_many_arguments)]
+    fn next_event(&self, scene: &Scene, ctx: &crate::light::LightContext, hit: &SurfaceInteraction, material: &crate::bsdf::Material, wo: Vec3, u_light: f32, u_pos: Vec2) -> Option<Rgb> {
+        let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
+        let light = &scene.lights[li];
+        let ds = light.sample_direct(ctx, hit.p, u_pos)?;
+        if ds.radiance == Rgb::ZERO {
+            return None;
+        }
+        let wi = hit.frame.to_local(ds.wi);
+        let f = material.eval(wo, wi, TransportMode::Radiance);
+        if f == Rgb::ZERO {
+            return None;
+        }
+        let shadow = if ds.dist.is_finite() { hit.spawn_ray_to(ds.p).0 } else { hit.spawn_ray(ds.wi) };
+        if scene.occluded(&shadow) {
+            return None;
+        }
+        let pdf_light = pmf * ds.pdf;
+        let w = if ds.delta { 1.0 } else { power_heuristic(pdf_light, material.pdf(wo, wi)) };
+        Some(f * ds.radiance * (wi.z.abs() * w / pdf_light))
+    }
+}
+
+impl Integrator for PathTracer {
+    fn name(&self) -> &'static str {
+        "pt"
+    }
+
+    fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
+        let r = tile.rect;
+        let width = scene.camera.width;
+        for y in r.y0..r.y1 {
+            for x in r.x0..r.x1 {
+                let local = ((y - r.y0) * (r.x1 - r.x0) + (x - r.x0)) as usize;
+                let pixel = y * width + x;
+                for s in tile.samples.clone() {
+                    let mut sampler = Sampler::for_pixel(tile.seed, pixel, s);
+                    let jitter = sampler.next_2d();
+                    let ray = scene.camera.generate_ray(Vec2::new(x as f32, y as f32) + jitter);
+                    let l = self.li(scene, ray, &mut sampler);
+                    accum.add(local, l);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,25 @@
+//! Tessera's renderer library: Mitsuba 3 scene loading, geometry and BVH, BSDFs, lights,
+//! camera, deterministic samplers, film with EXR/PNG output, and the integrators.
+//!
+//! ```no_run
+//! use tessera_common::{integrator::{PathTracer, PathSettings}, render::{render, Budget, RenderOptions}, scene::Scene};
+//! let scene = Scene::load(std::path::Path::new("scenes/cornell-box/scene.xml")).unwrap();
+//! let pt = PathTracer { settings: PathSettings::from_scene(&scene, None) };
+//! let opts = RenderOptions { budget: Budget::Samples(16), seed: 1, threads: 0, tile_size: 32 };
+//! let out = render(&scene, &pt, &opts, &|_, _| {}).unwrap();
+//! assert_eq!(out.film.total_samples(), 16 * 256 * 256);
+//! ```
+#![deny(missing_docs)]
+
+pub mod bsdf;
+pub mod camera;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod math;
+pub mod render;
+pub mod sampler;
+pub mod scene;
+#[cfg(any(test, feature = "test-util"))]
+pub mod testing;

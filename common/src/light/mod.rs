@@ -1,0 +1,239 @@
+//! Emitters: Mitsuba's `area` (on any shape), `point` and `constant`.
+//!
+//! Each light offers direct-lighting samples towards a reference point (for next-event
+//! estimation) with the matching solid-angle pdf, and emission samples (for light paths) with
+//! their position pdf (area measure) and direction pdf (solid angle).
+
+pub mod sampler;
+
+use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};
+use crate::scene::shape::{Mesh, Shape, ShapeGeometry, SurfacePoint};
+use glam::{Vec2, Vec3};
+
+pub use sampler::LightSampler;
+
+/// The closed set of light types.
+#[derive(Clone, Debug)]
+pub enum Light {
+    /// Emitting surface of a shape, one-sided (emits to the side its normal points to).
+    Area {
+        /// Index of the shape.
+        shape: u32,
+        /// Emitted radiance.
+        radiance: Rgb,
+    },
+    /// Isotropic point light.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Radiant intensity (W/sr).
+        intensity: Rgb,
+    },
+    /// Constant radiance arriving from every direction at infinity.
+    Constant {
+        /// Radiance.
+        radiance: Rgb,
+    },
+}
+
+/// A direct-lighting sample.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectSample {
+    /// Point on the light (for infinite lights: unused, see `dist`).
+    pub p: Vec3,
+    /// Surface normal at `p` (zero for point and infinite lights).
+    pub n: Vec3,
+    /// Unit direction from the reference point to the light.
+    pub wi: Vec3,
+    /// Distance to `p` (infinite for infinite lights).
+    pub dist: f32,
+    /// Radiance arriving at the reference point (before visibility).
+    pub radiance: Rgb,
+    /// Solid-angle pdf at the reference point (1 for delta lights).
+    pub pdf: f32,
+    /// The light is a delta light (no BSDF sampling can hit it).
+    pub delta: bool,
+}
+
+/// An emission sample: a ray leaving the light.
+#[derive(Clone, Copy, Debug)]
+pub struct EmissionSample {
+    /// Origin.
+    pub p: Vec3,
+    /// Surface normal at the origin (zero for point lights; the direction for infinite lights).
+    pub n: Vec3,
+    /// Direction of travel.
+    pub d: Vec3,
+    /// Emitted radiance along `d`.
+    pub radiance: Rgb,
+    /// Position pdf, area measure (1 for delta positions).
+    pub pdf_pos: f32,
+    /// Direction pdf, solid angle.
+    pub pdf_dir: f32,
+    /// The position is a delta distribution (point lights).
+    pub delta_pos: bool,
+}
+
+/// Scene data lights need: shapes, meshes and the bounding sphere.
+pub struct LightContext<'a> {
+    /// All shapes.
+    pub shapes: &'a [Shape],
+    /// All meshes.
+    pub meshes: &'a [Mesh],
+    /// Centre of the scene's bounding sphere.
+    pub center: Vec3,
+    /// Radius of the scene's bounding sphere.
+    pub radius: f32,
+}
+
+/// Cone of directions a sphere subtends from outside: `(1 − cos θmax, sin² θmax)`, with a
+/// Taylor expansion for tiny spheres where `1 − cos` would cancel catastrophically.
+fn sphere_cone(dist2: f32, radius: f32) -> (f32, f32) {
+    let sin2_max = radius * radius / dist2;
+    let one_minus_cos = if sin2_max < 0.000_685_23 { 0.5 * sin2_max } else { 1.0 - safe_sqrt(1.0 - sin2_max) };
+    (one_minus_cos, sin2_max)
+}
+
+impl Light {
+    /// Whether the light is a delta light (cannot be hit by rays).
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Light::Point { .. })
+    }
+
+    /// Whether the light is at infinity.
+    pub fn is_infinite(&self) -> bool {
+        matches!(self, Light::Constant { .. })
+    }
+
+    /// Radiance leaving an area light at a surface point with normal `n` in direction `w`.
+    #[inline]
+    pub fn eval_area(radiance: Rgb, n: Vec3, w: Vec3) -> Rgb {
+        if n.dot(w) > 0.0 { radiance } else { Rgb::ZERO }
+    }
+
+    /// Samples a direction from `p_ref` towards the light.
+    pub fn sample_direct(&self, ctx: &LightContext, p_ref: Vec3, u: Vec2) -> Option<DirectSample> {
+        match self {
+            Light::Point { position, intensity } => {
+                let delta = *position - p_ref;
+                let dist2 = delta.length_squared();
+                let dist = dist2.sqrt();
+                (dist > 0.0).then(|| DirectSample { p: *position, n: Vec3::ZERO, wi: delta / dist, dist, radiance: *intensity / dist2, pdf: 1.0, delta: true })
+            }
+            Light::Constant { radiance } => {
+                let wi = warp::square_to_uniform_sphere(u);
+                Some(DirectSample { p: p_ref + wi * (2.0 * ctx.radius), n: -wi, wi, dist: f32::INFINITY, radiance: *radiance, pdf: warp::uniform_sphere_pdf(), delta: false })
+            }
+            Light::Area { shape, radiance } => {
+                let shape = &ctx.shapes[*shape as usize];
+                let (sp, pdf) = match &shape.geometry {
+                    ShapeGeometry::Sphere { center, radius } if (p_ref - *center).length_squared() > radius * radius * 1.0001 => {
+                        sample_sphere_cone(p_ref, *center, *radius, shape.flip_normals, u)?
+                    }
+                    _ => {
+                        let sp = shape.sample_area(ctx.meshes, u);
+                        let d = sp.p - p_ref;
+                        let dist2 = d.length_squared();
+                        let cos = sp.n.dot(-d).abs() / dist2.sqrt();
+                        if cos <= 0.0 || dist2 == 0.0 {
+                            return None;
+                        }
+                        (sp, dist2 / (cos * shape.area))
+                    }
+                };
+                let delta = sp.p - p_ref;
+                let dist = delta.length();
+                if !(dist > 0.0) || !pdf.is_finite() || pdf <= 0.0 {
+                    return None;
+                }
+                let wi = delta / dist;
+                Some(DirectSample { p: sp.p, n: sp.n, wi, dist, radiance: Self::eval_area(*radiance, sp.n, -wi), pdf, delta: false })
+            }
+        }
+    }
+
+    /// Solid-angle pdf that [`Light::sample_direct`] from `p_ref` produces the point `p` with
+    /// normal `n` (for infinite lights: the direction `p - p_ref`).
+    pub fn pdf_direct(&self, ctx: &LightContext, p_ref: Vec3, p: Vec3, n: Vec3) -> f32 {
+        match self {
+            Light::Point { .. } => 0.0,
+            Light::Constant { .. } => warp::uniform_sphere_pdf(),
+            Light::Area { shape, .. } => {
+                let shape = &ctx.shapes[*shape as usize];
+                if let ShapeGeometry::Sphere { center, radius } = &shape.geometry {
+                    let dist2 = (p_ref - *center).length_squared();
+                    if dist2 > radius * radius * 1.0001 {
+                        return 1.0 / (2.0 * PI * sphere_cone(dist2, *radius).0);
+                    }
+                }
+                let d = p - p_ref;
+                let dist2 = d.length_squared();
+                let cos = n.dot(d).abs() / dist2.sqrt();
+                if cos <= 0.0 { 0.0 } else { dist2 / (cos * shape.area) }
+            }
+        }
+    }
+
+    /// Samples a ray leaving the light, with `u_pos` choosing the origin and `u_dir` the direction.
+    pub fn sample_emission(&self, ctx: &LightContext, u_pos: Vec2, u_dir: Vec2) -> Option<EmissionSample> {
+        match self {
+            Light::Point { position, intensity } => {
+                let d = warp::square_to_uniform_sphere(u_dir);
+                Some(EmissionSample { p: *position, n: Vec3::ZERO, d, radiance: *intensity, pdf_pos: 1.0, pdf_dir: warp::uniform_sphere_pdf(), delta_pos: true })
+            }
+            Light::Constant { radiance } => {
+                let d = -warp::square_to_uniform_sphere(u_dir);
+                let frame = Frame::from_normal(d);
+                let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
+                let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
+                Some(EmissionSample { p, n: d, d, radiance: *radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir: warp::uniform_sphere_pdf(), delta_pos: false })
+            }
+            Light::Area { shape, radiance } => {
+                let shape = &ctx.shapes[*shape as usize];
+                let sp = shape.sample_area(ctx.meshes, u_pos);
+                let local = warp::square_to_cosine_hemisphere(u_dir);
+                let d = Frame::from_normal(sp.n).to_world(local);
+                Some(EmissionSample { p: sp.p, n: sp.n, d, radiance: *radiance, pdf_pos: 1.0 / shape.area, pdf_dir: local.z * INV_PI, delta_pos: false })
+            }
+        }
+    }
+
+    /// Position (area) and direction (solid angle) pdfs of emitting along `d` from `p` with
+    /// normal `n`.
+    pub fn pdf_emission(&self, ctx: &LightContext, n: Vec3, d: Vec3) -> (f32, f32) {
+        match self {
+            Light::Point { .. } => (0.0, warp::uniform_sphere_pdf()),
+            Light::Constant { .. } => (1.0 / (PI * ctx.radius * ctx.radius), warp::uniform_sphere_pdf()),
+            Light::Area { shape, .. } => (1.0 / ctx.shapes[*shape as usize].area, n.dot(d).max(0.0) * INV_PI),
+        }
+    }
+}
+
+/// Samples the cone a sphere subtends from `p_ref` uniformly and returns the point where the
+/// sampled direction meets the sphere, with the solid-angle pdf (pbrt-v4's construction).
+fn sample_sphere_cone(p_ref: Vec3, center: Vec3, radius: f32, flip: bool, u: Vec2) -> Option<(SurfacePoint, f32)> {
+    let to_center = center - p_ref;
+    let dist2 = to_center.length_squared();
+    let dist = dist2.sqrt();
+    let (one_minus_cos_max, sin2_max) = sphere_cone(dist2, radius);
+    let sin_max = sin2_max.sqrt();
+    let (cos_theta, sin2_theta) = if sin2_max < 0.000_685_23 {
+        let s2 = sin2_max * u.x;
+        ((1.0 - s2).sqrt(), s2)
+    } else {
+        let c = 1.0 - u.x * one_minus_cos_max;
+        (c, (1.0 - c * c).max(0.0))
+    };
+    // angle at the sphere centre between -to_center and the sampled surface point
+    let cos_alpha = sin2_theta / sin_max + cos_theta * safe_sqrt(1.0 - sin2_theta / sin2_max);
+    let sin_alpha = safe_sqrt(1.0 - cos_alpha * cos_alpha);
+    let phi = 2.0 * PI * u.y;
+    let frame = Frame::from_normal(-to_center / dist);
+    let n = frame.to_world(Vec3::new(sin_alpha * phi.cos(), sin_alpha * phi.sin(), cos_alpha));
+    let p = center + n * radius;
+    let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
+    Some((SurfacePoint { p, n: if flip { -n } else { n } }, pdf))
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,69 @@
+//! Command-line definitions (clap) and dispatch.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Tessera: a distributed renderer for Mitsuba 3 scenes.
+#[derive(Parser, Debug)]
+#[command(name = "tessera", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Rendering algorithms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IntegratorKind {
+    /// Path tracing with next-event estimation and MIS (Mitsuba's `path`).
+    Pt,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a scene on this machine and write an OpenEXR image plus a PNG preview.
+    Render(RenderArgs),
+    /// Measure rendering speed (samples per second) on scenes.
+    Bench(crate::bench::BenchArgs),
+}
+
+/// Arguments of `tessera render`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// The Mitsuba 3 scene file (XML, format 3.0.0).
+    pub scene: PathBuf,
+    /// Output EXR [default: the scene's name in the working directory, e.g. cornell-box.exr].
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Rendering algorithm.
+    #[arg(long, value_enum, default_value = "pt")]
+    pub integrator: IntegratorKind,
+    /// Samples per pixel [default: the scene's sampler sample_count].
+    #[arg(long, conflicts_with = "time")]
+    pub spp: Option<u32>,
+    /// Render for this many seconds instead of a fixed sample count.
+    #[arg(long)]
+    pub time: Option<f64>,
+    /// Seed of all random numbers; the same seed gives the same image [default: the scene's, or 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Render threads [default: all cores].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_depth: Option<i64>,
+    /// Set a scene parameter ($name), overriding its <default>: -D name=value.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    pub define: Vec<String>,
+}
+
+/// Parses the command line and runs the command.
+pub fn run() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Render(args) => crate::local::render_command(&args),
+        Command::Bench(args) => crate::bench::bench_command(&args),
+    }
+}

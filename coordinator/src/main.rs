@@ -1,0 +1,14 @@
+//! `tessera`: the command-line entry point. Parses arguments and hands over to the library.
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    tessera_coordinator::telemetry::init();
+    match tessera_coordinator::cli::run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
