@@ -35,10 +35,20 @@ fn list(p: &Property) -> Option<Vec<i64>> {
     })
 }
 
+/// ply-rs-bw reports ASCII errors as "Line N: …": lift N into the location.
+fn parse_error(path: &Path, message: &str) -> SceneError {
+    let message = message.replace('\n', " ").trim().to_string();
+    let line = message.strip_prefix("Line ").and_then(|rest| rest.split(':').next()).and_then(|n| n.trim().parse::<u32>().ok());
+    match line {
+        Some(line) => SceneError::at(&Location::new(path, line, 1), format!("invalid ply: {}", message.split_once(": ").map_or(message.as_str(), |(_, m)| m))),
+        None => SceneError::file(path, format!("invalid ply: {message}")),
+    }
+}
+
 /// Loads a PLY file.
 pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
-    let ply = Parser::<DefaultElement>::new().read_ply(&mut bytes.as_slice()).map_err(|e| SceneError::file(path, format!("invalid ply: {e}")))?;
+    let ply = Parser::<DefaultElement>::new().read_ply(&mut bytes.as_slice()).map_err(|e| parse_error(path, &e.to_string()))?;
     let ascii = ply.header.encoding == ply_rs_bw::ply::Encoding::Ascii;
     // for ASCII files, element k of the first element list sits on line header_lines + k + 1
     let header_lines = bytes.split(|&b| b == b'\n').position(|l| l.starts_with(b"end_header")).map_or(0, |i| i + 1) as u32;

@@ -1,0 +1,21 @@
+//! Helpers shared by the integration tests: locating the repository's scenes and rendering.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use tessera_common::film::Film;
+use tessera_common::integrator::{PathSettings, PathTracer};
+use tessera_common::render::{Budget, RenderOptions, render};
+use tessera_common::scene::Scene;
+
+/// `scenes/NAME/scene.xml` in the repository.
+pub fn scene_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("scenes").join(name).join("scene.xml")
+}
+
+/// Renders `scene` with `pt` at `spp` samples per pixel.
+pub fn render_pt(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
+    let pt = PathTracer { settings: PathSettings::from_scene(scene, None) };
+    let opts = RenderOptions { budget: Budget::Samples(spp), seed, threads, tile_size: 32 };
+    render(scene, &pt, &opts, &|_, _| {}).expect("render").film
+}

@@ -1,0 +1,28 @@
+//! The same seed gives a bit-identical EXR whatever the thread count, and different seeds give
+//! different images.
+
+mod common;
+
+use common::{render_pt, scene_path};
+use tessera_common::film::exr::write_exr;
+use tessera_common::scene::Scene;
+
+fn exr_bytes(scene: &Scene, seed: u64, threads: usize) -> Vec<u8> {
+    let film = render_pt(scene, 4, seed, threads);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("out.exr");
+    write_exr(&path, film.width, film.height, &film.average(), Some(&film.count), &[]).expect("write");
+    std::fs::read(&path).expect("read")
+}
+
+#[test]
+fn same_seed_gives_identical_bytes_with_one_and_two_threads() {
+    for name in ["cornell-box", "caustic-glass"] {
+        let scene = Scene::load(&scene_path(name)).expect("scene loads");
+        let one = exr_bytes(&scene, 42, 1);
+        let two = exr_bytes(&scene, 42, 2);
+        assert!(one == two, "{name}: 1 and 2 threads differ");
+        let other = exr_bytes(&scene, 43, 2);
+        assert!(one != other, "{name}: the seed must matter");
+    }
+}

@@ -1,0 +1,142 @@
+//! Every scene in `scenes/`, rendered by `pt` at 32 spp with two seeds, agrees with its Mitsuba
+//! 3.9.1 reference by the method of the shared `tools/exrcompare.py` (ported to
+//! `film::compare`):
+//!
+//! * bias: each channel's relative bias of the image mean is below 1 % or not significant
+//!   (|z| ≤ 4, z from the spread of the two renders and the reference's own error);
+//! * noise: relMSE against the reference is at most 1.2 × the noise floor of the two seeds —
+//!   and, tighter, at most 1.2 × the worst ratio Mitsuba itself reaches on that scene.
+//!
+//! Calibration (Mitsuba 3.9.1 `llvm_ad_rgb`, 32 spp, ten seed pairs, the same check): the ratio
+//! of an unbiased renderer sits *below* 1 on these scenes, because the two-render noise
+//! estimate carries both renders' fireflies. Mitsuba's ranges were cornell-box 0.82–0.86,
+//! veach-mis 0.65–0.71, caustic-glass 0.28–0.79, indirect-room 0.43–0.47,
+//! glossy-interreflection 0.83–0.88, env-lit 0.91–0.94; its |bias_z| never exceeded 2.7 and
+//! its bias reached 1.8 % once (veach-mis, z = 2.6), which the |z| ≤ 4 rule accepts. Each
+//! scene's bound below is min(1.2, 1.2 × Mitsuba's largest ratio), so a renderer noisier or more
+//! biased than Mitsuba by 20 % fails even where the flat 1.2 would pass it.
+//!
+//! One documented exception, `env-lit`: its glass cube's bottom face lies exactly in the floor's
+//! plane (y = 0). A ray inside the cube reaching y = 0 meets two surfaces at the same distance,
+//! and which one a ray tracer reports is decided by floating-point rounding in its triangle
+//! test (Mitsuba's reference shows an X-shaped pattern of both outcomes there). No renderer can
+//! reproduce another's rounding, so for this scene the noise check leaves out the pixels whose
+//! camera ray first hits the cube; the bias check still covers the whole image.
+//! `env_lit_cube_is_coplanar_with_the_floor` guards the premise.
+
+mod common;
+
+use common::{render_pt, scene_path};
+use glam::Vec2;
+use tessera_common::film::compare::compare;
+use tessera_common::film::exr::read_rgb;
+use tessera_common::scene::Scene;
+use tessera_common::scene::shape::ShapeGeometry;
+
+const SPP: u32 = 32;
+const MAX_BIAS: f64 = 0.01;
+const MAX_RATIO: f64 = 1.2;
+
+/// min(1.2, 1.2 × Mitsuba's largest ratio at 32 spp over ten seed pairs).
+fn ratio_bound(name: &str) -> f64 {
+    let mitsuba_max: f64 = match name {
+        "cornell-box" => 0.86,
+        "veach-mis" => 0.71,
+        "caustic-glass" => 0.79,
+        "indirect-room" => 0.47,
+        "glossy-interreflection" => 0.88,
+        "env-lit" => 0.944,
+        _ => return MAX_RATIO,
+    };
+    (1.2 * mitsuba_max).min(MAX_RATIO)
+}
+
+fn reference_rel_err(name: &str) -> f64 {
+    let text = std::fs::read_to_string(scene_path(name).with_file_name("reference.json")).expect("reference.json");
+    let v: serde_json::Value = serde_json::from_str(&text).expect("reference.json is JSON");
+    v["rel_stderr_of_image_mean"].as_f64().unwrap_or(0.0)
+}
+
+/// Pixels whose primary ray (through the pixel centre) first hits shape `shape`.
+fn pixels_hitting(scene: &Scene, shape: u32) -> Vec<bool> {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    (0..w * h)
+        .map(|i| {
+            let ray = scene.camera.generate_ray(Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5));
+            scene.intersect(&ray).is_some_and(|hit| hit.shape == shape)
+        })
+        .collect()
+}
+
+fn check_scene(name: &str, exclude_shape: Option<u32>) {
+    let scene = Scene::load(&scene_path(name)).expect("scene loads");
+    let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference loads");
+    let a = render_pt(&scene, SPP, 1, 0).average();
+    let b = render_pt(&scene, SPP, 2, 0).average();
+    let full = compare(&a, &reference.pixels, Some(&b), reference_rel_err(name));
+    assert_eq!(full.non_finite, 0, "{name}: non-finite pixels");
+    assert!(full.bias_ok(MAX_BIAS), "{name}: biased: {full:?}");
+    let noise = match exclude_shape {
+        None => full.clone(),
+        Some(shape) => {
+            let keep: Vec<bool> = pixels_hitting(&scene, shape).iter().map(|hit| !hit).collect();
+            let pick = |img: &[[f32; 3]]| img.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();
+            compare(&pick(&a), &pick(&reference.pixels), Some(&pick(&b)), 0.0)
+        }
+    };
+    let ratio = noise.ratio.expect("two renders");
+    let bound = ratio_bound(name);
+    assert!(ratio <= bound, "{name}: relMSE is {ratio:.3} x the noise floor (bound {bound:.3}): {noise:?}");
+    eprintln!("{name}: bias {:?} z {:?} ratio {ratio:.3}", full.bias, full.bias_z);
+}
+
+#[test]
+fn cornell_box_agrees_with_mitsuba() {
+    check_scene("cornell-box", None);
+}
+
+#[test]
+fn veach_mis_agrees_with_mitsuba() {
+    check_scene("veach-mis", None);
+}
+
+#[test]
+fn caustic_glass_agrees_with_mitsuba() {
+    check_scene("caustic-glass", None);
+}
+
+#[test]
+fn indirect_room_agrees_with_mitsuba() {
+    check_scene("indirect-room", None);
+}
+
+#[test]
+fn glossy_interreflection_agrees_with_mitsuba() {
+    check_scene("glossy-interreflection", None);
+}
+
+/// The glass cube is the last shape of env-lit.
+fn env_lit_cube(scene: &Scene) -> u32 {
+    scene.shapes.len() as u32 - 1
+}
+
+#[test]
+fn env_lit_agrees_with_mitsuba() {
+    let scene = Scene::load(&scene_path("env-lit")).expect("scene loads");
+    check_scene("env-lit", Some(env_lit_cube(&scene)));
+}
+
+#[test]
+fn env_lit_cube_is_coplanar_with_the_floor() {
+    let scene = Scene::load(&scene_path("env-lit")).expect("scene loads");
+    let lowest = |shape: u32| match &scene.shapes[shape as usize].geometry {
+        ShapeGeometry::Mesh(m) => scene.meshes[*m as usize].positions.iter().map(|p| p.y).fold(f32::MAX, f32::min),
+        _ => panic!("expected a mesh"),
+    };
+    let highest_floor = match &scene.shapes[0].geometry {
+        ShapeGeometry::Mesh(m) => scene.meshes[*m as usize].positions.iter().map(|p| p.y.abs()).fold(0.0, f32::max),
+        _ => panic!("expected a mesh"),
+    };
+    assert_eq!(lowest(env_lit_cube(&scene)), 0.0, "the cube's bottom is at y = 0");
+    assert!(highest_floor < 1e-12, "the floor is flat at y = 0: {highest_floor}");
+}
