@@ -8,7 +8,8 @@
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use crate::geometry::Ray;
 use glam::{Vec3, Vec3A};
-use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, cwbvh::CwBvh};
+use glam::UVec2;
+use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, cwbvh::{CwBvh, Traversal}};
 
 /// What the BVH stores per primitive, in BVH order.
 #[derive(Clone, Copy, Debug)]
@@ -82,10 +83,11 @@ impl WatertightRay {
     }
 
     /// Returns (t, b1, b2) for a hit in (0, tmax).
-    #[inline]
+    #[inline(always)]
     fn intersect(&self, o: Vec3, tmax: f32, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
-        let (a, b, c) = (tri[0] - o, tri[1] - o, tri[2] - o);
+        // plain arrays: indexing a glam vector with a run-time axis compiles to branches
+        let (a, b, c) = ((tri[0] - o).to_array(), (tri[1] - o).to_array(), (tri[2] - o).to_array());
         let s = self.shear;
         let (ax, ay) = (a[kx] - s.x * a[kz], a[ky] - s.y * a[kz]);
         let (bx, by) = (b[kx] - s.x * b[kz], b[ky] - s.y * b[kz]);
@@ -199,7 +201,7 @@ impl Accel {
         self.prims.len()
     }
 
-    #[inline]
+    #[inline(always)]
     fn intersect_prim(&self, prim: &Prim, wt: &WatertightRay, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, f32, f32)> {
         match &prim.geom {
             Geom::Triangle(tri) => wt.intersect(o, tmax, tri),
@@ -221,17 +223,18 @@ impl Accel {
             return None;
         }
         let wt = WatertightRay::new(ray.d);
+        let mut traverse_ray = Self::obvhs_ray(ray);
         let mut best: Option<Hit> = None;
-        let mut hit = obvhs::ray::RayHit::none();
-        self.bvh.ray_traverse(Self::obvhs_ray(ray), &mut hit, |r, id| {
-            let prim = &self.prims[id];
-            match self.intersect_prim(prim, &wt, ray.o, ray.d, r.tmax) {
-                Some((t, b1, b2)) => {
+        TRAVERSAL.with_borrow_mut(|state| {
+            state.reinit(traverse_ray.direction);
+            let mut node;
+            obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
+                let prim = &self.prims[state.primitive_id as usize];
+                if let Some((t, b1, b2)) = self.intersect_prim(prim, &wt, ray.o, ray.d, traverse_ray.tmax) {
                     best = Some(Hit { t, shape: prim.shape, index: prim.index, bary: [b1, b2] });
-                    t
+                    traverse_ray.tmax = t;
                 }
-                None => f32::INFINITY,
-            }
+            });
         });
         best
     }
@@ -242,10 +245,27 @@ impl Accel {
             return false;
         }
         let wt = WatertightRay::new(ray.d);
-        !self.bvh.ray_traverse_miss(Self::obvhs_ray(ray), |r, id| {
-            self.intersect_prim(&self.prims[id], &wt, ray.o, ray.d, r.tmax).map_or(f32::INFINITY, |h| h.0)
-        })
+        let traverse_ray = Self::obvhs_ray(ray);
+        let mut hit = false;
+        TRAVERSAL.with_borrow_mut(|state| {
+            state.reinit(traverse_ray.direction);
+            let mut node;
+            'outer: {
+                obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
+                    if self.intersect_prim(&self.prims[state.primitive_id as usize], &wt, ray.o, ray.d, ray.tmax).is_some() {
+                        hit = true;
+                        break 'outer;
+                    }
+                });
+            }
+        });
+        hit
     }
+}
+
+thread_local! {
+    /// Each thread's traversal stack, reused so that no ray pays for zeroing a fresh one.
+    static TRAVERSAL: std::cell::RefCell<Traversal> = std::cell::RefCell::new(Traversal::default());
 }
 
 #[cfg(test)]
