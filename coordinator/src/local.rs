@@ -84,15 +84,24 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         tracing::warn!(count = out.film.non_finite, "non-finite samples were zeroed");
     }
     println!(
-        "{}: {} spp ({} samples) in {:.2} s, {:.0} samples/s -> {}",
+        "{}: {} spp ({} samples) in {:.2} s, {:.0} samples/s, peak memory {:.0} MB -> {}",
         integrator.name(),
         out.spp,
         samples,
         secs,
         samples as f64 / secs.max(1e-9),
+        peak_rss_bytes() as f64 / 1e6,
         output.display()
     );
     Ok(())
+}
+
+/// Peak resident set size of this process so far (Linux reports `ru_maxrss` in KiB).
+pub fn peak_rss_bytes() -> u64 {
+    // SAFETY: getrusage only writes into the struct we pass
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };
+    usage.ru_maxrss.max(0) as u64 * 1024
 }
 
 /// Writes the EXR and the PNG preview beside it.
