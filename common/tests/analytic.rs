@@ -53,22 +53,26 @@ fn diffuse_sphere_under_constant_sky_reflects_its_albedo() {
     assert!((bg - 1.0).abs() < 1e-6, "background {bg}");
 }
 
+/// A camera inside a closed diffuse sphere of albedo ρ whose inner surface emits radiance Le.
+fn furnace(rho: f64, le: f64, max_depth: i64) -> Scene {
+    scene(&format!(
+        r#"<scene version="3.0.0">{}
+             <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+             <shape type="sphere"><float name="radius" value="3"/><boolean name="flip_normals" value="true"/>
+               <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
+               <emitter type="area"><rgb name="radiance" value="{le}"/></emitter></shape>
+           </scene>"#,
+        sensor("0, 0, 0", "0, 0, 1", 16)
+    ))
+}
+
 /// Inside a closed diffuse sphere of albedo ρ whose inner surface also emits radiance Le, the
 /// radiance is Le / (1 − ρ) everywhere (white furnace with emission): every bounce, Russian
 /// roulette and light sampling must be unbiased for this to hold.
 #[test]
 fn closed_emissive_sphere_furnace() {
     let (rho, le) = (0.5, 1.0);
-    let s = scene(&format!(
-        r#"<scene version="3.0.0">{}
-             <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
-             <shape type="sphere"><float name="radius" value="3"/><boolean name="flip_normals" value="true"/>
-               <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
-               <emitter type="area"><rgb name="radiance" value="{le}"/></emitter></shape>
-           </scene>"#,
-        sensor("0, 0, 0", "0, 0, 1", 16)
-    ));
-    let film = render_pt(&s, 64, 3, 0);
+    let film = render_pt(&furnace(rho, le, -1), 64, 3, 0);
     let (m, se, _) = mean_and_stderr(&film, |_| true);
     let expected = le / (1.0 - rho);
     assert!((m - expected).abs() < 4.0 * se, "furnace: {m} ± {se}, expected {expected}");
@@ -81,16 +85,7 @@ fn closed_emissive_sphere_furnace() {
 fn max_depth_counts_segments_like_mitsuba() {
     let (rho, le) = (0.5, 1.0);
     for (depth, expected) in [(1, le), (2, le * (1.0 + rho)), (3, le * (1.0 + rho + rho * rho))] {
-        let s = scene(&format!(
-            r#"<scene version="3.0.0">{}
-                 <integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
-                 <shape type="sphere"><float name="radius" value="3"/><boolean name="flip_normals" value="true"/>
-                   <bsdf type="diffuse"><rgb name="reflectance" value="{rho}"/></bsdf>
-                   <emitter type="area"><rgb name="radiance" value="{le}"/></emitter></shape>
-               </scene>"#,
-            sensor("0, 0, 0", "0, 0, 1", 16)
-        ));
-        let film = render_pt(&s, 64, 5, 0);
+        let film = render_pt(&furnace(rho, le, depth), 64, 5, 0);
         let (m, se, _) = mean_and_stderr(&film, |_| true);
         assert!((m - expected).abs() < 4.0 * se.max(1e-5), "max_depth {depth}: {m} ± {se}, expected {expected}");
     }
