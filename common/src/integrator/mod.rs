@@ -4,6 +4,7 @@
 //! is a function of (seed, pixel, sample index, dimension), so a tile renders to bit-identical
 //! sums wherever and however it is rendered.
 
+pub mod path;
 pub mod pt;
 
 use crate::film::{Rect, TileAccum};

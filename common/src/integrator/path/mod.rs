@@ -1,0 +1,4 @@
+//! Path-space building blocks shared by the bidirectional integrators: the gathered pdf arrays
+//! and the balance-heuristic MIS weights with sample counts.
+
+pub mod mis;
