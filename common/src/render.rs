@@ -60,7 +60,9 @@ pub enum RenderError {
 pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<RenderOutput, RenderError> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let tiles = Rect::tiles(w, h, opts.tile_size);
+    // image-level integrators render the full frame, one iteration per tile, parallel inside
+    let tiles = if integrator.full_frame() { vec![Rect { x0: 0, y0: 0, x1: w, y1: h }] } else { Rect::tiles(w, h, opts.tile_size) };
+    let max_pass = if integrator.full_frame() { 1 } else { u32::MAX };
     let mut film = Film::new(w, h);
     let start = Instant::now();
     let pixels = w as u64 * h as u64;
@@ -76,7 +78,7 @@ pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, 
     loop {
         let per_spp = (spp_done > 0).then(|| start.elapsed().as_secs_f64() / spp_done as f64);
         let pass = match opts.budget {
-            Budget::Samples(n) => n - spp_done,
+            Budget::Samples(n) => (n - spp_done).min(max_pass),
             Budget::Time(t) => {
                 let remaining = t.as_secs_f64() - start.elapsed().as_secs_f64();
                 match per_spp {
@@ -85,6 +87,7 @@ pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, 
                     // aim for passes of about a tenth of the budget, never past the deadline
                     Some(s) => ((remaining / s).floor() as u32).min(((t.as_secs_f64() * 0.1 / s) as u32).max(1)),
                 }
+                .min(max_pass)
             }
         };
         if pass == 0 {
@@ -108,7 +111,7 @@ pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, 
             film.merge_tile(t);
         }
         spp_done += pass;
-        if matches!(opts.budget, Budget::Samples(_)) {
+        if matches!(opts.budget, Budget::Samples(n) if spp_done >= n) {
             break;
         }
     }

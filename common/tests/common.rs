@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
-use tessera_common::integrator::{PathSettings, PathTracer};
+use tessera_common::integrator::{Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, render};
 use tessera_common::scene::Scene;
 
@@ -15,7 +15,16 @@ pub fn scene_path(name: &str) -> PathBuf {
 
 /// Renders `scene` with `pt` at `spp` samples per pixel.
 pub fn render_pt(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
-    let pt = PathTracer { settings: PathSettings::from_scene(scene, None) };
+    render_with(scene, &PathTracer { settings: PathSettings::from_scene(scene, None) }, spp, seed, threads)
+}
+
+/// Renders `scene` with `lt` (ν = 1) for `iterations` iterations.
+pub fn render_lt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_with(scene, &LightTracer { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: 1.0 }, iterations, seed, threads)
+}
+
+/// Renders `scene` with any integrator.
+pub fn render_with(scene: &Scene, integrator: &dyn Integrator, spp: u32, seed: u64, threads: usize) -> Film {
     let opts = RenderOptions { budget: Budget::Samples(spp), seed, threads, tile_size: 32 };
-    render(scene, &pt, &opts, &|_, _| {}).expect("render").film
+    render(scene, integrator, &opts, &|_, _| {}).expect("render").film
 }

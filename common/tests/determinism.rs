@@ -3,12 +3,16 @@
 
 mod common;
 
-use common::{render_pt, scene_path};
+use common::{render_lt, render_pt, scene_path};
+use tessera_common::film::Film;
 use tessera_common::film::exr::write_exr;
 use tessera_common::scene::Scene;
 
 fn exr_bytes(scene: &Scene, seed: u64, threads: usize) -> Vec<u8> {
-    let film = render_pt(scene, 4, seed, threads);
+    exr_of(&render_pt(scene, 4, seed, threads))
+}
+
+fn exr_of(film: &Film) -> Vec<u8> {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("out.exr");
     write_exr(&path, film.width, film.height, &film.average(), Some(&film.count), &[]).expect("write");
@@ -25,4 +29,14 @@ fn same_seed_gives_identical_bytes_with_one_and_two_threads() {
         let other = exr_bytes(&scene, 43, 2);
         assert!(one != other, "{name}: the seed must matter");
     }
+}
+
+/// Light paths are seeded by (seed, path, iteration) and their splats merged in a fixed order.
+#[test]
+fn light_tracing_is_identical_with_one_and_two_threads() {
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let one = exr_of(&render_lt(&scene, 2, 9, 1));
+    let two = exr_of(&render_lt(&scene, 2, 9, 2));
+    assert!(one == two, "1 and 2 threads differ");
+    assert!(one != exr_of(&render_lt(&scene, 2, 10, 2)), "the seed must matter");
 }

@@ -1,6 +1,6 @@
-//! Every scene in `scenes/`, rendered by `pt` at 32 spp with two seeds, agrees with its Mitsuba
-//! 3.9.1 reference by the method of the shared `tools/exrcompare.py` (ported to
-//! `film::compare`):
+//! Every scene in `scenes/`, rendered at 32 samples (iterations) per pixel with two seeds,
+//! agrees with its Mitsuba 3.9.1 reference by the method of the shared `tools/exrcompare.py`
+//! (ported to `film::compare`). `pt` on every scene:
 //!
 //! * bias: each channel's relative bias of the image mean is below 1 % or not significant
 //!   (|z| ≤ 4, z from the spread of the two renders and the reference's own error);
@@ -26,7 +26,8 @@
 
 mod common;
 
-use common::{render_pt, scene_path};
+use common::{render_lt, render_pt, scene_path};
+use tessera_common::film::Film;
 use glam::Vec2;
 use tessera_common::film::compare::compare;
 use tessera_common::film::exr::read_rgb;
@@ -69,13 +70,17 @@ fn pixels_hitting(scene: &Scene, shape: u32) -> Vec<bool> {
 }
 
 fn check_scene(name: &str, exclude_shape: Option<u32>) {
+    check_scene_with(name, exclude_shape, render_pt, MAX_BIAS, ratio_bound(name));
+}
+
+fn check_scene_with(name: &str, exclude_shape: Option<u32>, render: fn(&Scene, u32, u64, usize) -> Film, max_bias: f64, bound: f64) {
     let scene = Scene::load(&scene_path(name)).expect("scene loads");
     let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference loads");
-    let a = render_pt(&scene, SPP, 1, 0).average();
-    let b = render_pt(&scene, SPP, 2, 0).average();
+    let a = render(&scene, SPP, 1, 0).average();
+    let b = render(&scene, SPP, 2, 0).average();
     let full = compare(&a, &reference.pixels, Some(&b), reference_rel_err(name));
     assert_eq!(full.non_finite, 0, "{name}: non-finite pixels");
-    assert!(full.bias_ok(MAX_BIAS), "{name}: biased: {full:?}");
+    assert!(full.bias_ok(max_bias), "{name}: biased: {full:?}");
     let noise = match exclude_shape {
         None => full.clone(),
         Some(shape) => {
@@ -85,7 +90,6 @@ fn check_scene(name: &str, exclude_shape: Option<u32>) {
         }
     };
     let ratio = noise.ratio.expect("two renders");
-    let bound = ratio_bound(name);
     assert!(ratio <= bound, "{name}: relMSE is {ratio:.3} x the noise floor (bound {bound:.3}): {noise:?}");
     eprintln!("{name}: bias {:?} z {:?} ratio {ratio:.3}", full.bias, full.bias_z);
 }
@@ -139,4 +143,46 @@ fn env_lit_cube_is_coplanar_with_the_floor() {
     };
     assert_eq!(lowest(env_lit_cube(&scene)), 0.0, "the cube's bottom is at y = 0");
     assert!(highest_floor < 1e-12, "the floor is flat at y = 0: {highest_floor}");
+}
+
+/// `lt` (ν = 1) on the scenes where no delta surface (smooth glass or mirror) is seen directly
+/// by the camera: bias below 2 % or |z| ≤ 4, relMSE within 1.3 × the noise floor.
+mod light_tracing {
+    use super::*;
+
+    fn check(name: &str) {
+        check_scene_with(name, None, render_lt, 0.02, 1.3);
+    }
+
+    #[test]
+    fn cornell_box() {
+        check("cornell-box");
+    }
+
+    #[test]
+    fn indirect_room() {
+        check("indirect-room");
+    }
+
+    #[test]
+    fn veach_mis() {
+        check("veach-mis");
+    }
+
+    #[test]
+    fn glossy_interreflection() {
+        check("glossy-interreflection");
+    }
+
+    /// Where the camera sees glass or the environment, light tracing cannot form the paths,
+    /// but every pixel must stay finite.
+    #[test]
+    fn delta_surfaces_seen_directly_stay_finite() {
+        for name in ["caustic-glass", "env-lit"] {
+            let scene = Scene::load(&scene_path(name)).expect("scene loads");
+            let film = render_lt(&scene, 2, 1, 0);
+            assert_eq!(film.non_finite, 0, "{name}");
+            assert!(film.average().iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{name}");
+        }
+    }
 }

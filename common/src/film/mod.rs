@@ -76,6 +76,30 @@ impl TileAccum {
     }
 }
 
+impl TileAccum {
+    /// Adds a light-tracing splat to pixel `local` without counting a sample: splats are part
+    /// of the iteration's estimate of every pixel, counted once per iteration by
+    /// [`TileAccum::count_iterations`].
+    #[inline]
+    pub fn add_splat(&mut self, local: usize, value: Rgb) {
+        let v = if value.is_finite() { value } else {
+            self.non_finite += 1;
+            Rgb::ZERO
+        };
+        let s = &mut self.sum[local];
+        s[0] += v.x as f64;
+        s[1] += v.y as f64;
+        s[2] += v.z as f64;
+    }
+
+    /// Counts `n` more samples (iterations) in every pixel.
+    pub fn count_iterations(&mut self, n: u32) {
+        for c in &mut self.count {
+            *c += n;
+        }
+    }
+}
+
 /// A whole image of sums and counts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Film {

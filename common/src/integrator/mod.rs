@@ -4,6 +4,7 @@
 //! is a function of (seed, pixel, sample index, dimension), so a tile renders to bit-identical
 //! sums wherever and however it is rendered.
 
+pub mod lt;
 pub mod path;
 pub mod pt;
 
@@ -11,6 +12,7 @@ use crate::film::{Rect, TileAccum};
 use crate::scene::Scene;
 use std::ops::Range;
 
+pub use lt::LightTracer;
 pub use pt::PathTracer;
 
 /// One unit of work.
@@ -52,4 +54,9 @@ pub trait Integrator: Send + Sync {
     fn name(&self) -> &'static str;
     /// Renders `tile` into `accum` (which covers `tile.rect`).
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum);
+    /// Whether tiles must cover the whole frame (light paths, splats and photon maps are
+    /// image-level), rendering a range of iterations.
+    fn full_frame(&self) -> bool {
+        false
+    }
 }
