@@ -20,6 +20,9 @@ pub enum IntegratorKind {
     /// Light tracing (Mitsuba's `ptracer`): light paths connected to the camera. Cannot see
     /// smooth glass or mirrors, or an environment, directly: those pixels stay dark.
     Lt,
+    /// Bidirectional path tracing with a light-vertex cache: hits, next-event estimation,
+    /// c connections per camera vertex and light tracing, balance heuristic over sample counts.
+    Bdpt,
 }
 
 /// Subcommands.
@@ -42,7 +45,7 @@ pub struct RenderArgs {
     /// Rendering algorithm.
     #[arg(long, value_enum, default_value = "pt")]
     pub integrator: IntegratorKind,
-    /// Samples per pixel; iterations for lt [default: the scene's sampler sample_count].
+    /// Samples per pixel; iterations for lt and bdpt [default: the scene's sampler sample_count].
     #[arg(long, conflicts_with = "time")]
     pub spp: Option<u32>,
     /// Render for this many seconds instead of a fixed sample count.
@@ -57,9 +60,12 @@ pub struct RenderArgs {
     /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
     #[arg(long, allow_negative_numbers = true)]
     pub max_depth: Option<i64>,
-    /// Light paths per pixel per iteration (ν) for lt: N = floor(ν · pixels) light paths.
+    /// Light paths per pixel per iteration (ν) for lt and bdpt: N = floor(ν · pixels).
     #[arg(long, default_value_t = 1.0)]
     pub light_paths_per_pixel: f32,
+    /// Connections to cached light vertices per camera vertex (c) for bdpt.
+    #[arg(long, default_value_t = 1)]
+    pub connections: u32,
     /// Set a scene parameter ($name), overriding its <default>: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,

@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::film::{exr::write_exr, png::write_png};
-use tessera_common::integrator::{Integrator, LightTracer, PathSettings, PathTracer};
+use tessera_common::integrator::{Bdpt, Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, RenderOutput, render};
 use tessera_common::scene::Scene;
 
@@ -35,7 +35,7 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
 }
 
 /// Builds the integrator the arguments ask for.
-pub fn make_integrator(kind: IntegratorKind, scene: &Scene, max_depth: Option<i64>, light_paths_per_pixel: f32) -> anyhow::Result<Box<dyn Integrator>> {
+pub fn make_integrator(kind: IntegratorKind, scene: &Scene, max_depth: Option<i64>, light_paths_per_pixel: f32, connections: u32) -> anyhow::Result<Box<dyn Integrator>> {
     if !(light_paths_per_pixel > 0.0 && light_paths_per_pixel.is_finite()) {
         bail!("--light-paths-per-pixel must be positive, got {light_paths_per_pixel}");
     }
@@ -49,6 +49,7 @@ pub fn make_integrator(kind: IntegratorKind, scene: &Scene, max_depth: Option<i6
     Ok(match kind {
         IntegratorKind::Pt => Box::new(PathTracer { settings }),
         IntegratorKind::Lt => Box::new(LightTracer { settings, light_paths_per_pixel }),
+        IntegratorKind::Bdpt => Box::new(Bdpt { settings, light_paths_per_pixel, connections }),
     })
 }
 
@@ -67,7 +68,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--threads must be at least 1");
     }
     let scene = Scene::load_with(&args.scene, &defines)?;
-    let integrator = make_integrator(args.integrator, &scene, args.max_depth, args.light_paths_per_pixel)?;
+    let integrator = make_integrator(args.integrator, &scene, args.max_depth, args.light_paths_per_pixel, args.connections)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),

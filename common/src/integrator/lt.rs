@@ -52,6 +52,7 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, glam::Ve
             Light::Point { intensity, .. } => *intensity * v.beta.x,
             Light::Constant { .. } => return None,
         },
+        VertexKind::Camera => return None,
         VertexKind::Surface { material } => {
             let frame = v.frame();
             let f = scene.materials[material as usize].eval(frame.to_local(v.wo), frame.to_local(cs.wi), TransportMode::Importance);

@@ -4,6 +4,7 @@
 //! is a function of (seed, pixel, sample index, dimension), so a tile renders to bit-identical
 //! sums wherever and however it is rendered.
 
+pub mod bdpt;
 pub mod lt;
 pub mod path;
 pub mod pt;
@@ -12,6 +13,7 @@ use crate::film::{Rect, TileAccum};
 use crate::scene::Scene;
 use std::ops::Range;
 
+pub use bdpt::Bdpt;
 pub use lt::LightTracer;
 pub use pt::PathTracer;
 

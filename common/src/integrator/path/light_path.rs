@@ -2,7 +2,7 @@
 //! reaches becomes a vertex, until `max_edges` edges or absorption. The densities needed by the
 //! MIS weights are recorded on the way (forward on each vertex, reverse on its predecessor).
 
-use super::vertex::{PathVertex, VertexKind, solid_angle_to_area};
+use super::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use crate::bsdf::TransportMode;
 use crate::light::Light;
 use crate::math::Rgb;
@@ -93,7 +93,7 @@ pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, ou
         // reverse density of the predecessor, sampled from here towards it
         let prev = out[current - 1];
         let pdf_rev_sa = if bs.delta { 0.0 } else { material.pdf(bs.wi, wo_local) };
-        out[current - 1].pdf_rev = if prev_infinite && current - 1 == start { pdf_rev_sa } else { solid_angle_to_area(pdf_rev_sa, hit.p, prev.p, if matches!(prev.kind, VertexKind::Light { .. }) && prev.n_geo == Vec3::ZERO { Vec3::ZERO } else { prev.n_geo }) };
+        out[current - 1].pdf_rev = density_at_vertex(pdf_rev_sa, hit.p, &prev, infinite && current - 1 == start);
         out[current].delta = bs.delta;
         pdf_dir = if bs.delta { 0.0 } else { bs.pdf };
         prev_p = hit.p;

@@ -40,13 +40,19 @@ pub struct PathPdfs {
     /// Density of vertex 0 under next-event estimation from vertex 1 (× light selection); 0 when
     /// next-event estimation cannot produce the path.
     pub next_event0: f32,
+    /// Whether a camera path can hit the light vertex (false for point lights). Kept apart from
+    /// `from_camera[0]`, which is 0 both for unhittable lights and after a delta bounce.
+    pub emitter_hittable: bool,
+    /// Whether light tracing can connect the light vertex itself to the camera (false for
+    /// infinite lights, whose vertex is at infinity).
+    pub emitter_splattable: bool,
 }
 
 impl PathPdfs {
     /// Empty arrays for a path of `len` vertices.
     pub fn new(len: usize) -> Self {
         assert!(len >= 2 && len <= MAX_VERTICES, "invariant: path length {len} within 2..={MAX_VERTICES}");
-        PathPdfs { len, from_light: [0.0; MAX_VERTICES], from_camera: [0.0; MAX_VERTICES], delta: [false; MAX_VERTICES], next_event0: 0.0 }
+        PathPdfs { len, from_light: [0.0; MAX_VERTICES], from_camera: [0.0; MAX_VERTICES], delta: [false; MAX_VERTICES], next_event0: 0.0, emitter_hittable: true, emitter_splattable: true }
     }
 }
 
@@ -150,7 +156,7 @@ pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 
     prefix_ratios(p, &mut ratio);
     let mut n = 0;
     // s = 0: the camera path hits the light
-    out[n] = if p.from_camera[0] > 0.0 && can_connect(p, 0) { counts.hit } else { 0.0 };
+    out[n] = if p.emitter_hittable && can_connect(p, 0) { counts.hit } else { 0.0 };
     n += 1;
     // s = 1: next-event estimation uses its own density for vertex 0
     out[n] = if p.next_event0 > 0.0 && can_connect(p, 1) && k >= 2 { counts.next_event * p.next_event0 / remap0(p.from_camera[0]) } else { 0.0 };
@@ -159,7 +165,7 @@ pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 
         out[n] = if can_connect(p, s) { counts.connect * ratio[s] } else { 0.0 };
         n += 1;
     }
-    out[n] = if k >= 1 && can_connect(p, k) { counts.light_trace * ratio[k] } else { 0.0 };
+    out[n] = if k >= 1 && can_connect(p, k) && (k >= 2 || p.emitter_splattable) { counts.light_trace * ratio[k] } else { 0.0 };
     n += 1;
     if let Some(m) = &counts.merge {
         for i in 1..k.saturating_sub(1) {

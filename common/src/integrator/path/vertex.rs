@@ -12,6 +12,8 @@ pub enum VertexKind {
         /// Index into `Scene::lights`.
         light: u32,
     },
+    /// The camera (pinhole) at the start of a camera path.
+    Camera,
     /// A surface scattering vertex.
     Surface {
         /// Index into `Scene::materials`.
@@ -64,6 +66,19 @@ impl PathVertex {
         let num = self.n_shading.dot(w_prev).abs() * self.n_geo.dot(w_next).abs();
         let den = self.n_geo.dot(w_prev).abs() * self.n_shading.dot(w_next).abs();
         if den > 0.0 { num / den } else { 0.0 }
+    }
+}
+
+/// Converts a solid-angle density of sampling, from point `from`, the direction towards vertex
+/// `to` into the density of `to` in its own measure: area for surfaces and area lights, solid
+/// angle for infinite lights, and 0 for point lights and the pinhole, which no ray can hit.
+#[inline]
+pub fn density_at_vertex(pdf: f32, from: Vec3, to: &PathVertex, infinite_light: bool) -> f32 {
+    match to.kind {
+        VertexKind::Camera => 0.0,
+        VertexKind::Light { .. } if infinite_light => pdf,
+        VertexKind::Light { .. } if to.n_geo == Vec3::ZERO => 0.0,
+        _ => solid_angle_to_area(pdf, from, to.p, to.n_geo),
     }
 }
 

@@ -177,6 +177,7 @@ fn delta_vertices_exclude_adjacent_connections() {
 fn a_light_that_cannot_be_hit_gives_emitter_hits_no_weight() {
     let mut p = random_path(2, 4, false);
     p.from_camera[0] = 0.0; // a point light
+    p.emitter_hittable = false;
     let w = weight(&p, &SampleCounts::PATH_TRACING, Technique::NextEvent);
     assert_eq!(w, 1.0);
     assert_eq!(weight(&p, &SampleCounts::PATH_TRACING, Technique::EmitterHit), 0.0);

@@ -1,0 +1,254 @@
+//! `bdpt`: bidirectional path tracing with a light-vertex cache (Davidovič et al. 2014, as in
+//! SeeSharp's `VertexCacheBidir`), with sample counts as parameters for efficiency-aware MIS.
+//!
+//! Each iteration traces N = ⌊ν·P⌋ light paths and caches their vertices. Light tracing
+//! connects every light vertex to the camera. Then one camera path per pixel: at each vertex
+//! it counts emitter hits, makes one next-event estimate, and connects to c light vertices
+//! chosen uniformly from the cache. All techniques are combined with the balance heuristic over
+//! their sample counts (`integrator::path::mis`). No Russian roulette: paths end at
+//! `max_depth` segments, on absorption or on escape.
+//!
+//! Parameters: `max_depth`; ν (`--light-paths-per-pixel`, default 1); c (`--connections`,
+//! default 1). Use it where light arrives along paths camera paths find hard (through small
+//! openings, from hidden lights); caustics seen directly still need light tracing or merging.
+
+use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
+use super::path::light_path::trace_light_path;
+use super::path::mis::SampleCounts;
+use super::path::techniques::{area_emission, camera_vertex, connect, emitter_hit_weight, light_trace, next_event};
+use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
+use super::{Integrator, PathSettings, TileRequest};
+use crate::bsdf::TransportMode;
+use crate::film::TileAccum;
+use crate::math::Rgb;
+use crate::sampler::Sampler;
+use crate::scene::Scene;
+use glam::Vec2;
+use rayon::prelude::*;
+
+/// The bidirectional path tracer.
+#[derive(Clone, Debug)]
+pub struct Bdpt {
+    /// Depth and emitter settings.
+    pub settings: PathSettings,
+    /// Light paths per pixel per iteration (ν).
+    pub light_paths_per_pixel: f32,
+    /// Connections per camera vertex (c).
+    pub connections: u32,
+}
+
+/// One iteration's light subpaths, stored back to back.
+pub struct LightCache {
+    /// All vertices; a vertex at depth d is preceded by its subpath's d earlier vertices.
+    pub vertices: Vec<PathVertex>,
+    /// Indices of the vertices connections may choose (depth ≥ 1).
+    pub selectable: Vec<u32>,
+    /// Number of light paths.
+    pub paths: u32,
+}
+
+impl LightCache {
+    /// Traces `paths` light paths of iteration `iteration`, in parallel chunks concatenated in
+    /// order, so the cache does not depend on the thread count.
+    pub fn trace(scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32) -> Self {
+        let chunks: Vec<Vec<PathVertex>> = (0..paths.div_ceil(LIGHT_PATH_CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut out = Vec::new();
+                for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
+                    trace_light_path(scene, &mut Sampler::for_light_path(seed, index, iteration), max_edges, &mut out);
+                }
+                out
+            })
+            .collect();
+        let vertices: Vec<PathVertex> = chunks.into_iter().flatten().collect();
+        let selectable = vertices.iter().enumerate().filter(|(_, v)| v.depth >= 1).map(|(i, _)| i as u32).collect();
+        LightCache { vertices, selectable, paths }
+    }
+
+    /// The light subpath ending at vertex `index`.
+    #[inline]
+    pub fn subpath(&self, index: usize) -> &[PathVertex] {
+        let depth = self.vertices[index].depth as usize;
+        &self.vertices[index - depth..=index]
+    }
+}
+
+impl Bdpt {
+    fn max_edges(&self) -> u32 {
+        self.settings.max_depth.min(MAX_BIDIR_EDGES)
+    }
+
+    /// Sample counts of this iteration's techniques.
+    pub fn counts(&self, cache: &LightCache) -> SampleCounts {
+        let n = cache.paths as f32;
+        let connect = if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
+        SampleCounts { hit: 1.0, next_event: 1.0, connect, light_trace: n, merge: None }
+    }
+
+    /// Light-tracing splats of every cached vertex, by chunks merged in order.
+    fn splats(&self, scene: &Scene, cache: &LightCache, counts: &SampleCounts, scale: f32) -> Vec<Vec<(u32, Rgb)>> {
+        let width = scene.camera.width;
+        let chunk = 4096usize;
+        (0..cache.vertices.len().div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| {
+                let mut out = Vec::new();
+                for i in c * chunk..((c + 1) * chunk).min(cache.vertices.len()) {
+                    let light = cache.subpath(i);
+                    // directly visible emitters are hidden on request; path length is bounded
+                    if (light.len() == 1 && self.settings.hide_emitters) || light.len() as u32 > self.max_edges() {
+                        continue;
+                    }
+                    if let Some((w, raster)) = light_trace(scene, light, counts) {
+                        out.push((raster.y as u32 * width + raster.x as u32, w.value * scale));
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+
+    /// One camera path through pixel (x, y): the sum of its weighted contributions.
+    #[allow(clippy::too_many_arguments)]
+    fn camera_path(&self, scene: &Scene, cache: &LightCache, counts: &SampleCounts, x: u32, y: u32, seed: u64, iteration: u32, verts: &mut Vec<PathVertex>) -> Rgb {
+        let cam = &scene.camera;
+        let pixels = (cam.width * cam.height) as f32;
+        let mut sampler = Sampler::for_pixel(seed, y * cam.width + x, iteration);
+        let mut ray = cam.generate_ray(Vec2::new(x as f32, y as f32) + sampler.next_2d());
+        let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
+        let mut beta = Rgb::ONE;
+        let mut total = Rgb::ZERO;
+        let max_edges = self.max_edges();
+        let connect_scale = if counts.connect > 0.0 { 1.0 / counts.connect } else { 0.0 };
+        verts.clear();
+        verts.push(camera_vertex(scene));
+        loop {
+            let depth = verts.len() as u32;
+            let prev = verts[verts.len() - 1];
+            let Some(hit) = scene.intersect(&ray) else {
+                // ---- escaped: infinite lights ----
+                if !(self.settings.hide_emitters && depth == 1) {
+                    for &li in &scene.infinite_lights {
+                        let crate::light::Light::Constant { radiance } = scene.lights[li as usize] else { continue };
+                        let env = PathVertex { p: ray.o + ray.d * (2.0 * scene.bounds_radius), n_geo: -ray.d, n_shading: -ray.d, wo: -ray.d, beta, pdf_fwd: pdf_dir, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Light { light: li }, delta: false, depth };
+                        verts.push(env);
+                        total += beta * radiance * emitter_hit_weight(scene, verts, li, counts);
+                        verts.pop();
+                    }
+                }
+                break;
+            };
+            let shape = &scene.shapes[hit.shape as usize];
+            let v = PathVertex {
+                p: hit.p,
+                n_geo: hit.n_geo,
+                n_shading: hit.frame.n,
+                wo: hit.wo,
+                beta,
+                pdf_fwd: solid_angle_to_area(pdf_dir, prev.p, hit.p, hit.n_geo),
+                pdf_rev: 0.0,
+                pdf_next_event: 0.0,
+                kind: VertexKind::Surface { material: shape.material },
+                delta: false,
+                depth,
+            };
+            verts.push(v);
+            // ---- emitter hit ----
+            if let Some(li) = shape.light {
+                if !(self.settings.hide_emitters && depth == 1) {
+                    let le = area_emission(scene, li, &v);
+                    if le != Rgb::ZERO {
+                        total += beta * le * emitter_hit_weight(scene, verts, li, counts);
+                    }
+                }
+            }
+            if depth >= max_edges {
+                break;
+            }
+            let material = &scene.materials[shape.material as usize];
+            // ---- next-event estimation ----
+            let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
+            if material.has_smooth_lobe() {
+                if let Some(w) = next_event(scene, verts, u_light, u_pos, counts) {
+                    total += w.value;
+                }
+            }
+            // ---- connections to cached light vertices ----
+            for _ in 0..self.connections {
+                let u = sampler.next_1d();
+                if cache.selectable.is_empty() || !material.has_smooth_lobe() {
+                    continue;
+                }
+                let pick = cache.selectable[((u * cache.selectable.len() as f32) as usize).min(cache.selectable.len() - 1)] as usize;
+                let light = cache.subpath(pick);
+                if depth + light.len() as u32 > max_edges {
+                    continue;
+                }
+                if let Some(w) = connect(scene, verts, light, connect_scale, counts) {
+                    total += w.value;
+                }
+            }
+            // ---- continue the camera path ----
+            let frame = hit.frame;
+            let wo = frame.to_local(hit.wo);
+            let (uc, u) = (sampler.next_1d(), sampler.next_2d());
+            let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            beta *= bs.weight;
+            let n = verts.len();
+            if n >= 3 {
+                let before = verts[n - 2];
+                verts[n - 2].pdf_rev = density_at_vertex(if bs.delta { 0.0 } else { material.pdf(bs.wi, wo) }, hit.p, &before, false);
+            }
+            verts[n - 1].delta = bs.delta;
+            pdf_dir = if bs.delta { 0.0 } else { bs.pdf };
+            if beta == Rgb::ZERO || !beta.is_finite() {
+                break;
+            }
+            ray = hit.spawn_ray(frame.to_world(bs.wi));
+        }
+        total
+    }
+}
+
+impl Integrator for Bdpt {
+    fn name(&self) -> &'static str {
+        "bdpt"
+    }
+
+    fn full_frame(&self) -> bool {
+        true
+    }
+
+    fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        assert!(tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h, "invariant: bdpt renders full-frame tiles");
+        let n = light_path_count(self.light_paths_per_pixel, w * h);
+        for iteration in tile.samples.clone() {
+            if self.settings.max_depth == 0 {
+                for i in 0..(w * h) as usize {
+                    accum.add(i, Rgb::ZERO);
+                }
+                continue;
+            }
+            // light paths stop one edge short: every technique adds at least one camera edge
+            let cache = LightCache::trace(scene, tile.seed, iteration, n, self.max_edges().saturating_sub(1));
+            let counts = self.counts(&cache);
+            let splats = self.splats(scene, &cache, &counts, (w * h) as f32 / n as f32);
+            let rows: Vec<Vec<Rgb>> = (0..h)
+                .into_par_iter()
+                .map_init(Vec::new, |verts, y| (0..w).map(|x| self.camera_path(scene, &cache, &counts, x, y, tile.seed, iteration, verts)).collect())
+                .collect();
+            for (y, row) in rows.iter().enumerate() {
+                for (x, value) in row.iter().enumerate() {
+                    accum.add(y * w as usize + x, *value);
+                }
+            }
+            for chunk in &splats {
+                for (pixel, value) in chunk {
+                    accum.add_splat(*pixel as usize, *value);
+                }
+            }
+        }
+    }
+}
