@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::render_pt;
+use common::{render_bdpt, render_lt, render_pt};
 use std::collections::HashMap;
 use std::path::Path;
 use tessera_common::scene::Scene;
@@ -88,5 +88,23 @@ fn max_depth_counts_segments_like_mitsuba() {
         let film = render_pt(&furnace(rho, le, depth), 64, 5, 0);
         let (m, se, _) = mean_and_stderr(&film, |_| true);
         assert!((m - expected).abs() < 4.0 * se.max(1e-5), "max_depth {depth}: {m} ± {se}, expected {expected}");
+    }
+}
+
+/// A light sealed inside a closed box: no light path reaches the camera outside it. Every
+/// integrator gives a clean black image: no NaN, no panic.
+#[test]
+fn sealed_light_gives_a_clean_black_image() {
+    let s = scene(&format!(
+        r#"<scene version="3.0.0">{}
+             <shape type="cube"><bsdf type="diffuse"/></shape>
+             <shape type="sphere"><float name="radius" value="0.2"/><emitter type="area"><rgb name="radiance" value="10"/></emitter></shape>
+             <emitter type="point"><point name="position" value="0, 0.5, 0"/><rgb name="intensity" value="5"/></emitter>
+           </scene>"#,
+        sensor("0, 0, 6", "0, 0, 0", 16)
+    ));
+    for (name, film) in [("pt", render_pt(&s, 4, 1, 0)), ("lt", render_lt(&s, 4, 1, 0)), ("bdpt", render_bdpt(&s, 4, 1, 0))] {
+        assert_eq!(film.non_finite, 0, "{name}");
+        assert!(film.average().iter().flatten().all(|&v| v == 0.0), "{name}: light leaked");
     }
 }

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
-use tessera_common::integrator::{Integrator, LightTracer, PathSettings, PathTracer};
+use tessera_common::integrator::{Bdpt, Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, render};
 use tessera_common::scene::Scene;
 
@@ -21,6 +21,16 @@ pub fn render_pt(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
 /// Renders `scene` with `lt` (ν = 1) for `iterations` iterations.
 pub fn render_lt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
     render_with(scene, &LightTracer { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: 1.0 }, iterations, seed, threads)
+}
+
+/// Renders `scene` with `bdpt` (ν light paths per pixel, c connections) for `iterations`.
+pub fn render_bdpt_with(scene: &Scene, nu: f32, c: u32, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_with(scene, &Bdpt { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: nu, connections: c }, iterations, seed, threads)
+}
+
+/// Renders `scene` with vanilla `bdpt` (ν = 1, c = 1).
+pub fn render_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_bdpt_with(scene, 1.0, 1, iterations, seed, threads)
 }
 
 /// Renders `scene` with any integrator.
