@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{render_bdpt, render_lt, render_pt};
+use common::{render_bdpt, render_lt, render_pt, render_vcm};
 use std::collections::HashMap;
 use std::path::Path;
 use tessera_common::scene::Scene;
@@ -103,7 +103,7 @@ fn sealed_light_gives_a_clean_black_image() {
            </scene>"#,
         sensor("0, 0, 6", "0, 0, 0", 16)
     ));
-    for (name, film) in [("pt", render_pt(&s, 4, 1, 0)), ("lt", render_lt(&s, 4, 1, 0)), ("bdpt", render_bdpt(&s, 4, 1, 0))] {
+    for (name, film) in [("pt", render_pt(&s, 4, 1, 0)), ("lt", render_lt(&s, 4, 1, 0)), ("bdpt", render_bdpt(&s, 4, 1, 0)), ("vcm", render_vcm(&s, 4, 1, 0))] {
         assert_eq!(film.non_finite, 0, "{name}");
         assert!(film.average().iter().flatten().all(|&v| v == 0.0), "{name}: light leaked");
     }

@@ -4,7 +4,8 @@
 
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
-use tessera_common::integrator::{Bdpt, Integrator, LightTracer, PathSettings, PathTracer};
+use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
+use tessera_common::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, render};
 use tessera_common::scene::Scene;
 
@@ -25,12 +26,23 @@ pub fn render_lt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> F
 
 /// Renders `scene` with `bdpt` (ν light paths per pixel, c connections) for `iterations`.
 pub fn render_bdpt_with(scene: &Scene, nu: f32, c: u32, iterations: u32, seed: u64, threads: usize) -> Film {
-    render_with(scene, &Bdpt { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: nu, connections: c }, iterations, seed, threads)
+    render_with(scene, &Bidir::bdpt(PathSettings::from_scene(scene, None), nu, c), iterations, seed, threads)
 }
 
 /// Renders `scene` with vanilla `bdpt` (ν = 1, c = 1).
 pub fn render_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
     render_bdpt_with(scene, 1.0, 1, iterations, seed, threads)
+}
+
+/// Renders `scene` with `vcm` (ν, c, constant χ, correlation-aware weights on or off).
+pub fn render_vcm_with(scene: &Scene, nu: f32, c: u32, chi: f32, correlation_aware: bool, iterations: u32, seed: u64, threads: usize) -> Film {
+    let merge = MergeConfig { mask: MergeMask::Constant(chi), correlation_aware };
+    render_with(scene, &Bidir::vcm(PathSettings::from_scene(scene, None), nu, c, merge), iterations, seed, threads)
+}
+
+/// Renders `scene` with vanilla `vcm` (ν = 1, c = 1, χ = 1, correlation-aware).
+pub fn render_vcm(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_vcm_with(scene, 1.0, 1, 1.0, true, iterations, seed, threads)
 }
 
 /// Renders `scene` with any integrator.

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{render_bdpt, render_lt, render_pt, scene_path};
+use common::{render_bdpt, render_lt, render_pt, render_vcm, scene_path};
 use tessera_common::film::Film;
 use tessera_common::film::exr::write_exr;
 use tessera_common::scene::Scene;
@@ -47,5 +47,14 @@ fn bdpt_is_identical_with_one_and_two_threads() {
     let scene = Scene::load(&scene_path("caustic-glass")).expect("scene loads");
     let one = exr_of(&render_bdpt(&scene, 1, 4, 1));
     let two = exr_of(&render_bdpt(&scene, 1, 4, 2));
+    assert!(one == two, "1 and 2 threads differ");
+}
+
+/// The photon map and merges of vcm are identical for any thread count.
+#[test]
+fn vcm_is_identical_with_one_and_two_threads() {
+    let scene = Scene::load(&scene_path("caustic-glass")).expect("scene loads");
+    let one = exr_of(&render_vcm(&scene, 1, 4, 1));
+    let two = exr_of(&render_vcm(&scene, 1, 4, 2));
     assert!(one == two, "1 and 2 threads differ");
 }

@@ -59,7 +59,7 @@ struct Timing {
 }
 
 fn time_tessera(args: &BenchArgs, scene: &Scene) -> anyhow::Result<Timing> {
-    let integrator = make_integrator(args.integrator, scene, None, 1.0, 1)?;
+    let integrator = make_integrator(args.integrator, scene, &crate::local::IntegratorOptions::default())?;
     let opts = RenderOptions { budget: Budget::Samples(args.spp), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
     let mut best: Option<(f64, f64)> = None;
     for run in 0..=args.repeats {

@@ -23,6 +23,18 @@ pub enum IntegratorKind {
     /// Bidirectional path tracing with a light-vertex cache: hits, next-event estimation,
     /// c connections per camera vertex and light tracing, balance heuristic over sample counts.
     Bdpt,
+    /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but
+    /// the first (fixed radius, so slightly biased).
+    Vcm,
+}
+
+/// An on/off switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Switch {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
 }
 
 /// Subcommands.
@@ -45,7 +57,7 @@ pub struct RenderArgs {
     /// Rendering algorithm.
     #[arg(long, value_enum, default_value = "pt")]
     pub integrator: IntegratorKind,
-    /// Samples per pixel; iterations for lt and bdpt [default: the scene's sampler sample_count].
+    /// Samples per pixel; iterations for lt, bdpt and vcm [default: the scene's sampler sample_count].
     #[arg(long, conflicts_with = "time")]
     pub spp: Option<u32>,
     /// Render for this many seconds instead of a fixed sample count.
@@ -60,12 +72,18 @@ pub struct RenderArgs {
     /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
     #[arg(long, allow_negative_numbers = true)]
     pub max_depth: Option<i64>,
-    /// Light paths per pixel per iteration (ν) for lt and bdpt: N = floor(ν · pixels).
+    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels).
     #[arg(long, default_value_t = 1.0)]
     pub light_paths_per_pixel: f32,
-    /// Connections to cached light vertices per camera vertex (c) for bdpt.
+    /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.
     #[arg(long, default_value_t = 1)]
     pub connections: u32,
+    /// Merging for vcm (on: merge probability 1 in every pixel).
+    #[arg(long, value_enum, default_value = "on")]
+    pub merge: Switch,
+    /// Correlation-aware MIS weights for merges (vcm).
+    #[arg(long, value_enum, default_value = "on")]
+    pub correlation_aware: Switch,
     /// Set a scene parameter ($name), overriding its <default>: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,

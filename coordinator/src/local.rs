@@ -1,14 +1,15 @@
 //! `tessera render`: renders a scene on this machine with no setup, writing an EXR (beauty RGB
 //! plus per-pixel sample counts) and an sRGB PNG preview beside it.
 
-use crate::cli::{IntegratorKind, RenderArgs};
+use crate::cli::{IntegratorKind, RenderArgs, Switch};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::film::{exr::write_exr, png::write_png};
-use tessera_common::integrator::{Bdpt, Integrator, LightTracer, PathSettings, PathTracer};
+use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
+use tessera_common::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, RenderOutput, render};
 use tessera_common::scene::Scene;
 
@@ -34,22 +35,61 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
         .collect()
 }
 
-/// Builds the integrator the arguments ask for.
-pub fn make_integrator(kind: IntegratorKind, scene: &Scene, max_depth: Option<i64>, light_paths_per_pixel: f32, connections: u32) -> anyhow::Result<Box<dyn Integrator>> {
-    if !(light_paths_per_pixel > 0.0 && light_paths_per_pixel.is_finite()) {
-        bail!("--light-paths-per-pixel must be positive, got {light_paths_per_pixel}");
+/// The integrator parameters of the command line.
+#[derive(Clone, Copy, Debug)]
+pub struct IntegratorOptions {
+    /// `--max-depth`.
+    pub max_depth: Option<i64>,
+    /// `--light-paths-per-pixel`.
+    pub light_paths_per_pixel: f32,
+    /// `--connections`.
+    pub connections: u32,
+    /// `--merge`.
+    pub merge: bool,
+    /// `--correlation-aware`.
+    pub correlation_aware: bool,
+}
+
+impl IntegratorOptions {
+    /// From `tessera render`'s arguments.
+    pub fn from_args(args: &RenderArgs) -> Self {
+        IntegratorOptions {
+            max_depth: args.max_depth,
+            light_paths_per_pixel: args.light_paths_per_pixel,
+            connections: args.connections,
+            merge: args.merge == Switch::On,
+            correlation_aware: args.correlation_aware == Switch::On,
+        }
     }
-    let max_depth = match max_depth {
+}
+
+impl Default for IntegratorOptions {
+    fn default() -> Self {
+        IntegratorOptions { max_depth: None, light_paths_per_pixel: 1.0, connections: 1, merge: true, correlation_aware: true }
+    }
+}
+
+/// Builds the integrator the arguments ask for.
+pub fn make_integrator(kind: IntegratorKind, scene: &Scene, o: &IntegratorOptions) -> anyhow::Result<Box<dyn Integrator>> {
+    if !(o.light_paths_per_pixel > 0.0 && o.light_paths_per_pixel.is_finite()) {
+        bail!("--light-paths-per-pixel must be positive, got {}", o.light_paths_per_pixel);
+    }
+    let max_depth = match o.max_depth {
         None => None,
         Some(-1) => Some(u32::MAX),
         Some(d) if d >= 0 => Some(d.min(u32::MAX as i64) as u32),
         Some(d) => bail!("--max-depth must be -1 (unlimited) or non-negative, got {d}"),
     };
     let settings = PathSettings::from_scene(scene, max_depth);
+    let (nu, c) = (o.light_paths_per_pixel, o.connections);
     Ok(match kind {
         IntegratorKind::Pt => Box::new(PathTracer { settings }),
-        IntegratorKind::Lt => Box::new(LightTracer { settings, light_paths_per_pixel }),
-        IntegratorKind::Bdpt => Box::new(Bdpt { settings, light_paths_per_pixel, connections }),
+        IntegratorKind::Lt => Box::new(LightTracer { settings, light_paths_per_pixel: nu }),
+        IntegratorKind::Bdpt => Box::new(Bidir::bdpt(settings, nu, c)),
+        IntegratorKind::Vcm => {
+            let mask = MergeMask::Constant(if o.merge { 1.0 } else { 0.0 });
+            Box::new(Bidir::vcm(settings, nu, c, MergeConfig { mask, correlation_aware: o.correlation_aware }))
+        }
     })
 }
 
@@ -68,7 +108,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--threads must be at least 1");
     }
     let scene = Scene::load_with(&args.scene, &defines)?;
-    let integrator = make_integrator(args.integrator, &scene, args.max_depth, args.light_paths_per_pixel, args.connections)?;
+    let integrator = make_integrator(args.integrator, &scene, &IntegratorOptions::from_args(args))?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),

@@ -4,16 +4,17 @@
 //! is a function of (seed, pixel, sample index, dimension), so a tile renders to bit-identical
 //! sums wherever and however it is rendered.
 
-pub mod bdpt;
+pub mod bidir;
 pub mod lt;
 pub mod path;
 pub mod pt;
+pub mod vcm;
 
 use crate::film::{Rect, TileAccum};
 use crate::scene::Scene;
 use std::ops::Range;
 
-pub use bdpt::Bdpt;
+pub use bidir::Bidir;
 pub use lt::LightTracer;
 pub use pt::PathTracer;
 

@@ -20,6 +20,9 @@ pub struct Join {
     pub light_next_from_camera: f32,
     /// Next-event density of the light vertex (vertex 0).
     pub next_event0: f32,
+    /// The light subpath's last vertex arrived at by sampling (a merge) rather than evaluated
+    /// (a connection): its delta flag then stays as traced.
+    pub light_end_sampled: bool,
 }
 
 /// The pdf arrays of the path `light[0..s]` + `camera[t-1..=0]` (camera subpath in camera
@@ -49,7 +52,9 @@ pub fn gather(light: &[PathVertex], camera: &[PathVertex], join: &Join, infinite
     }
     if s >= 1 {
         p.from_camera[s - 1] = join.light_end_from_camera;
-        p.delta[s - 1] = false;
+        if !join.light_end_sampled {
+            p.delta[s - 1] = false;
+        }
         if s >= 2 {
             p.from_camera[s - 2] = join.light_next_from_camera;
         }

@@ -137,6 +137,7 @@ pub fn next_event(scene: &Scene, camera: &[PathVertex], u_light: f32, u_pos: Vec
         light_end_from_camera: density_at_vertex(material.pdf(wo, wi), z.p, &light_vertex, infinite),
         light_next_from_camera: 0.0,
         next_event0,
+        light_end_sampled: false,
     };
     let pdfs = gather(std::slice::from_ref(&light_vertex), camera, &join, infinite);
     let weight = mis::weight(&pdfs, counts, Technique::NextEvent);
@@ -176,6 +177,7 @@ pub fn connect(scene: &Scene, camera: &[PathVertex], light: &[PathVertex], scale
         light_end_from_camera: solid_angle_to_area(mz.pdf(z_wo, z_wi), z.p, y.p, y.n_geo),
         light_next_from_camera: density_at_vertex(my.pdf(y_wi, y_wo), y.p, &light[s - 2], s == 2 && path_on_infinite_light(scene, light)),
         next_event0: light[1].pdf_next_event,
+        light_end_sampled: false,
     };
     let pdfs = gather(light, camera, &join, path_on_infinite_light(scene, light));
     let weight = mis::weight(&pdfs, counts, Technique::Connect(s));
@@ -207,6 +209,7 @@ pub fn light_trace(scene: &Scene, light: &[PathVertex], counts: &SampleCounts) -
         light_end_from_camera: density_at_vertex(pixels * cam.pdf_ray(-to_camera).1, cam.origin, y, false),
         light_next_from_camera,
         next_event0: if s >= 2 { light[1].pdf_next_event } else { 0.0 },
+        light_end_sampled: false,
     };
     let pdfs = gather(light, std::slice::from_ref(&camera_vertex), &join, path_on_infinite_light(scene, light));
     let weight = mis::weight(&pdfs, counts, Technique::LightTrace);

@@ -1,6 +1,7 @@
+//! The bidirectional integrators `bdpt` and `vcm`, which differ only in merging.
+//!
 //! `bdpt`: bidirectional path tracing with a light-vertex cache (Davidovič et al. 2014, as in
 //! SeeSharp's `VertexCacheBidir`), with sample counts as parameters for efficiency-aware MIS.
-//!
 //! Each iteration traces N = ⌊ν·P⌋ light paths and caches their vertices. Light tracing
 //! connects every light vertex to the camera. Then one camera path per pixel: at each vertex
 //! it counts emitter hits, makes one next-event estimate, and connects to c light vertices
@@ -8,13 +9,20 @@
 //! their sample counts (`integrator::path::mis`). No Russian roulette: paths end at
 //! `max_depth` segments, on absorption or on escape.
 //!
+//! `vcm`: the same plus vertex merging (Georgiev et al. 2012): at every camera vertex but the
+//! primary one, with probability χ of its pixel, photons of the iteration's cache within
+//! radius r are merged (weight 1/χ); see [`super::vcm`] for the radius and kernel. A fixed
+//! radius makes `vcm` slightly biased (not progressive).
+//!
 //! Parameters: `max_depth`; ν (`--light-paths-per-pixel`, default 1); c (`--connections`,
-//! default 1). Use it where light arrives along paths camera paths find hard (through small
-//! openings, from hidden lights); caustics seen directly still need light tracing or merging.
+//! default 1); for `vcm` χ (`--merge on|off` or a per-pixel mask) and the correlation-aware
+//! factor (`--correlation-aware`). Use them where light arrives along paths camera paths find
+//! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
 use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
 use super::path::light_path::trace_light_path;
-use super::path::mis::SampleCounts;
+use super::path::mis::{MergeCounts, SampleCounts};
+use super::vcm::{MergeConfig, PhotonMap, merge, merge_radius_max};
 use super::path::techniques::{area_emission, camera_vertex, connect, emitter_hit_weight, light_trace, next_event};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use super::{Integrator, PathSettings, TileRequest};
@@ -26,15 +34,27 @@ use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
 
-/// The bidirectional path tracer.
+/// The bidirectional path tracer, with optional merging.
 #[derive(Clone, Debug)]
-pub struct Bdpt {
+pub struct Bidir {
     /// Depth and emitter settings.
     pub settings: PathSettings,
     /// Light paths per pixel per iteration (ν).
     pub light_paths_per_pixel: f32,
     /// Connections per camera vertex (c).
     pub connections: u32,
+    /// Merging (`vcm`), or none (`bdpt`).
+    pub merge: Option<MergeConfig>,
+}
+
+/// What one iteration shares between its camera paths and splats.
+pub struct Iteration {
+    /// The light-vertex cache.
+    pub cache: LightCache,
+    /// The photon map over the cache (`vcm`).
+    pub photons: Option<PhotonMap>,
+    /// Largest merge radius.
+    pub radius_max: f32,
 }
 
 /// One iteration's light subpaths, stored back to back.
@@ -74,20 +94,37 @@ impl LightCache {
     }
 }
 
-impl Bdpt {
+impl Bidir {
+    /// `bdpt` with ν light paths per pixel and c connections.
+    pub fn bdpt(settings: PathSettings, light_paths_per_pixel: f32, connections: u32) -> Self {
+        Bidir { settings, light_paths_per_pixel, connections, merge: None }
+    }
+
+    /// `vcm`: `bdpt` plus merging.
+    pub fn vcm(settings: PathSettings, light_paths_per_pixel: f32, connections: u32, merge: MergeConfig) -> Self {
+        Bidir { settings, light_paths_per_pixel, connections, merge: Some(merge) }
+    }
+
     fn max_edges(&self) -> u32 {
         self.settings.max_depth.min(MAX_BIDIR_EDGES)
     }
 
-    /// Sample counts of this iteration's techniques.
-    pub fn counts(&self, cache: &LightCache) -> SampleCounts {
+    /// Sample counts of a camera path through `pixel` whose primary hit is `d1` away.
+    pub fn counts(&self, it: &Iteration, pixel: u32, d1: f32) -> SampleCounts {
+        let cache = &it.cache;
         let n = cache.paths as f32;
         let connect = if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
-        SampleCounts { hit: 1.0, next_event: 1.0, connect, light_trace: n, merge: None }
+        let merge = self.merge.as_ref().map(|m| {
+            let r = super::vcm::path_radius(d1, it.radius_max);
+            let rc = d1 * (1.0f32).to_radians().tan();
+            MergeCounts { area: std::f32::consts::PI * r * r, count: n * m.mask.at(pixel), correlation_aware: m.correlation_aware, correlation_area: std::f32::consts::PI * rc * rc, light_paths: n }
+        });
+        SampleCounts { hit: 1.0, next_event: 1.0, connect, light_trace: n, merge }
     }
 
     /// Light-tracing splats of every cached vertex, by chunks merged in order.
-    fn splats(&self, scene: &Scene, cache: &LightCache, counts: &SampleCounts, scale: f32) -> Vec<Vec<(u32, Rgb)>> {
+    fn splats(&self, scene: &Scene, it: &Iteration, scale: f32) -> Vec<Vec<(u32, Rgb)>> {
+        let cache = &it.cache;
         let width = scene.camera.width;
         let chunk = 4096usize;
         (0..cache.vertices.len().div_ceil(chunk))
@@ -100,7 +137,12 @@ impl Bdpt {
                     if (light.len() == 1 && self.settings.hide_emitters) || light.len() as u32 > self.max_edges() {
                         continue;
                     }
-                    if let Some((w, raster)) = light_trace(scene, light, counts) {
+                    // the splat pixel's χ and the radius of a camera path whose primary hit is the
+                    // light subpath's last vertex
+                    let Some(raster) = scene.camera.raster_of(light[light.len() - 1].p - scene.camera.origin) else { continue };
+                    let pixel = raster.y as u32 * width + raster.x as u32;
+                    let counts = self.counts(it, pixel, (light[light.len() - 1].p - scene.camera.origin).length());
+                    if let Some((w, raster)) = light_trace(scene, light, &counts) {
                         out.push((raster.y as u32 * width + raster.x as u32, w.value * scale));
                     }
                 }
@@ -111,10 +153,16 @@ impl Bdpt {
 
     /// One camera path through pixel (x, y): the sum of its weighted contributions.
     #[allow(clippy::too_many_arguments)]
-    fn camera_path(&self, scene: &Scene, cache: &LightCache, counts: &SampleCounts, x: u32, y: u32, seed: u64, iteration: u32, verts: &mut Vec<PathVertex>) -> Rgb {
+    #[allow(clippy::too_many_arguments)]
+    fn camera_path(&self, scene: &Scene, it: &Iteration, x: u32, y: u32, seed: u64, iteration: u32, verts: &mut Vec<PathVertex>) -> Rgb {
         let cam = &scene.camera;
+        let cache = &it.cache;
         let pixels = (cam.width * cam.height) as f32;
-        let mut sampler = Sampler::for_pixel(seed, y * cam.width + x, iteration);
+        let pixel = y * cam.width + x;
+        let mut sampler = Sampler::for_pixel(seed, pixel, iteration);
+        // until the primary hit is known, any radius will do: no merge can involve the camera ray
+        let mut counts = self.counts(it, pixel, 1.0);
+        let mut radius = 0.0;
         let mut ray = cam.generate_ray(Vec2::new(x as f32, y as f32) + sampler.next_2d());
         let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
         let mut beta = Rgb::ONE;
@@ -133,7 +181,7 @@ impl Bdpt {
                         let crate::light::Light::Constant { radiance } = scene.lights[li as usize] else { continue };
                         let env = PathVertex { p: ray.o + ray.d * (2.0 * scene.bounds_radius), n_geo: -ray.d, n_shading: -ray.d, wo: -ray.d, beta, pdf_fwd: pdf_dir, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Light { light: li }, delta: false, depth };
                         verts.push(env);
-                        total += beta * radiance * emitter_hit_weight(scene, verts, li, counts);
+                        total += beta * radiance * emitter_hit_weight(scene, verts, li, &counts);
                         verts.pop();
                     }
                 }
@@ -154,12 +202,17 @@ impl Bdpt {
                 depth,
             };
             verts.push(v);
+            if depth == 1 {
+                let d1 = (hit.p - cam.origin).length();
+                counts = self.counts(it, pixel, d1);
+                radius = super::vcm::path_radius(d1, it.radius_max);
+            }
             // ---- emitter hit ----
             if let Some(li) = shape.light {
                 if !(self.settings.hide_emitters && depth == 1) {
                     let le = area_emission(scene, li, &v);
                     if le != Rgb::ZERO {
-                        total += beta * le * emitter_hit_weight(scene, verts, li, counts);
+                        total += beta * le * emitter_hit_weight(scene, verts, li, &counts);
                     }
                 }
             }
@@ -170,7 +223,7 @@ impl Bdpt {
             // ---- next-event estimation ----
             let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
             if material.has_smooth_lobe() {
-                if let Some(w) = next_event(scene, verts, u_light, u_pos, counts) {
+                if let Some(w) = next_event(scene, verts, u_light, u_pos, &counts) {
                     total += w.value;
                 }
             }
@@ -185,8 +238,16 @@ impl Bdpt {
                 if depth + light.len() as u32 > max_edges {
                     continue;
                 }
-                if let Some(w) = connect(scene, verts, light, connect_scale, counts) {
+                if let Some(w) = connect(scene, verts, light, connect_scale, &counts) {
                     total += w.value;
+                }
+            }
+            // ---- merging (vcm), never at the primary vertex ----
+            if let (Some(m), Some(photons)) = (&self.merge, &it.photons) {
+                let u = sampler.next_1d();
+                let chi = m.mask.at(pixel);
+                if depth >= 2 && chi > 0.0 && u < chi && material.has_smooth_lobe() {
+                    total += merge(scene, verts, cache, photons, radius, &counts, max_edges) / chi;
                 }
             }
             // ---- continue the camera path ----
@@ -211,9 +272,9 @@ impl Bdpt {
     }
 }
 
-impl Integrator for Bdpt {
+impl Integrator for Bidir {
     fn name(&self) -> &'static str {
-        "bdpt"
+        if self.merge.is_some() { "vcm" } else { "bdpt" }
     }
 
     fn full_frame(&self) -> bool {
@@ -233,11 +294,13 @@ impl Integrator for Bdpt {
             }
             // light paths stop one edge short: every technique adds at least one camera edge
             let cache = LightCache::trace(scene, tile.seed, iteration, n, self.max_edges().saturating_sub(1));
-            let counts = self.counts(&cache);
-            let splats = self.splats(scene, &cache, &counts, (w * h) as f32 / n as f32);
+            let radius_max = merge_radius_max(scene);
+            let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
+            let it = Iteration { cache, photons, radius_max };
+            let splats = self.splats(scene, &it, (w * h) as f32 / n as f32);
             let rows: Vec<Vec<Rgb>> = (0..h)
                 .into_par_iter()
-                .map_init(Vec::new, |verts, y| (0..w).map(|x| self.camera_path(scene, &cache, &counts, x, y, tile.seed, iteration, verts)).collect())
+                .map_init(Vec::new, |verts, y| (0..w).map(|x| self.camera_path(scene, &it, x, y, tile.seed, iteration, verts)).collect())
                 .collect();
             for (y, row) in rows.iter().enumerate() {
                 for (x, value) in row.iter().enumerate() {
