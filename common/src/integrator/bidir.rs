@@ -23,7 +23,8 @@ use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
 use super::path::light_path::trace_light_path;
 use super::path::mis::{MergeCounts, SampleCounts};
 use super::vcm::{MergeConfig, PhotonMap, merge, merge_radius_max};
-use super::path::techniques::{area_emission, camera_vertex, connect, emitter_hit_weight, light_trace, next_event};
+use super::observer::{NoObserver, SampleObserver};
+use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use super::{Integrator, PathSettings, TileRequest};
 use crate::bsdf::TransportMode;
@@ -34,9 +35,9 @@ use crate::scene::Scene;
 use glam::Vec2;
 use rayon::prelude::*;
 
-/// The bidirectional path tracer, with optional merging.
+/// The bidirectional path tracer, with optional merging, reporting samples to `O`.
 #[derive(Clone, Debug)]
-pub struct Bidir {
+pub struct Bidir<O: SampleObserver = NoObserver> {
     /// Depth and emitter settings.
     pub settings: PathSettings,
     /// Light paths per pixel per iteration (ν).
@@ -45,6 +46,8 @@ pub struct Bidir {
     pub connections: u32,
     /// Merging (`vcm`), or none (`bdpt`).
     pub merge: Option<MergeConfig>,
+    /// Receives every sample.
+    pub observer: O,
 }
 
 /// What one iteration shares between its camera paths and splats.
@@ -94,17 +97,24 @@ impl LightCache {
     }
 }
 
-impl Bidir {
+impl Bidir<NoObserver> {
     /// `bdpt` with ν light paths per pixel and c connections.
     pub fn bdpt(settings: PathSettings, light_paths_per_pixel: f32, connections: u32) -> Self {
-        Bidir { settings, light_paths_per_pixel, connections, merge: None }
+        Bidir { settings, light_paths_per_pixel, connections, merge: None, observer: NoObserver }
     }
 
     /// `vcm`: `bdpt` plus merging.
     pub fn vcm(settings: PathSettings, light_paths_per_pixel: f32, connections: u32, merge: MergeConfig) -> Self {
-        Bidir { settings, light_paths_per_pixel, connections, merge: Some(merge) }
+        Bidir { settings, light_paths_per_pixel, connections, merge: Some(merge), observer: NoObserver }
     }
 
+    /// The same integrator reporting its samples to `observer`.
+    pub fn with_observer<O: SampleObserver>(self, observer: O) -> Bidir<O> {
+        Bidir { settings: self.settings, light_paths_per_pixel: self.light_paths_per_pixel, connections: self.connections, merge: self.merge, observer }
+    }
+}
+
+impl<O: SampleObserver> Bidir<O> {
     fn max_edges(&self) -> u32 {
         self.settings.max_depth.min(MAX_BIDIR_EDGES)
     }
@@ -142,8 +152,8 @@ impl Bidir {
                     let Some(raster) = scene.camera.raster_of(light[light.len() - 1].p - scene.camera.origin) else { continue };
                     let pixel = raster.y as u32 * width + raster.x as u32;
                     let counts = self.counts(it, pixel, (light[light.len() - 1].p - scene.camera.origin).length());
-                    if let Some((w, raster)) = light_trace(scene, light, &counts) {
-                        out.push((raster.y as u32 * width + raster.x as u32, w.value * scale));
+                    if let Some((w, raster)) = light_trace(scene, light, &counts, scale, &self.observer) {
+                        out.push((raster.y as u32 * width + raster.x as u32, w.value));
                     }
                 }
                 out
@@ -163,6 +173,7 @@ impl Bidir {
         // until the primary hit is known, any radius will do: no merge can involve the camera ray
         let mut counts = self.counts(it, pixel, 1.0);
         let mut radius = 0.0;
+        let report = Report { observer: &self.observer, pixel };
         let mut ray = cam.generate_ray(Vec2::new(x as f32, y as f32) + sampler.next_2d());
         let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
         let mut beta = Rgb::ONE;
@@ -181,7 +192,7 @@ impl Bidir {
                         let crate::light::Light::Constant { radiance } = scene.lights[li as usize] else { continue };
                         let env = PathVertex { p: ray.o + ray.d * (2.0 * scene.bounds_radius), n_geo: -ray.d, n_shading: -ray.d, wo: -ray.d, beta, pdf_fwd: pdf_dir, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Light { light: li }, delta: false, depth };
                         verts.push(env);
-                        total += beta * radiance * emitter_hit_weight(scene, verts, li, &counts);
+                        total += emitter_hit(scene, verts, li, radiance, &counts, &report);
                         verts.pop();
                     }
                 }
@@ -212,7 +223,7 @@ impl Bidir {
                 if !(self.settings.hide_emitters && depth == 1) {
                     let le = area_emission(scene, li, &v);
                     if le != Rgb::ZERO {
-                        total += beta * le * emitter_hit_weight(scene, verts, li, &counts);
+                        total += emitter_hit(scene, verts, li, le, &counts, &report);
                     }
                 }
             }
@@ -223,7 +234,7 @@ impl Bidir {
             // ---- next-event estimation ----
             let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
             if material.has_smooth_lobe() {
-                if let Some(w) = next_event(scene, verts, u_light, u_pos, &counts) {
+                if let Some(w) = next_event(scene, verts, u_light, u_pos, &counts, &report) {
                     total += w.value;
                 }
             }
@@ -238,7 +249,7 @@ impl Bidir {
                 if depth + light.len() as u32 > max_edges {
                     continue;
                 }
-                if let Some(w) = connect(scene, verts, light, connect_scale, &counts) {
+                if let Some(w) = connect(scene, verts, light, connect_scale, &counts, &report) {
                     total += w.value;
                 }
             }
@@ -247,7 +258,7 @@ impl Bidir {
                 let u = sampler.next_1d();
                 let chi = m.mask.at(pixel);
                 if depth >= 2 && chi > 0.0 && u < chi && material.has_smooth_lobe() {
-                    total += merge(scene, verts, cache, photons, radius, &counts, max_edges) / chi;
+                    total += merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
                 }
             }
             // ---- continue the camera path ----
@@ -272,7 +283,7 @@ impl Bidir {
     }
 }
 
-impl Integrator for Bidir {
+impl<O: SampleObserver> Integrator for Bidir<O> {
     fn name(&self) -> &'static str {
         if self.merge.is_some() { "vcm" } else { "bdpt" }
     }

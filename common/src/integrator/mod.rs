@@ -6,6 +6,7 @@
 
 pub mod bidir;
 pub mod lt;
+pub mod observer;
 pub mod path;
 pub mod pt;
 pub mod vcm;

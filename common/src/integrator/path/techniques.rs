@@ -15,8 +15,27 @@ use crate::bsdf::{Material, TransportMode};
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::light::Light;
 use crate::math::{Rgb, SHADOW_EPSILON};
+use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+
+/// Where a sample lands and who watches: the pixel and the observer.
+#[derive(Clone, Copy)]
+pub struct Report<'a, O: SampleObserver> {
+    /// The observer.
+    pub observer: &'a O,
+    /// The camera path's pixel.
+    pub pixel: u32,
+}
+
+impl<O: SampleObserver> Report<'_, O> {
+    #[inline(always)]
+    fn emit(&self, technique: Technique, pixel: u32, value: Rgb, weight: f32, pdfs: &super::mis::PathPdfs, counts: &SampleCounts) {
+        if value != Rgb::ZERO {
+            self.observer.on_sample(&SampleRecord { technique, pixel, value, weight, pdfs, counts });
+        }
+    }
+}
 
 /// A weighted contribution and the weight that was applied.
 #[derive(Clone, Copy, Debug)]
@@ -79,8 +98,9 @@ fn emission_densities(scene: &Scene, li: u32, y: &PathVertex, to: &PathVertex) -
 }
 
 /// The camera subpath ends on an emitter (or escaped to an infinite light, with `camera`'s
-/// last vertex being the virtual light vertex). Weight of the hit technique.
-pub fn emitter_hit_weight(scene: &Scene, camera: &[PathVertex], li: u32, counts: &SampleCounts) -> f32 {
+/// last vertex being the virtual light vertex) emitting `emitted` towards it: the weighted
+/// contribution of the hit technique.
+pub fn emitter_hit<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], li: u32, emitted: Rgb, counts: &SampleCounts, report: &Report<O>) -> Rgb {
     let t = camera.len();
     let end = &camera[t - 1];
     let prev = &camera[t - 2];
@@ -89,12 +109,15 @@ pub fn emitter_hit_weight(scene: &Scene, camera: &[PathVertex], li: u32, counts:
     let next_event0 = if prev.kind == VertexKind::Camera { 0.0 } else { next_event_density(scene, &light_vertex, prev) };
     let join = Join { camera_end_from_light: pos, camera_next_from_light: next, next_event0, ..Join::default() };
     let pdfs = gather(&[], camera, &join, is_infinite(scene, li));
-    mis::weight(&pdfs, counts, Technique::EmitterHit)
+    let weight = mis::weight(&pdfs, counts, Technique::EmitterHit);
+    let value = camera[t - 1].beta * emitted * weight;
+    report.emit(Technique::EmitterHit, report.pixel, value, weight, &pdfs, counts);
+    value
 }
 
 /// Next-event estimation from the camera subpath's last vertex with uniform numbers `u_light`
 /// and `u_pos`.
-pub fn next_event(scene: &Scene, camera: &[PathVertex], u_light: f32, u_pos: Vec2, counts: &SampleCounts) -> Option<Weighted> {
+pub fn next_event<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], u_light: f32, u_pos: Vec2, counts: &SampleCounts, report: &Report<O>) -> Option<Weighted> {
     let z = camera.last()?;
     let material = material_of(scene, z)?;
     let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
@@ -142,12 +165,13 @@ pub fn next_event(scene: &Scene, camera: &[PathVertex], u_light: f32, u_pos: Vec
     let pdfs = gather(std::slice::from_ref(&light_vertex), camera, &join, infinite);
     let weight = mis::weight(&pdfs, counts, Technique::NextEvent);
     let value = z.beta * f * ds.radiance * (wi.z.abs() * weight / (pmf * ds.pdf));
+    report.emit(Technique::NextEvent, report.pixel, value, weight, &pdfs, counts);
     Some(Weighted { value, weight })
 }
 
 /// Connects the camera subpath's last vertex to the light subpath `light` (whose last vertex
 /// is a surface vertex). `scale` is 1 / (effective connection count), c·N/|cache|.
-pub fn connect(scene: &Scene, camera: &[PathVertex], light: &[PathVertex], scale: f32, counts: &SampleCounts) -> Option<Weighted> {
+pub fn connect<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], light: &[PathVertex], scale: f32, counts: &SampleCounts, report: &Report<O>) -> Option<Weighted> {
     let (z, y) = (camera.last()?, light.last()?);
     let (mz, my) = (material_of(scene, z)?, material_of(scene, y)?);
     let d = y.p - z.p;
@@ -182,12 +206,13 @@ pub fn connect(scene: &Scene, camera: &[PathVertex], light: &[PathVertex], scale
     let pdfs = gather(light, camera, &join, path_on_infinite_light(scene, light));
     let weight = mis::weight(&pdfs, counts, Technique::Connect(s));
     let value = z.beta * f_cam * f_light * y.beta * (g * weight * scale);
+    report.emit(Technique::Connect(s), report.pixel, value, weight, &pdfs, counts);
     Some(Weighted { value, weight })
 }
 
-/// Light tracing: connects the light subpath's last vertex to the camera. Returns the
-/// (unscaled) weighted contribution and the raster position.
-pub fn light_trace(scene: &Scene, light: &[PathVertex], counts: &SampleCounts) -> Option<(Weighted, Vec2)> {
+/// Light tracing: connects the light subpath's last vertex to the camera. Returns the weighted
+/// contribution, multiplied by `scale` (P/N), and the raster position.
+pub fn light_trace<O: SampleObserver>(scene: &Scene, light: &[PathVertex], counts: &SampleCounts, scale: f32, observer: &O) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
     let (raw, raster) = crate::integrator::lt::connect_to_camera(scene, y)?;
     let cam = &scene.camera;
@@ -213,7 +238,10 @@ pub fn light_trace(scene: &Scene, light: &[PathVertex], counts: &SampleCounts) -
     };
     let pdfs = gather(light, std::slice::from_ref(&camera_vertex), &join, path_on_infinite_light(scene, light));
     let weight = mis::weight(&pdfs, counts, Technique::LightTrace);
-    Some((Weighted { value: raw * weight, weight }, raster))
+    let value = raw * (weight * scale);
+    let pixel = raster.y as u32 * cam.width + raster.x as u32;
+    Report { observer, pixel }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts);
+    Some((Weighted { value, weight }, raster))
 }
 
 /// The pinhole as the first camera-path vertex.

@@ -18,6 +18,8 @@ use super::path::gather::{Join, gather};
 use super::path::light_path::next_event_density;
 use super::path::mis::{self, SampleCounts, Technique};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex};
+use super::observer::{SampleObserver, SampleRecord};
+use super::path::techniques::Report;
 use crate::bsdf::TransportMode;
 use crate::math::{PI, Rgb};
 use crate::scene::Scene;
@@ -79,9 +81,14 @@ pub fn path_radius(d1: f32, radius_max: f32) -> f32 {
     (d1 * (0.1f32).to_radians().tan()).min(radius_max)
 }
 
-/// Merges the camera subpath's last vertex with the photons within `radius`: the sum of the
-/// MIS-weighted contributions (before the 1/χ of the merge probability).
-pub fn merge(scene: &Scene, camera: &[PathVertex], cache: &LightCache, photons: &PhotonMap, radius: f32, counts: &SampleCounts, max_edges: u32) -> Rgb {
+/// Merges the camera subpath's last vertex with the photons within `radius`, which happens
+/// with probability `chi`: the sum of the MIS-weighted contributions, including the 1/χ.
+#[allow(clippy::too_many_arguments)]
+pub fn merge<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], cache: &LightCache, photons: &PhotonMap, radius: f32, chi: f32, counts: &SampleCounts, max_edges: u32, report: &Report<O>) -> Rgb {
+    // never at the primary vertex: camera = [pinhole, primary, ..., z]
+    if camera.len() < 3 {
+        return Rgb::ZERO;
+    }
     let Some(z) = camera.last() else { return Rgb::ZERO };
     let VertexKind::Surface { material } = z.kind else { return Rgb::ZERO };
     let mz = &scene.materials[material as usize];
@@ -120,7 +127,11 @@ pub fn merge(scene: &Scene, camera: &[PathVertex], cache: &LightCache, photons: 
         let kernel = 2.0 * (r2 - d2) / (PI * r2 * r2);
         // shading correction at the merge vertex: |ns·wi| / |ng·wi|
         let correction = wi.z.abs() / z.n_geo.dot(y.wo).abs();
-        total += z.beta * f * y.beta * (correction * kernel * weight / n_paths);
+        let value = z.beta * f * y.beta * (correction * kernel * weight / (n_paths * chi));
+        if value != Rgb::ZERO {
+            report.observer.on_sample(&SampleRecord { technique: Technique::Merge(s), pixel: report.pixel, value, weight, pdfs: &pdfs, counts });
+        }
+        total += value;
     });
     total
 }
