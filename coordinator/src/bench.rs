@@ -41,6 +41,16 @@ pub struct BenchArgs {
     /// Print one JSON object per scene instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Equal-time mode: render each scene with each of `--integrators` for this many seconds
+    /// and report relMSE against the scene's reference.exr and the speed-up over pt.
+    #[arg(long)]
+    pub equal_time: Option<f64>,
+    /// Integrators compared in equal-time mode.
+    #[arg(long, value_delimiter = ',', default_value = "pt,lt,bdpt,vcm")]
+    pub integrators: Vec<IntegratorKind>,
+    /// Measure photon-map build and query rates for this many photons instead.
+    #[arg(long)]
+    pub photon_map: Option<u32>,
 }
 
 /// Process CPU time (user + system) in seconds.
@@ -101,9 +111,63 @@ fn default_scenes() -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// Equal-time comparison of integrators on one scene: (name, relMSE, samples/s) per integrator.
+fn equal_time(args: &BenchArgs, path: &std::path::Path, seconds: f64) -> anyhow::Result<Vec<(String, f64, f64)>> {
+    let scene = Scene::load(path)?;
+    let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+    let mut rows = Vec::new();
+    for &kind in &args.integrators {
+        let integrator = make_integrator(kind, &scene, &crate::local::IntegratorOptions::default())?;
+        let opts = RenderOptions { budget: Budget::Time(std::time::Duration::from_secs_f64(seconds)), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
+        let out = render(&scene, integrator.as_ref(), &opts, &|_, _| {})?;
+        let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
+        rows.push((integrator.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
+    }
+    Ok(rows)
+}
+
+/// Photon-map build and query rates for `n` photons spread through a unit cube, queried at
+/// `n` points with a radius that finds about 10 photons each.
+fn photon_map_rates(n: u32) {
+    use tessera_common::integrator::path::vertex::{PathVertex, VertexKind};
+    use tessera_common::integrator::vcm::PhotonMap;
+    use tessera_common::sampler::Sampler;
+    let point = |seed: u64, i: u32| { let mut s = Sampler::for_pixel(seed, i, 0); let u = s.next_2d(); glam::Vec3::new(u.x, u.y, s.next_1d()) };
+    let vertices: Vec<PathVertex> = (0..n).map(|i| PathVertex { p: point(1, i), n_geo: glam::Vec3::Z, n_shading: glam::Vec3::Z, wo: glam::Vec3::Z, beta: glam::Vec3::ONE, pdf_fwd: 1.0, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Surface { material: 0 }, delta: false, depth: 1 }).collect();
+    let all: Vec<u32> = (0..n).collect();
+    let radius = (10.0 / (n as f32 * 4.0 / 3.0 * std::f32::consts::PI)).cbrt();
+    let t = std::time::Instant::now();
+    let map = PhotonMap::build(&vertices, &all, radius);
+    let build = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let mut found = 0u64;
+    for i in 0..n {
+        map.query(point(2, i), radius, |_, _| found += 1);
+    }
+    let query = t.elapsed().as_secs_f64();
+    println!("photon map, {n} photons: build {:.3} s ({:.1} M photons/s); {n} queries of radius {radius:.4} in {:.3} s ({:.2} M queries/s, {:.1} photons found per query, single thread)", build, n as f64 / build / 1e6, query, n as f64 / query / 1e6, found as f64 / n as f64);
+}
+
 /// Runs `tessera bench`.
 pub fn bench_command(args: &BenchArgs) -> anyhow::Result<()> {
+    if let Some(n) = args.photon_map {
+        photon_map_rates(n);
+        return Ok(());
+    }
     let scenes = if args.scenes.is_empty() { default_scenes()? } else { args.scenes.clone() };
+    if let Some(seconds) = args.equal_time {
+        println!("equal time {seconds} s: relMSE vs reference (top 0.1 % dropped); speed-up = relMSE(pt) / relMSE; samples/s");
+        for path in &scenes {
+            let rows = equal_time(args, path, seconds)?;
+            let pt = rows.iter().find(|r| r.0 == "pt").map(|r| r.1);
+            let cells: Vec<String> = rows.iter().map(|(n, e, sps)| match pt {
+                Some(p) => format!("{n} {e:.5} ({:.2}x, {:.0} S/s)", p / e, sps),
+                None => format!("{n} {e:.5} ({:.0} S/s)", sps),
+            }).collect();
+            println!("{:<24} {}", scene_name(path), cells.join("  "));
+        }
+        return Ok(());
+    }
     if !args.json {
         let mut header = format!("{:<24} {:>14} {:>14}", "scene", "tessera S/s", "S/cpu-s");
         if args.mitsuba_python.is_some() {

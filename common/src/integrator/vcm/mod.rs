@@ -98,7 +98,7 @@ pub fn merge<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], cache: &Li
     let n_paths = cache.paths as f32;
     let r2 = radius * radius;
     let mut total = Rgb::ZERO;
-    photons.query(&cache.vertices, z.p, radius, |index, d2| {
+    photons.query(z.p, radius, |index, d2| {
         let y = &cache.vertices[index as usize];
         if z.depth + y.depth > max_edges || z.n_geo.dot(y.wo).abs() < 1e-4 {
             return;

@@ -14,6 +14,8 @@ pub struct PhotonMap {
     starts: Vec<u32>,
     /// Photon (cache vertex) indices grouped by bucket, ascending within a bucket.
     photons: Vec<u32>,
+    /// Their positions in the same order, so distance tests read contiguous memory.
+    positions: Vec<Vec3>,
 }
 
 #[inline]
@@ -30,7 +32,7 @@ impl PhotonMap {
         let cell = (2.0 * max_radius).max(1e-12);
         let origin = candidates.iter().fold(Vec3::splat(f32::MAX), |m, &i| m.min(vertices[i as usize].p));
         let buckets = (2 * candidates.len()).max(16).next_power_of_two();
-        let mut map = PhotonMap { origin, inv_cell: 1.0 / cell, mask: buckets - 1, starts: vec![0; buckets + 1], photons: vec![0; candidates.len()] };
+        let mut map = PhotonMap { origin, inv_cell: 1.0 / cell, mask: buckets - 1, starts: vec![0; buckets + 1], photons: vec![0; candidates.len()], positions: vec![Vec3::ZERO; candidates.len()] };
         let keys: Vec<usize> = candidates.iter().map(|&i| bucket_of(map.cell_of(vertices[i as usize].p), map.mask)).collect();
         for &b in &keys {
             map.starts[b + 1] += 1;
@@ -41,6 +43,7 @@ impl PhotonMap {
         let mut fill = map.starts.clone();
         for (&i, &b) in candidates.iter().zip(&keys) {
             map.photons[fill[b] as usize] = i;
+            map.positions[fill[b] as usize] = vertices[i as usize].p;
             fill[b] += 1;
         }
         map
@@ -65,7 +68,7 @@ impl PhotonMap {
     /// Calls `visit(index, distance²)` for every photon within `radius` (≤ the build's maximum)
     /// of `p`, in a deterministic order.
     #[inline]
-    pub fn query(&self, vertices: &[PathVertex], p: Vec3, radius: f32, mut visit: impl FnMut(u32, f32)) {
+    pub fn query(&self, p: Vec3, radius: f32, mut visit: impl FnMut(u32, f32)) {
         if self.photons.is_empty() {
             return;
         }
@@ -86,8 +89,9 @@ impl PhotonMap {
                 continue;
             }
             seen[k] = b;
-            for &i in &self.photons[self.starts[b] as usize..self.starts[b + 1] as usize] {
-                let d2 = (vertices[i as usize].p - p).length_squared();
+            let range = self.starts[b] as usize..self.starts[b + 1] as usize;
+            for (&i, q) in self.photons[range.clone()].iter().zip(&self.positions[range]) {
+                let d2 = (*q - p).length_squared();
                 if d2 <= r2 {
                     visit(i, d2);
                 }
@@ -116,7 +120,7 @@ mod tests {
             let p = s.next_2d().extend(s.next_1d()) * 2.2 - 1.1;
             let r = 0.02 + 0.08 * s.next_1d();
             let mut found = vec![];
-            map.query(&vertices, p, r, |i, _| found.push(i));
+            map.query(p, r, |i, _| found.push(i));
             let mut expected: Vec<u32> = all.iter().copied().filter(|&i| (vertices[i as usize].p - p).length() <= r).collect();
             found.sort();
             expected.sort();
