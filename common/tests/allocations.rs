@@ -33,7 +33,7 @@ static GLOBAL: Counting = Counting;
 fn connections_and_merges_do_not_allocate() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
     let scene = Scene::load(&path).expect("scene loads");
-    let cache = LightCache::trace(&scene, 1, 0, 4096, 10);
+    let cache = LightCache::trace(&scene, 1, 0, 4096, 10, 5);
     let radius = merge_radius_max(&scene) * 4.0;
     let photons = PhotonMap::build(&cache.vertices, &cache.selectable, radius);
     // a two-vertex camera subpath: the pinhole and the primary hit through the image centre

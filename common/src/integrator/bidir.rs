@@ -6,8 +6,9 @@
 //! connects every light vertex to the camera. Then one camera path per pixel: at each vertex
 //! it counts emitter hits, makes one next-event estimate, and connects to c light vertices
 //! chosen uniformly from the cache. All techniques are combined with the balance heuristic over
-//! their sample counts (`integrator::path::mis`). No Russian roulette: paths end at
-//! `max_depth` segments, on absorption or on escape.
+//! their sample counts (`integrator::path::mis`). Both subpaths use Mitsuba's Russian roulette
+//! from `rr_depth` on (SeeSharp has none); paths end at `max_depth` segments, on absorption, on
+//! escape or by roulette.
 //!
 //! `vcm`: the same plus vertex merging (Georgiev et al. 2012): at every camera vertex but the
 //! primary one, with probability χ of its pixel, photons of the iteration's cache within
@@ -29,7 +30,7 @@ use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle
 use super::{Integrator, PathSettings, TileRequest};
 use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
-use crate::math::Rgb;
+use crate::math::{Rgb, max_component};
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::Vec2;
@@ -73,13 +74,13 @@ pub struct LightCache {
 impl LightCache {
     /// Traces `paths` light paths of iteration `iteration`, in parallel chunks concatenated in
     /// order, so the cache does not depend on the thread count.
-    pub fn trace(scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32) -> Self {
+    pub fn trace(scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32, rr_depth: u32) -> Self {
         let chunks: Vec<Vec<PathVertex>> = (0..paths.div_ceil(LIGHT_PATH_CHUNK))
             .into_par_iter()
             .map(|c| {
                 let mut out = Vec::new();
                 for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
-                    trace_light_path(scene, &mut Sampler::for_light_path(seed, index, iteration), max_edges, &mut out);
+                    trace_light_path(scene, &mut Sampler::for_light_path(seed, index, iteration), max_edges, rr_depth, &mut out);
                 }
                 out
             })
@@ -177,6 +178,7 @@ impl<O: SampleObserver> Bidir<O> {
         let mut ray = cam.generate_ray(Vec2::new(x as f32, y as f32) + sampler.next_2d());
         let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
         let mut beta = Rgb::ONE;
+        let mut eta = 1.0f32;
         let mut total = Rgb::ZERO;
         let max_edges = self.max_edges();
         let connect_scale = if counts.connect > 0.0 { 1.0 / counts.connect } else { 0.0 };
@@ -267,6 +269,16 @@ impl<O: SampleObserver> Bidir<O> {
             let (uc, u) = (sampler.next_1d(), sampler.next_2d());
             let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) else { break };
             beta *= bs.weight;
+            eta *= bs.eta;
+            // Russian roulette as in Mitsuba's path (the MIS weights still sum to one per path,
+            // so stopping early keeps every technique unbiased)
+            if depth >= self.settings.rr_depth {
+                let q = (max_component(beta) * eta * eta).min(0.95);
+                if sampler.next_1d() >= q {
+                    break;
+                }
+                beta /= q;
+            }
             let n = verts.len();
             if n >= 3 {
                 let before = verts[n - 2];
@@ -304,7 +316,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
-            let cache = LightCache::trace(scene, tile.seed, iteration, n, self.max_edges().saturating_sub(1));
+            let cache = LightCache::trace(scene, tile.seed, iteration, n, self.max_edges().saturating_sub(1), self.settings.rr_depth);
             let radius_max = merge_radius_max(scene);
             let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
             let it = Iteration { cache, photons, radius_max };

@@ -30,7 +30,7 @@ pub const MAX_BIDIR_EDGES: u32 = (super::path::mis::MAX_VERTICES - 2) as u32;
 /// The light tracer.
 #[derive(Clone, Debug)]
 pub struct LightTracer {
-    /// Depth settings (`rr_depth` is not used: light paths stop at `max_depth`).
+    /// Depth settings (`max_depth`; Russian roulette from `rr_depth`).
     pub settings: PathSettings,
     /// Light paths per pixel per iteration (ν).
     pub light_paths_per_pixel: f32,
@@ -89,7 +89,7 @@ impl LightTracer {
         for index in range {
             vertices.clear();
             let mut sampler = Sampler::for_light_path(seed, index, iteration);
-            trace_light_path(scene, &mut sampler, self.max_edges(), &mut vertices);
+            trace_light_path(scene, &mut sampler, self.max_edges(), self.settings.rr_depth, &mut vertices);
             for v in &vertices {
                 if let Some((value, raster)) = connect_to_camera(scene, v) {
                     let pixel = raster.y as u32 * width + raster.x as u32;

@@ -10,9 +10,11 @@ use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::Vec3;
 
-/// Traces one light subpath into `out` (appending). Returns the number of vertices appended
-/// (0 when the scene has no light or the emission sample failed).
-pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, out: &mut Vec<PathVertex>) -> usize {
+/// Traces one light subpath into `out` (appending), with Russian roulette from `rr_depth` on
+/// (survival min(max throughput relative to emission · η², 0.95), as camera paths use).
+/// Returns the number of vertices appended (0 when the scene has no light or the emission
+/// sample failed).
+pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, rr_depth: u32, out: &mut Vec<PathVertex>) -> usize {
     let start = out.len();
     let Some((li, pmf, _)) = scene.light_sampler.sample(sampler.next_1d()) else { return 0 };
     let light = &scene.lights[li];
@@ -44,6 +46,8 @@ pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, ou
     // importance leaving the light: Le |cos| / (pmf pdf_pos pdf_dir)
     let cos0 = if e.n == Vec3::ZERO || infinite { 1.0 } else { e.n.dot(e.d).abs() };
     let mut beta = e.radiance * (cos0 / (pmf * e.pdf_pos * e.pdf_dir));
+    let beta_start = beta.max_element().max(1e-30);
+    let mut eta = 1.0f32;
     let mut ray = crate::geometry::Ray::new(e.p, e.d);
     if !infinite && e.n != Vec3::ZERO {
         ray.o = crate::geometry::offset_ray_origin(e.p, e.n, e.d);
@@ -87,8 +91,16 @@ pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, ou
         let current = out.len() - 1;
         let correction = out[current].importance_correction(hit.wo, wi);
         beta *= bs.weight * correction;
+        eta *= bs.eta;
         if beta == Rgb::ZERO || !beta.is_finite() {
             break;
+        }
+        if depth >= rr_depth {
+            let q = (beta.max_element() / beta_start * eta * eta).min(0.95);
+            if sampler.next_1d() >= q {
+                break;
+            }
+            beta /= q;
         }
         // reverse density of the predecessor, sampled from here towards it
         let prev = out[current - 1];
