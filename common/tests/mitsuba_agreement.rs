@@ -35,6 +35,18 @@ use tessera_common::scene::Scene;
 use tessera_common::scene::shape::ShapeGeometry;
 
 const SPP: u32 = 32;
+
+/// One test per scene, each calling the module's `check(name)`.
+macro_rules! scene_tests {
+    ($($test:ident => $name:literal),* $(,)?) => {
+        $(
+            #[test]
+            fn $test() {
+                check($name);
+            }
+        )*
+    };
+}
 const MAX_BIAS: f64 = 0.01;
 const MAX_RATIO: f64 = 1.2;
 
@@ -196,30 +208,7 @@ mod bidirectional {
         check_scene_with(name, None, render_bdpt, 16, MAX_BIAS, MAX_RATIO);
     }
 
-    #[test]
-    fn cornell_box() {
-        check("cornell-box");
-    }
-
-    #[test]
-    fn veach_mis() {
-        check("veach-mis");
-    }
-
-    #[test]
-    fn caustic_glass() {
-        check("caustic-glass");
-    }
-
-    #[test]
-    fn indirect_room() {
-        check("indirect-room");
-    }
-
-    #[test]
-    fn glossy_interreflection() {
-        check("glossy-interreflection");
-    }
+    scene_tests!(cornell_box => "cornell-box", veach_mis => "veach-mis", caustic_glass => "caustic-glass", indirect_room => "indirect-room", glossy_interreflection => "glossy-interreflection");
 
     #[test]
     fn env_lit() {
@@ -252,30 +241,7 @@ mod merging {
         check_scene_with(name, None, render_vcm, 16, 0.02, 1.5);
     }
 
-    #[test]
-    fn cornell_box() {
-        check("cornell-box");
-    }
-
-    #[test]
-    fn veach_mis() {
-        check("veach-mis");
-    }
-
-    #[test]
-    fn caustic_glass() {
-        check("caustic-glass");
-    }
-
-    #[test]
-    fn indirect_room() {
-        check("indirect-room");
-    }
-
-    #[test]
-    fn glossy_interreflection() {
-        check("glossy-interreflection");
-    }
+    scene_tests!(cornell_box => "cornell-box", veach_mis => "veach-mis", caustic_glass => "caustic-glass", indirect_room => "indirect-room", glossy_interreflection => "glossy-interreflection");
 
     #[test]
     fn env_lit() {

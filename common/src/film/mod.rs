@@ -64,6 +64,13 @@ impl TileAccum {
     /// Adds one sample to pixel `local` (row-major index within the rectangle).
     #[inline]
     pub fn add(&mut self, local: usize, value: Rgb) {
+        self.accumulate(local, value);
+        self.count[local] += 1;
+    }
+
+    /// Adds `value` to the sums of pixel `local`, zeroing (and counting) non-finite values.
+    #[inline]
+    fn accumulate(&mut self, local: usize, value: Rgb) {
         let v = if value.is_finite() { value } else {
             self.non_finite += 1;
             Rgb::ZERO
@@ -72,7 +79,6 @@ impl TileAccum {
         s[0] += v.x as f64;
         s[1] += v.y as f64;
         s[2] += v.z as f64;
-        self.count[local] += 1;
     }
 }
 
@@ -82,14 +88,7 @@ impl TileAccum {
     /// [`TileAccum::count_iterations`].
     #[inline]
     pub fn add_splat(&mut self, local: usize, value: Rgb) {
-        let v = if value.is_finite() { value } else {
-            self.non_finite += 1;
-            Rgb::ZERO
-        };
-        let s = &mut self.sum[local];
-        s[0] += v.x as f64;
-        s[1] += v.y as f64;
-        s[2] += v.z as f64;
+        self.accumulate(local, value);
     }
 
     /// Counts `n` more samples (iterations) in every pixel.
