@@ -226,8 +226,13 @@ mod bidirectional {
         fn dense(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
             render_bdpt_with(scene, 2.0, 0, spp, seed, threads)
         }
+        /// ν = 0, c = 0: pure path tracing (hits and NEE) on the shared bidirectional code
+        fn path_tracing(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
+            render_bdpt_with(scene, 0.0, 0, spp, seed, threads)
+        }
         check_scene_with("glossy-interreflection", None, sparse, 16, MAX_BIAS, MAX_RATIO);
         check_scene_with("glossy-interreflection", None, dense, 16, MAX_BIAS, MAX_RATIO);
+        check_scene_with("glossy-interreflection", None, path_tracing, 16, MAX_BIAS, MAX_RATIO);
     }
 }
 

@@ -72,7 +72,8 @@ pub struct RenderArgs {
     /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
     #[arg(long, allow_negative_numbers = true)]
     pub max_depth: Option<i64>,
-    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels).
+    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels);
+    /// 0 makes bdpt a path tracer on the shared bidirectional code (hits and NEE only).
     #[arg(long, default_value_t = 1.0)]
     pub light_paths_per_pixel: f32,
     /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.

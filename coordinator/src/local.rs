@@ -71,8 +71,8 @@ impl Default for IntegratorOptions {
 
 /// Builds the integrator the arguments ask for.
 pub fn make_integrator(kind: IntegratorKind, scene: &Scene, o: &IntegratorOptions) -> anyhow::Result<Box<dyn Integrator>> {
-    if !(o.light_paths_per_pixel > 0.0 && o.light_paths_per_pixel.is_finite()) {
-        bail!("--light-paths-per-pixel must be positive, got {}", o.light_paths_per_pixel);
+    if !(o.light_paths_per_pixel >= 0.0 && o.light_paths_per_pixel.is_finite()) || (kind == IntegratorKind::Lt && o.light_paths_per_pixel == 0.0) {
+        bail!("--light-paths-per-pixel must be positive (or 0 for bdpt and vcm: no light paths), got {}", o.light_paths_per_pixel);
     }
     let max_depth = match o.max_depth {
         None => None,

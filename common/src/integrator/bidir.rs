@@ -320,7 +320,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             let radius_max = merge_radius_max(scene);
             let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
             let it = Iteration { cache, photons, radius_max };
-            let splats = self.splats(scene, &it, (w * h) as f32 / n as f32);
+            let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
             let rows: Vec<Vec<Rgb>> = (0..h)
                 .into_par_iter()
                 .map_init(Vec::new, |verts, y| (0..w).map(|x| self.camera_path(scene, &it, x, y, tile.seed, iteration, verts)).collect())

@@ -36,9 +36,10 @@ pub struct LightTracer {
     pub light_paths_per_pixel: f32,
 }
 
-/// Number of light paths per iteration for ν and P pixels: ⌊ν·P⌋, at least 1.
+/// Number of light paths per iteration for ν and P pixels: ⌊ν·P⌋, at least 1 unless ν = 0
+/// (no light paths: the bidirectional engine then path traces with hits and NEE only).
 pub fn light_path_count(nu: f32, pixels: u32) -> u32 {
-    ((nu as f64 * pixels as f64).floor() as u32).max(1)
+    if nu <= 0.0 { 0 } else { ((nu as f64 * pixels as f64).floor() as u32).max(1) }
 }
 
 /// Contribution of light-path vertex `v` (whose predecessor on the path is `prev`, if any)
@@ -117,7 +118,7 @@ impl Integrator for LightTracer {
             accum.count_iterations(tile.samples.len() as u32);
             return;
         }
-        let n = light_path_count(self.light_paths_per_pixel, w * h);
+        let n = light_path_count(self.light_paths_per_pixel, w * h).max(1);
         // the pixel filter's importance is P times the image-normalised We
         let scale = (w * h) as f32 / n as f32;
         for iteration in tile.samples.clone() {
