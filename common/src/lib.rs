@@ -18,6 +18,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod light;
 pub mod math;
+pub mod mis;
 pub mod render;
 pub mod sampler;
 pub mod scene;

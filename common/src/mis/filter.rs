@@ -1,0 +1,163 @@
+//! Image filters of the optimiser (emis-spec §5), on single-channel row-major images:
+//!
+//! * box: 3×3 mean whose divisor at the border is the number of in-image taps; radius r means r
+//!   successive passes;
+//! * dilation: 3×3 maximum with out-of-image taps counting as −∞; radius r means r passes;
+//! * quantile: a linear histogram with one bin per pixel over [min, max], returning the centre
+//!   of the bin holding the requested quantile.
+
+/// A single-channel image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width.
+    pub width: usize,
+    /// Height.
+    pub height: usize,
+    /// Pixels, row-major.
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    /// An image filled with `value`.
+    pub fn filled(width: usize, height: usize, value: f32) -> Self {
+        Image { width, height, data: vec![value; width * height] }
+    }
+
+    /// From row-major data.
+    pub fn from_data(width: usize, height: usize, data: Vec<f32>) -> Self {
+        assert_eq!(data.len(), width * height, "invariant: data matches the size");
+        Image { width, height, data }
+    }
+
+    #[inline]
+    fn neighbours(&self, x: usize, y: usize) -> impl Iterator<Item = f32> + '_ {
+        let (x0, x1) = (x.saturating_sub(1), (x + 1).min(self.width - 1));
+        let (y0, y1) = (y.saturating_sub(1), (y + 1).min(self.height - 1));
+        (y0..=y1).flat_map(move |yy| (x0..=x1).map(move |xx| self.data[yy * self.width + xx]))
+    }
+
+    fn pass(&self, f: impl Fn(&Image, usize, usize) -> f32) -> Image {
+        let mut out = Image::filled(self.width, self.height, 0.0);
+        for y in 0..self.height {
+            for x in 0..self.width {
+                out.data[y * self.width + x] = f(self, x, y);
+            }
+        }
+        out
+    }
+
+    /// One 3×3 box pass with border renormalisation.
+    pub fn box3(&self) -> Image {
+        self.pass(|img, x, y| {
+            let (sum, n) = img.neighbours(x, y).fold((0.0f64, 0u32), |(s, n), v| (s + v as f64, n + 1));
+            (sum / n as f64) as f32
+        })
+    }
+
+    /// One 3×3 max pass (out-of-image taps are −∞, i.e. ignored).
+    pub fn dilate3(&self) -> Image {
+        self.pass(|img, x, y| img.neighbours(x, y).fold(f32::NEG_INFINITY, f32::max))
+    }
+
+    /// `radius` successive box passes.
+    pub fn box_blur(&self, radius: usize) -> Image {
+        (0..radius).fold(self.clone(), |img, _| img.box3())
+    }
+
+    /// `radius` successive dilation passes.
+    pub fn dilate(&self, radius: usize) -> Image {
+        (0..radius).fold(self.clone(), |img, _| img.dilate3())
+    }
+
+    /// The `q` quantile (0..1) by a linear histogram with one bin per pixel over [min, max],
+    /// returning the centre of the bin (the reference implementation's approximation).
+    pub fn histogram_quantile(&self, q: f64) -> f32 {
+        let finite: Vec<f32> = self.data.iter().copied().filter(|v| v.is_finite()).collect();
+        if finite.is_empty() {
+            return 0.0;
+        }
+        let (lo, hi) = finite.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        if hi <= lo {
+            return lo;
+        }
+        let bins = finite.len();
+        let width = (hi - lo) as f64 / bins as f64;
+        let mut counts = vec![0u32; bins];
+        for &v in &finite {
+            counts[(((v - lo) as f64 / width) as usize).min(bins - 1)] += 1;
+        }
+        let target = (q * finite.len() as f64).ceil().max(1.0) as u64;
+        let mut acc = 0u64;
+        for (i, &c) in counts.iter().enumerate() {
+            acc += c as u64;
+            if acc >= target {
+                return (lo as f64 + (i as f64 + 0.5) * width) as f32;
+            }
+        }
+        hi
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn single(w: usize, h: usize, x: usize, y: usize) -> Image {
+        let mut img = Image::filled(w, h, 0.0);
+        img.data[y * w + x] = 9.0;
+        img
+    }
+
+    #[test]
+    fn box_golden_values() {
+        // a single 9 in the middle of 5x5 spreads to a 3x3 block of 1s
+        let b = single(5, 5, 2, 2).box3();
+        for y in 0..5 {
+            for x in 0..5 {
+                let expected = if (1..=3).contains(&x) && (1..=3).contains(&y) { 1.0 } else { 0.0 };
+                assert!((b.data[y * 5 + x] - expected).abs() < 1e-6, "({x},{y})");
+            }
+        }
+        // in a corner only 4 taps exist: the corner pixel becomes 9/4
+        let c = single(5, 5, 0, 0).box3();
+        assert!((c.data[0] - 9.0 / 4.0).abs() < 1e-6);
+        // on an edge 6 taps exist
+        let e = single(5, 5, 2, 0).box3();
+        assert!((e.data[2] - 9.0 / 6.0).abs() < 1e-6);
+        // a constant image is unchanged, border included
+        let k = Image::filled(4, 3, 2.5).box_blur(3);
+        assert!(k.data.iter().all(|&v| (v - 2.5).abs() < 1e-6));
+    }
+
+    #[test]
+    fn dilation_golden_values() {
+        let d = single(7, 7, 3, 3).dilate(2);
+        for y in 0..7 {
+            for x in 0..7 {
+                let inside = (1..=5).contains(&x) && (1..=5).contains(&y);
+                assert_eq!(d.data[y * 7 + x], if inside { 9.0 } else { 0.0 }, "({x},{y})");
+            }
+        }
+        // the border does not leak in: a corner value dilates only inwards
+        let c = single(4, 4, 0, 0).dilate3();
+        assert_eq!(c.data.iter().filter(|&&v| v == 9.0).count(), 4);
+    }
+
+    #[test]
+    fn repeated_passes_equal_single_applications() {
+        let img = Image::from_data(6, 5, (0..30).map(|i| ((i * 7919) % 13) as f32).collect());
+        assert_eq!(img.box_blur(3), img.box3().box3().box3());
+        assert_eq!(img.dilate(2), img.dilate3().dilate3());
+    }
+
+    #[test]
+    fn histogram_quantile_returns_bin_centres() {
+        let img = Image::from_data(10, 10, (0..100).map(|i| i as f32).collect());
+        // 100 bins of width 0.99 over [0, 99]: the 99.9 % quantile lies in the last bin
+        let q = img.histogram_quantile(0.999);
+        assert!((q - (99.0 - 0.495)).abs() < 1e-3, "{q}");
+        let median = img.histogram_quantile(0.5);
+        assert!((median - 49.5).abs() < 1.0, "{median}");
+        assert_eq!(Image::filled(3, 3, 4.0).histogram_quantile(0.9), 4.0);
+    }
+}

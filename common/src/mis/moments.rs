@@ -1,0 +1,117 @@
+//! Moment buffers (decision 2): per pixel × candidate, the sum of δ·w2 over all pilot samples,
+//! kept as an unnormalised sum with an iteration count, so that buffers from different workers
+//! add up exactly. A candidate that cannot sample a pixel's path is flagged infinite.
+
+use super::delta::Delta;
+
+/// Second-moment sums of all candidates for every pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MomentBuffer {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Number of candidates.
+    pub candidates: usize,
+    /// Σ δ·w2, indexed `pixel * candidates + candidate`.
+    pub sums: Vec<f64>,
+    /// Candidates that cannot sample some path of the pixel, same indexing.
+    pub infinite: Vec<bool>,
+    /// Iterations accumulated.
+    pub iterations: u32,
+}
+
+impl MomentBuffer {
+    /// An empty buffer.
+    pub fn new(width: u32, height: u32, candidates: usize) -> Self {
+        let n = width as usize * height as usize * candidates;
+        MomentBuffer { width, height, candidates, sums: vec![0.0; n], infinite: vec![false; n], iterations: 0 }
+    }
+
+    /// Adds one sample's contribution `w2` (the squared, channel-averaged, MIS-weighted
+    /// contribution) to candidate `candidate` of `pixel`, corrected by `delta`.
+    #[inline]
+    pub fn add(&mut self, pixel: u32, candidate: usize, delta: Delta, w2: f64) {
+        let i = pixel as usize * self.candidates + candidate;
+        match delta {
+            Delta::Finite(d) => self.sums[i] += d * w2,
+            Delta::Infinite => self.infinite[i] = true,
+        }
+    }
+
+    /// Adds another buffer of the same shape (another worker's iterations).
+    pub fn merge(&mut self, other: &MomentBuffer) -> Result<(), String> {
+        if (self.width, self.height, self.candidates) != (other.width, other.height, other.candidates) {
+            return Err(format!("moment buffers differ in shape: {}x{}x{} vs {}x{}x{}", self.width, self.height, self.candidates, other.width, other.height, other.candidates));
+        }
+        for (a, b) in self.sums.iter_mut().zip(&other.sums) {
+            *a += b;
+        }
+        for (a, b) in self.infinite.iter_mut().zip(&other.infinite) {
+            *a |= b;
+        }
+        self.iterations += other.iterations;
+        Ok(())
+    }
+
+    /// The per-iteration second moment of `candidate` at `pixel`: +∞ when flagged, 0 before
+    /// any iteration.
+    pub fn moment(&self, pixel: u32, candidate: usize) -> f64 {
+        let i = pixel as usize * self.candidates + candidate;
+        if self.infinite[i] {
+            f64::INFINITY
+        } else if self.iterations == 0 {
+            0.0
+        } else {
+            self.sums[i] / self.iterations as f64
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::Sampler;
+
+    /// Simulated pilot iterations: deterministic samples per (seed, iteration).
+    fn run(buffer: &mut MomentBuffer, seed: u64, iterations: std::ops::Range<u32>) {
+        for it in iterations {
+            for pixel in 0..buffer.width * buffer.height {
+                let mut s = Sampler::for_pixel(seed, pixel, it);
+                for c in 0..buffer.candidates {
+                    let d = if s.next_1d() < 0.01 { Delta::Infinite } else { Delta::Finite(s.next_1d() as f64 * 3.0) };
+                    buffer.add(pixel, c, d, (s.next_1d() as f64).powi(2));
+                }
+            }
+            buffer.iterations += 1;
+        }
+    }
+
+    #[test]
+    fn merging_two_workers_equals_one_run_with_both() {
+        let mut one = MomentBuffer::new(8, 4, 5);
+        run(&mut one, 1, 0..10);
+        let mut first = MomentBuffer::new(8, 4, 5);
+        let mut second = MomentBuffer::new(8, 4, 5);
+        run(&mut first, 1, 0..6);
+        run(&mut second, 1, 6..10);
+        first.merge(&second).unwrap();
+        assert_eq!(first.iterations, one.iterations);
+        assert_eq!(first.infinite, one.infinite);
+        for (a, b) in first.sums.iter().zip(&one.sums) {
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-12), "{a} vs {b}");
+        }
+        assert!(first.merge(&MomentBuffer::new(4, 4, 5)).is_err());
+    }
+
+    #[test]
+    fn infinite_candidates_are_flagged_not_nan() {
+        let mut b = MomentBuffer::new(1, 1, 2);
+        b.add(0, 0, Delta::Infinite, 1.0);
+        b.add(0, 1, Delta::Finite(2.0), 0.5);
+        b.iterations = 1;
+        assert_eq!(b.moment(0, 0), f64::INFINITY);
+        assert_eq!(b.moment(0, 1), 1.0);
+        assert!(!b.sums.iter().any(|v| v.is_nan()));
+    }
+}
