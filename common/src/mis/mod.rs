@@ -9,3 +9,4 @@ pub mod cost;
 pub mod delta;
 pub mod filter;
 pub mod moments;
+pub mod optimize;

@@ -1,0 +1,212 @@
+//! The optimiser (emis-spec §6, checklist 11–12) as a pure function: filtered moments, costs
+//! and the denoised image in; ν, c and the per-pixel merge mask χ out.
+//!
+//! 1. Pixel level: per pixel, the candidate (ν, c, merge) minimising filtered M_j × C_j over
+//!    all candidates; its merge bit goes into a binary image that is dilated (radius 16) and
+//!    blurred (box radius 16) into χ. A pixel whose best value is 0 merges nothing.
+//! 2. Image level: per image-level candidate g = (ν, c) (and path tracing), the mean over
+//!    pixels of the relative moment M_j(g, merge_j) / (Ī_j² + 1e-4) with merge_j = χ_j > 0.1,
+//!    after zeroing values above each candidate's 99.9 % quantile, times the mean cost; the
+//!    argmin wins.
+
+use super::candidate::Candidate;
+use super::cost::{CostConstants, PathStatistics, pixel_cost};
+use super::filter::Image;
+use super::moments::MomentBuffer;
+use serde::Serialize;
+
+/// Filter radii (decision 6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FilterSettings {
+    /// Box passes on each candidate's moments.
+    pub moment_box: usize,
+    /// Dilation of the binary merge decisions.
+    pub mask_dilate: usize,
+    /// Box passes on the dilated mask.
+    pub mask_box: usize,
+    /// Quantile above which pixel moments are zeroed in the image-level sums.
+    pub outlier_quantile: f64,
+}
+
+impl Default for FilterSettings {
+    fn default() -> Self {
+        FilterSettings { moment_box: 3, mask_dilate: 16, mask_box: 16, outlier_quantile: 0.999 }
+    }
+}
+
+/// Everything the optimiser reads.
+pub struct OptimizerInput<'a> {
+    /// The candidates, in the moment buffer's order.
+    pub candidates: &'a [Candidate],
+    /// Merged pilot moments.
+    pub moments: &'a MomentBuffer,
+    /// The denoised pilot image as a scalar (Ī, already box-filtered).
+    pub image: &'a Image,
+    /// Pilot path statistics.
+    pub statistics: PathStatistics,
+    /// Cost constants.
+    pub constants: CostConstants,
+    /// Filter radii.
+    pub filters: FilterSettings,
+}
+
+/// One image-level candidate's score, for reports.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ImageLevelScore {
+    /// Light paths per pixel (0: path tracing).
+    pub nu: f32,
+    /// Connections.
+    pub connections: u32,
+    /// Mean relative second moment.
+    pub relative_moment: f64,
+    /// Mean pixel cost.
+    pub cost: f64,
+}
+
+/// The optimiser's decision.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decision {
+    /// Light paths per pixel (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Per-pixel merge probability χ.
+    pub merge_mask: Image,
+    /// Scores of every image-level candidate.
+    pub scores: Vec<ImageLevelScore>,
+}
+
+/// Runs the optimisation.
+pub fn optimize(input: &OptimizerInput) -> Decision {
+    let m = input.moments;
+    let (w, h) = (m.width as usize, m.height as usize);
+    let pixels = (w * h) as u32;
+    let k = input.candidates.len();
+    // ---- filtered moments, one image per candidate ----
+    let filtered: Vec<Image> = (0..k)
+        .map(|c| Image::from_data(w, h, (0..pixels).map(|p| m.moment(p, c) as f32).collect()).box_blur(input.filters.moment_box))
+        .collect();
+    let cost = |cand: &Candidate, chi: f64| pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels);
+    // ---- pixel level: the merge bit of the best full candidate ----
+    let mut merge_bits = Image::filled(w, h, 0.0);
+    for p in 0..w * h {
+        let mut best = (f64::INFINITY, None);
+        for (c, cand) in input.candidates.iter().enumerate() {
+            let v = filtered[c].data[p] as f64 * cost(cand, if cand.merge { 1.0 } else { 0.0 });
+            if v < best.0 {
+                best = (v, Some(c));
+            }
+        }
+        if let (v, Some(c)) = best {
+            if v > 0.0 && input.candidates[c].merge {
+                merge_bits.data[p] = 1.0;
+            }
+        }
+    }
+    let merge_mask = merge_bits.dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box);
+    // ---- image level ----
+    let thresholds: Vec<f32> = filtered.iter().map(|img| img.histogram_quantile(input.filters.outlier_quantile)).collect();
+    let mut groups: Vec<(f32, u32)> = Vec::new();
+    for c in input.candidates {
+        if !groups.contains(&(c.nu, c.connections)) {
+            groups.push((c.nu, c.connections));
+        }
+    }
+    let find = |nu: f32, conn: u32, merge: bool| input.candidates.iter().position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()));
+    let mut scores = Vec::new();
+    for &(nu, conn) in &groups {
+        let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+        for p in 0..w * h {
+            let chi = merge_mask.data[p] as f64;
+            let merge = chi > 0.1;
+            // a group without the merge variant this pixel needs falls back to its other one
+            let Some(c) = find(nu, conn, merge).or_else(|| find(nu, conn, !merge)) else { continue };
+            total_cost += cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
+            let i = input.image.data[p] as f64;
+            if i == 0.0 {
+                continue;
+            }
+            let mut moment = filtered[c].data[p];
+            // outliers are zeroed, but an infinite moment (the candidate cannot sample this
+            // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
+            if moment > thresholds[c] && moment.is_finite() {
+                moment = 0.0;
+            }
+            rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
+        }
+        scores.push(ImageLevelScore { nu, connections: conn, relative_moment: rel, cost: total_cost });
+    }
+    let best = scores.iter().filter(|s| s.relative_moment.is_finite()).min_by(|a, b| (a.relative_moment * a.cost).total_cmp(&(b.relative_moment * b.cost)));
+    let (nu, connections) = best.map_or((0.0, 0), |s| (s.nu, s.connections));
+    Decision { nu, connections, merge_mask, scores }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mis::candidate::CandidateConfig;
+    use crate::mis::delta::Delta;
+
+    /// A moment buffer with `value(pixel, candidate)` as every candidate's per-iteration moment.
+    fn buffer(w: u32, h: u32, candidates: &[Candidate], value: impl Fn(u32, &Candidate) -> f64) -> MomentBuffer {
+        let mut b = MomentBuffer::new(w, h, candidates.len());
+        for p in 0..w * h {
+            for (c, cand) in candidates.iter().enumerate() {
+                let v = value(p, cand);
+                b.add(p, c, if v.is_finite() { Delta::Finite(1.0) } else { Delta::Infinite }, if v.is_finite() { v } else { 0.0 });
+            }
+        }
+        b.iterations = 1;
+        b
+    }
+
+    fn run(candidates: &[Candidate], moments: &MomentBuffer, image: &Image) -> Decision {
+        optimize(&OptimizerInput { candidates, moments, image, statistics: PathStatistics::default(), constants: CostConstants::default(), filters: FilterSettings::default() })
+    }
+
+    #[test]
+    fn merging_that_wins_in_a_disk_gives_a_dilated_blurred_disk() {
+        let candidates = CandidateConfig::vcm().candidates();
+        let (w, h) = (96u32, 96u32);
+        let in_disk = |p: u32| { let (x, y) = ((p % w) as f32 - 48.0, (p / w) as f32 - 48.0); x * x + y * y < 10.0 * 10.0 };
+        // merging is 1000x better inside the disk, useless (no better, more costly) outside
+        let b = buffer(w, h, &candidates, |p, c| if c.merge && in_disk(p) { 0.001 } else { 1.0 });
+        let d = run(&candidates, &b, &Image::filled(w as usize, h as usize, 1.0));
+        let chi = |x: u32, y: u32| d.merge_mask.data[(y * w + x) as usize];
+        assert_eq!(chi(48, 48), 1.0, "χ = 1 in the disk");
+        assert!(chi(48 + 10 + 16, 48) > 0.4, "dilated by 16 px");
+        assert!(chi(48 + 10 + 16 + 20, 48) == 0.0, "falls to 0 beyond dilation + blur");
+        // smooth fall-off: monotone from the disk outwards over 32+ px
+        let profile: Vec<f32> = (48..96).map(|x| chi(x, 48)).collect();
+        assert!(profile.windows(2).all(|p| p[1] <= p[0] + 1e-6), "monotone");
+        let transition = profile.iter().filter(|&&v| v > 0.0 && v < 1.0).count();
+        assert!(transition >= 15, "a gradual edge, not a step: {transition} px");
+    }
+
+    #[test]
+    fn a_two_times_lower_moment_at_equal_cost_wins_and_scaling_changes_nothing() {
+        let candidates = CandidateConfig::bdpt().candidates();
+        let target = Candidate { nu: 0.5, connections: 2, merge: false };
+        let cost_target = pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, true, 32 * 32);
+        // every candidate's moment × cost equals 1, except the target's, which is 0.5
+        let m = |_: u32, c: &Candidate| {
+            let cc = pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, !c.is_path_tracing(), 32 * 32);
+            if *c == target { 0.5 / cost_target } else { 1.0 / cc }
+        };
+        let img = Image::filled(32, 32, 0.7);
+        let d = run(&candidates, &buffer(32, 32, &candidates, m), &img);
+        assert_eq!((d.nu, d.connections), (0.5, 2));
+        let scaled = run(&candidates, &buffer(32, 32, &candidates, |p, c| 1e6 * m(p, c)), &img);
+        assert_eq!((scaled.nu, scaled.connections), (d.nu, d.connections), "scaling all moments changes no decision");
+        assert!(d.merge_mask.data.iter().all(|&v| v == 0.0), "bdpt never merges");
+    }
+
+    #[test]
+    fn candidates_that_cannot_sample_never_win() {
+        let candidates = CandidateConfig::bdpt().candidates();
+        // path tracing looks cheapest and perfect, but cannot sample some paths: infinite
+        let b = buffer(16, 16, &candidates, |p, c| if c.is_path_tracing() { if p == 5 { f64::INFINITY } else { 0.0 } } else { 1.0 });
+        let d = run(&candidates, &b, &Image::filled(16, 16, 1.0));
+        assert!(d.nu > 0.0, "a bidirectional candidate is chosen: {d:?}");
+    }
+}
