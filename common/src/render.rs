@@ -57,11 +57,23 @@ pub enum RenderError {
 
 /// Renders `scene` with `integrator`. `progress(done, total)` is called after each tile, in
 /// units of pixel-samples (`total` is an estimate under a time budget).
-pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<RenderOutput, RenderError> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
+pub fn render(
+    scene: &Scene,
+    integrator: &dyn Integrator,
+    opts: &RenderOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<RenderOutput, RenderError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .build()
+        .map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
     let (w, h) = (scene.camera.width, scene.camera.height);
     // image-level integrators render the full frame, one iteration per tile, parallel inside
-    let tiles = if integrator.full_frame() { vec![Rect { x0: 0, y0: 0, x1: w, y1: h }] } else { Rect::tiles(w, h, opts.tile_size) };
+    let tiles = if integrator.full_frame() {
+        vec![Rect { x0: 0, y0: 0, x1: w, y1: h }]
+    } else {
+        Rect::tiles(w, h, opts.tile_size)
+    };
     let max_pass = if integrator.full_frame() { 1 } else { u32::MAX };
     let mut film = Film::new(w, h);
     let start = Instant::now();
@@ -100,8 +112,13 @@ pub fn render(scene: &Scene, integrator: &dyn Integrator, opts: &RenderOptions, 
                 .par_iter()
                 .map(|rect| {
                     let mut accum = TileAccum::new(*rect);
-                    integrator.render_tile(scene, &TileRequest { rect: *rect, samples: samples.clone(), seed: opts.seed }, &mut accum);
-                    let n = done.fetch_add(rect.area() as u64 * pass as u64, std::sync::atomic::Ordering::Relaxed) + rect.area() as u64 * pass as u64;
+                    integrator.render_tile(
+                        scene,
+                        &TileRequest { rect: *rect, samples: samples.clone(), seed: opts.seed },
+                        &mut accum,
+                    );
+                    let n = done.fetch_add(rect.area() as u64 * pass as u64, std::sync::atomic::Ordering::Relaxed)
+                        + rect.area() as u64 * pass as u64;
                     progress(n, total.max(n));
                     accum
                 })

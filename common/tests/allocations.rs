@@ -50,14 +50,45 @@ fn connections_and_merges_do_not_allocate() {
     let ray = scene.camera.generate_ray(Vec2::new(128.0, 200.0));
     let hit = scene.intersect(&ray).expect("the floor is hit");
     let material = scene.shapes[hit.shape as usize].material;
-    let z1 = PathVertex { p: hit.p, n_geo: hit.n_geo, n_shading: hit.frame.n, wo: hit.wo, beta: glam::Vec3::ONE, pdf_fwd: solid_angle_to_area(1.0, cam.p, hit.p, hit.n_geo), pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Surface { material }, delta: false, depth: 1 };
+    let z1 = PathVertex {
+        p: hit.p,
+        n_geo: hit.n_geo,
+        n_shading: hit.frame.n,
+        wo: hit.wo,
+        beta: glam::Vec3::ONE,
+        pdf_fwd: solid_angle_to_area(1.0, cam.p, hit.p, hit.n_geo),
+        pdf_rev: 0.0,
+        pdf_next_event: 0.0,
+        kind: VertexKind::Surface { material },
+        delta: false,
+        depth: 1,
+    };
     // and a second vertex straight above it (the ceiling), as a diffuse bounce would reach
-    let up = tessera_common::geometry::Ray::new(tessera_common::geometry::offset_ray_origin(hit.p, hit.n_geo, glam::Vec3::Y), glam::Vec3::Y);
+    let up = tessera_common::geometry::Ray::new(
+        tessera_common::geometry::offset_ray_origin(hit.p, hit.n_geo, glam::Vec3::Y),
+        glam::Vec3::Y,
+    );
     let hit2 = scene.intersect(&up).expect("the ceiling is hit");
-    let z2 = PathVertex { p: hit2.p, n_geo: hit2.n_geo, n_shading: hit2.frame.n, wo: hit2.wo, pdf_fwd: solid_angle_to_area(1.0 / std::f32::consts::PI, hit.p, hit2.p, hit2.n_geo), depth: 2, kind: VertexKind::Surface { material: scene.shapes[hit2.shape as usize].material }, ..z1 };
+    let z2 = PathVertex {
+        p: hit2.p,
+        n_geo: hit2.n_geo,
+        n_shading: hit2.frame.n,
+        wo: hit2.wo,
+        pdf_fwd: solid_angle_to_area(1.0 / std::f32::consts::PI, hit.p, hit2.p, hit2.n_geo),
+        depth: 2,
+        kind: VertexKind::Surface { material: scene.shapes[hit2.shape as usize].material },
+        ..z1
+    };
     let camera = [cam, z1, z2];
-    let merge_counts = tessera_common::integrator::path::mis::MergeCounts { area: std::f32::consts::PI * radius * radius, count: 4096.0, correlation_aware: true, correlation_area: 1e-3, light_paths: 4096.0 };
-    let counts = SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.25, light_trace: 4096.0, merge: Some(merge_counts) };
+    let merge_counts = tessera_common::integrator::path::mis::MergeCounts {
+        area: std::f32::consts::PI * radius * radius,
+        count: 4096.0,
+        correlation_aware: true,
+        correlation_area: 1e-3,
+        light_paths: 4096.0,
+    };
+    let counts =
+        SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.25, light_trace: 4096.0, merge: Some(merge_counts) };
     let report = Report { observer: &NoObserver, pixel: 0 };
     let mut energy = glam::Vec3::ZERO;
     let before = allocations();

@@ -44,8 +44,14 @@ fn diffuse_sphere_under_constant_sky_reflects_its_albedo() {
     let film = render_pt(&s, 64, 7, 0);
     let w = 32usize;
     // the sphere's image is a disk around the centre with radius ≈ 16 · tan(asin(1/6)) / tan(15°)
-    let on_sphere = |i: usize| { let (x, y) = ((i % w) as f64 - 15.5, (i / w) as f64 - 15.5); x * x + y * y < 6.0 * 6.0 };
-    let off_sphere = |i: usize| { let (x, y) = ((i % w) as f64 - 15.5, (i / w) as f64 - 15.5); x * x + y * y > 12.0 * 12.0 };
+    let on_sphere = |i: usize| {
+        let (x, y) = ((i % w) as f64 - 15.5, (i / w) as f64 - 15.5);
+        x * x + y * y < 6.0 * 6.0
+    };
+    let off_sphere = |i: usize| {
+        let (x, y) = ((i % w) as f64 - 15.5, (i / w) as f64 - 15.5);
+        x * x + y * y > 12.0 * 12.0
+    };
     let (m, se, n) = mean_and_stderr(&film, on_sphere);
     assert!(n > 50);
     assert!((m - rho).abs() < 4.0 * se.max(1e-4), "sphere: {m} ± {se}, expected {rho}");
@@ -103,7 +109,12 @@ fn sealed_light_gives_a_clean_black_image() {
            </scene>"#,
         sensor("0, 0, 6", "0, 0, 0", 16)
     ));
-    for (name, film) in [("pt", render_pt(&s, 4, 1, 0)), ("lt", render_lt(&s, 4, 1, 0)), ("bdpt", render_bdpt(&s, 4, 1, 0)), ("vcm", render_vcm(&s, 4, 1, 0))] {
+    for (name, film) in [
+        ("pt", render_pt(&s, 4, 1, 0)),
+        ("lt", render_lt(&s, 4, 1, 0)),
+        ("bdpt", render_bdpt(&s, 4, 1, 0)),
+        ("vcm", render_vcm(&s, 4, 1, 0)),
+    ] {
         assert_eq!(film.non_finite, 0, "{name}");
         assert!(film.average().iter().flatten().all(|&v| v == 0.0), "{name}: light leaked");
     }

@@ -21,7 +21,13 @@ pub fn render_pt(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
 
 /// Renders `scene` with `lt` (ν = 1) for `iterations` iterations.
 pub fn render_lt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
-    render_with(scene, &LightTracer { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: 1.0 }, iterations, seed, threads)
+    render_with(
+        scene,
+        &LightTracer { settings: PathSettings::from_scene(scene, None), light_paths_per_pixel: 1.0 },
+        iterations,
+        seed,
+        threads,
+    )
 }
 
 /// Renders `scene` with `bdpt` (ν light paths per pixel, c connections) for `iterations`.
@@ -35,7 +41,16 @@ pub fn render_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usize) ->
 }
 
 /// Renders `scene` with `vcm` (ν, c, constant χ, correlation-aware weights on or off).
-pub fn render_vcm_with(scene: &Scene, nu: f32, c: u32, chi: f32, correlation_aware: bool, iterations: u32, seed: u64, threads: usize) -> Film {
+pub fn render_vcm_with(
+    scene: &Scene,
+    nu: f32,
+    c: u32,
+    chi: f32,
+    correlation_aware: bool,
+    iterations: u32,
+    seed: u64,
+    threads: usize,
+) -> Film {
     let merge = MergeConfig { mask: MergeMask::Constant(chi), correlation_aware };
     render_with(scene, &Bidir::vcm(PathSettings::from_scene(scene, None), nu, c, merge), iterations, seed, threads)
 }

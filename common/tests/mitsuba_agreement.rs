@@ -27,8 +27,8 @@
 mod common;
 
 use common::{render_bdpt, render_bdpt_with, render_lt, render_pt, render_vcm, render_vcm_with, scene_path};
-use tessera_common::film::Film;
 use glam::Vec2;
+use tessera_common::film::Film;
 use tessera_common::film::compare::compare;
 use tessera_common::film::exr::read_rgb;
 use tessera_common::scene::Scene;
@@ -85,7 +85,14 @@ fn check_scene(name: &str, exclude_shape: Option<u32>) {
     check_scene_with(name, exclude_shape, render_pt, SPP, MAX_BIAS, ratio_bound(name));
 }
 
-fn check_scene_with(name: &str, exclude_shape: Option<u32>, render: fn(&Scene, u32, u64, usize) -> Film, spp: u32, max_bias: f64, bound: f64) {
+fn check_scene_with(
+    name: &str,
+    exclude_shape: Option<u32>,
+    render: fn(&Scene, u32, u64, usize) -> Film,
+    spp: u32,
+    max_bias: f64,
+    bound: f64,
+) {
     let scene = Scene::load(&scene_path(name)).expect("scene loads");
     let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference loads");
     let a = render(&scene, spp, 1, 0).average();
@@ -97,7 +104,8 @@ fn check_scene_with(name: &str, exclude_shape: Option<u32>, render: fn(&Scene, u
         None => full.clone(),
         Some(shape) => {
             let keep: Vec<bool> = pixels_hitting(&scene, shape).iter().map(|hit| !hit).collect();
-            let pick = |img: &[[f32; 3]]| img.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();
+            let pick =
+                |img: &[[f32; 3]]| img.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();
             compare(&pick(&a), &pick(&reference.pixels), Some(&pick(&b)), 0.0)
         }
     };

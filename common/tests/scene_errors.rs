@@ -37,40 +37,55 @@ fn malformed_xml_names_the_line() {
 
 #[test]
 fn unknown_plugin_names_the_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <bsdf type=\"velvet\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <bsdf type=\"velvet\"/>\n</shape>\n</scene>\n"
+    );
     expect_error(&[("scene.xml", &xml)], "scene.xml", 5, "unsupported bsdf \"velvet\"");
 }
 
 #[test]
 fn unknown_parameter_names_the_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radiuss\" value=\"2\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radiuss\" value=\"2\"/>\n</shape>\n</scene>\n"
+    );
     expect_error(&[("scene.xml", &xml)], "scene.xml", 5, "unknown parameter \"radiuss\"");
 }
 
 #[test]
 fn missing_mesh_file_is_named() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\">\n  <string name=\"filename\" value=\"nowhere.obj\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\">\n  <string name=\"filename\" value=\"nowhere.obj\"/>\n</shape>\n</scene>\n"
+    );
     let (result, dir) = load(&[("scene.xml", &xml)]);
     let msg = result.err().expect("error").to_string();
-    assert!(msg.contains(&dir.path().join("nowhere.obj").display().to_string()) && msg.contains("cannot read mesh"), "{msg}");
+    assert!(
+        msg.contains(&dir.path().join("nowhere.obj").display().to_string()) && msg.contains("cannot read mesh"),
+        "{msg}"
+    );
 }
 
 #[test]
 fn bad_number_names_the_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radius\" value=\"1.5x\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radius\" value=\"1.5x\"/>\n</shape>\n</scene>\n"
+    );
     expect_error(&[("scene.xml", &xml)], "scene.xml", 5, "\"1.5x\" is not a number");
 }
 
 #[test]
 fn nan_vertex_in_obj_names_the_mesh_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>\n</scene>\n"
+    );
     let obj = "# a triangle\nv 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n";
     expect_error(&[("scene.xml", &xml), ("bad.obj", obj)], "bad.obj", 4, "non-finite");
 }
 
 #[test]
 fn nan_vertex_in_ply_names_the_mesh_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"bad.ply\"/></shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"bad.ply\"/></shape>\n</scene>\n"
+    );
     let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 nan 0\n3 0 1 2\n";
     expect_error(&[("scene.xml", &xml), ("bad.ply", ply)], "bad.ply", 12, "invalid ply");
     // binary files have no lines: the vertex is named instead
@@ -91,22 +106,30 @@ fn nan_vertex_in_ply_names_the_mesh_line() {
 
 #[test]
 fn face_index_out_of_range_names_the_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>\n</scene>\n"
+    );
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n";
     expect_error(&[("scene.xml", &xml), ("bad.obj", obj)], "bad.obj", 4, "out of range");
 }
 
 #[test]
 fn undefined_reference_and_parameter_name_the_line() {
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <ref id=\"gold\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <ref id=\"gold\"/>\n</shape>\n</scene>\n"
+    );
     expect_error(&[("scene.xml", &xml)], "scene.xml", 5, "unknown id \"gold\"");
-    let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radius\" value=\"$r\"/>\n</shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\">\n  <float name=\"radius\" value=\"$r\"/>\n</shape>\n</scene>\n"
+    );
     expect_error(&[("scene.xml", &xml)], "scene.xml", 5, "undefined parameter \"$r\"");
 }
 
 #[test]
 fn defaults_and_substitution_work() {
-    let xml = format!("<scene version=\"3.0.0\">\n<default name=\"r\" value=\"2.5\"/>\n{SENSOR}\n<shape type=\"sphere\"><float name=\"radius\" value=\"$r\"/></shape>\n</scene>\n");
+    let xml = format!(
+        "<scene version=\"3.0.0\">\n<default name=\"r\" value=\"2.5\"/>\n{SENSOR}\n<shape type=\"sphere\"><float name=\"radius\" value=\"$r\"/></shape>\n</scene>\n"
+    );
     let (scene, _dir) = load(&[("scene.xml", &xml)]);
     let scene = scene.expect("loads");
     match &scene.shapes[0].geometry {

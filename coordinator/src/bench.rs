@@ -70,7 +70,8 @@ struct Timing {
 
 fn time_tessera(args: &BenchArgs, scene: &Scene) -> anyhow::Result<Timing> {
     let integrator = make_integrator(args.integrator, scene, &crate::local::IntegratorOptions::default())?;
-    let opts = RenderOptions { budget: Budget::Samples(args.spp), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
+    let opts =
+        RenderOptions { budget: Budget::Samples(args.spp), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
     let mut best: Option<(f64, f64)> = None;
     for run in 0..=args.repeats {
         let c0 = cpu_seconds();
@@ -85,9 +86,23 @@ fn time_tessera(args: &BenchArgs, scene: &Scene) -> anyhow::Result<Timing> {
     Ok(Timing { samples_per_s: n / wall, samples_per_cpu_s: n / cpu.max(1e-9) })
 }
 
-fn time_mitsuba(args: &BenchArgs, python: &PathBuf, scene: &PathBuf, variant: &str, max_depth: Option<u32>) -> anyhow::Result<Timing> {
+fn time_mitsuba(
+    args: &BenchArgs,
+    python: &PathBuf,
+    scene: &PathBuf,
+    variant: &str,
+    max_depth: Option<u32>,
+) -> anyhow::Result<Timing> {
     let mut cmd = Command::new(python);
-    cmd.arg(&args.mitsuba_script).arg(scene).args(["--variant", variant, "--spp", &args.spp.to_string(), "--bench", "--repeats", &args.repeats.max(1).to_string()]);
+    cmd.arg(&args.mitsuba_script).arg(scene).args([
+        "--variant",
+        variant,
+        "--spp",
+        &args.spp.to_string(),
+        "--bench",
+        "--repeats",
+        &args.repeats.max(1).to_string(),
+    ]);
     if let Some(d) = max_depth {
         cmd.args(["--max-depth", &d.to_string()]);
     }
@@ -96,17 +111,27 @@ fn time_mitsuba(args: &BenchArgs, python: &PathBuf, scene: &PathBuf, variant: &s
     }
     let out = cmd.output().with_context(|| format!("cannot run {}", python.display()))?;
     if !out.status.success() {
-        bail!("mitsuba {variant} on {} failed: {}", scene.display(), String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or(""));
+        bail!(
+            "mitsuba {variant} on {} failed: {}",
+            scene.display(),
+            String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("")
+        );
     }
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let line = stdout.lines().rev().find(|l| l.trim_start().starts_with('{')).context("mitsuba printed no JSON line")?;
+    let line =
+        stdout.lines().rev().find(|l| l.trim_start().starts_with('{')).context("mitsuba printed no JSON line")?;
     let v: serde_json::Value = serde_json::from_str(line)?;
     let get = |k: &str| v.get(k).and_then(|x| x.as_f64()).with_context(|| format!("mitsuba JSON lacks {k}"));
     Ok(Timing { samples_per_s: get("samples_per_s_warm")?, samples_per_cpu_s: get("samples_per_cpu_s_warm")? })
 }
 
 fn default_scenes() -> anyhow::Result<Vec<PathBuf>> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir("scenes").context("no scenes given and no ./scenes folder")?.filter_map(|e| e.ok()).map(|e| e.path().join("scene.xml")).filter(|p| p.exists()).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir("scenes")
+        .context("no scenes given and no ./scenes folder")?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("scene.xml"))
+        .filter(|p| p.exists())
+        .collect();
     v.sort();
     Ok(v)
 }
@@ -118,7 +143,12 @@ fn equal_time(args: &BenchArgs, path: &std::path::Path, seconds: f64) -> anyhow:
     let mut rows = Vec::new();
     for &kind in &args.integrators {
         let integrator = make_integrator(kind, &scene, &crate::local::IntegratorOptions::default())?;
-        let opts = RenderOptions { budget: Budget::Time(std::time::Duration::from_secs_f64(seconds)), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
+        let opts = RenderOptions {
+            budget: Budget::Time(std::time::Duration::from_secs_f64(seconds)),
+            seed: 1,
+            threads: args.threads.unwrap_or(0),
+            tile_size: 32,
+        };
         let out = render(&scene, integrator.as_ref(), &opts, &|_, _| {})?;
         let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
         rows.push((integrator.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
@@ -132,8 +162,26 @@ fn photon_map_rates(n: u32) {
     use tessera_common::integrator::path::vertex::{PathVertex, VertexKind};
     use tessera_common::integrator::vcm::PhotonMap;
     use tessera_common::sampler::Sampler;
-    let point = |seed: u64, i: u32| { let mut s = Sampler::for_pixel(seed, i, 0); let u = s.next_2d(); glam::Vec3::new(u.x, u.y, s.next_1d()) };
-    let vertices: Vec<PathVertex> = (0..n).map(|i| PathVertex { p: point(1, i), n_geo: glam::Vec3::Z, n_shading: glam::Vec3::Z, wo: glam::Vec3::Z, beta: glam::Vec3::ONE, pdf_fwd: 1.0, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Surface { material: 0 }, delta: false, depth: 1 }).collect();
+    let point = |seed: u64, i: u32| {
+        let mut s = Sampler::for_pixel(seed, i, 0);
+        let u = s.next_2d();
+        glam::Vec3::new(u.x, u.y, s.next_1d())
+    };
+    let vertices: Vec<PathVertex> = (0..n)
+        .map(|i| PathVertex {
+            p: point(1, i),
+            n_geo: glam::Vec3::Z,
+            n_shading: glam::Vec3::Z,
+            wo: glam::Vec3::Z,
+            beta: glam::Vec3::ONE,
+            pdf_fwd: 1.0,
+            pdf_rev: 0.0,
+            pdf_next_event: 0.0,
+            kind: VertexKind::Surface { material: 0 },
+            delta: false,
+            depth: 1,
+        })
+        .collect();
     let all: Vec<u32> = (0..n).collect();
     let radius = (10.0 / (n as f32 * 4.0 / 3.0 * std::f32::consts::PI)).cbrt();
     let t = std::time::Instant::now();
@@ -145,7 +193,14 @@ fn photon_map_rates(n: u32) {
         map.query(point(2, i), radius, |_, _| found += 1);
     }
     let query = t.elapsed().as_secs_f64();
-    println!("photon map, {n} photons: build {:.3} s ({:.1} M photons/s); {n} queries of radius {radius:.4} in {:.3} s ({:.2} M queries/s, {:.1} photons found per query, single thread)", build, n as f64 / build / 1e6, query, n as f64 / query / 1e6, found as f64 / n as f64);
+    println!(
+        "photon map, {n} photons: build {:.3} s ({:.1} M photons/s); {n} queries of radius {radius:.4} in {:.3} s ({:.2} M queries/s, {:.1} photons found per query, single thread)",
+        build,
+        n as f64 / build / 1e6,
+        query,
+        n as f64 / query / 1e6,
+        found as f64 / n as f64
+    );
 }
 
 /// Runs `tessera bench`.
@@ -156,14 +211,19 @@ pub fn bench_command(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let scenes = if args.scenes.is_empty() { default_scenes()? } else { args.scenes.clone() };
     if let Some(seconds) = args.equal_time {
-        println!("equal time {seconds} s: relMSE vs reference (top 0.1 % dropped); speed-up = relMSE(pt) / relMSE; samples/s");
+        println!(
+            "equal time {seconds} s: relMSE vs reference (top 0.1 % dropped); speed-up = relMSE(pt) / relMSE; samples/s"
+        );
         for path in &scenes {
             let rows = equal_time(args, path, seconds)?;
             let pt = rows.iter().find(|r| r.0 == "pt").map(|r| r.1);
-            let cells: Vec<String> = rows.iter().map(|(n, e, sps)| match pt {
-                Some(p) => format!("{n} {e:.5} ({:.2}x, {:.0} S/s)", p / e, sps),
-                None => format!("{n} {e:.5} ({:.0} S/s)", sps),
-            }).collect();
+            let cells: Vec<String> = rows
+                .iter()
+                .map(|(n, e, sps)| match pt {
+                    Some(p) => format!("{n} {e:.5} ({:.2}x, {:.0} S/s)", p / e, sps),
+                    None => format!("{n} {e:.5} ({:.0} S/s)", sps),
+                })
+                .collect();
             println!("{:<24} {}", scene_name(path), cells.join("  "));
         }
         return Ok(());
@@ -188,12 +248,17 @@ pub fn bench_command(args: &BenchArgs) -> anyhow::Result<()> {
         }
         let name = scene_name(path);
         if args.json {
-            let m: serde_json::Map<String, serde_json::Value> = mitsuba.iter().map(|(v, t)| (v.clone(), serde_json::json!(t))).collect();
-            println!("{}", serde_json::json!({"scene": name, "integrator": format!("{:?}", args.integrator).to_lowercase(), "spp": args.spp, "tessera": ours, "mitsuba": m}));
+            let m: serde_json::Map<String, serde_json::Value> =
+                mitsuba.iter().map(|(v, t)| (v.clone(), serde_json::json!(t))).collect();
+            println!(
+                "{}",
+                serde_json::json!({"scene": name, "integrator": format!("{:?}", args.integrator).to_lowercase(), "spp": args.spp, "tessera": ours, "mitsuba": m})
+            );
         } else {
             let mut row = format!("{:<24} {:>14.0} {:>14.0}", name, ours.samples_per_s, ours.samples_per_cpu_s);
             for (_, t) in &mitsuba {
-                row += &format!(" {:>16.0} {:>8.2}x", t.samples_per_cpu_s, ours.samples_per_cpu_s / t.samples_per_cpu_s);
+                row +=
+                    &format!(" {:>16.0} {:>8.2}x", t.samples_per_cpu_s, ours.samples_per_cpu_s / t.samples_per_cpu_s);
             }
             println!("{row}");
         }

@@ -17,7 +17,14 @@ use tessera_common::scene::Scene;
 pub fn scene_name(path: &Path) -> String {
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
     if stem == "scene" {
-        if let Some(dir) = path.canonicalize().ok().as_deref().and_then(Path::parent).and_then(Path::file_name).and_then(|s| s.to_str()) {
+        if let Some(dir) = path
+            .canonicalize()
+            .ok()
+            .as_deref()
+            .and_then(Path::parent)
+            .and_then(Path::file_name)
+            .and_then(|s| s.to_str())
+        {
             return dir.to_string();
         }
     }
@@ -65,14 +72,29 @@ impl IntegratorOptions {
 
 impl Default for IntegratorOptions {
     fn default() -> Self {
-        IntegratorOptions { max_depth: None, light_paths_per_pixel: 1.0, connections: 1, merge: true, correlation_aware: true }
+        IntegratorOptions {
+            max_depth: None,
+            light_paths_per_pixel: 1.0,
+            connections: 1,
+            merge: true,
+            correlation_aware: true,
+        }
     }
 }
 
 /// Builds the integrator the arguments ask for.
-pub fn make_integrator(kind: IntegratorKind, scene: &Scene, o: &IntegratorOptions) -> anyhow::Result<Box<dyn Integrator>> {
-    if !(o.light_paths_per_pixel >= 0.0 && o.light_paths_per_pixel.is_finite()) || (kind == IntegratorKind::Lt && o.light_paths_per_pixel == 0.0) {
-        bail!("--light-paths-per-pixel must be positive (or 0 for bdpt and vcm: no light paths), got {}", o.light_paths_per_pixel);
+pub fn make_integrator(
+    kind: IntegratorKind,
+    scene: &Scene,
+    o: &IntegratorOptions,
+) -> anyhow::Result<Box<dyn Integrator>> {
+    if !(o.light_paths_per_pixel >= 0.0 && o.light_paths_per_pixel.is_finite())
+        || (kind == IntegratorKind::Lt && o.light_paths_per_pixel == 0.0)
+    {
+        bail!(
+            "--light-paths-per-pixel must be positive (or 0 for bdpt and vcm: no light paths), got {}",
+            o.light_paths_per_pixel
+        );
     }
     let max_depth = match o.max_depth {
         None => None,
@@ -114,9 +136,17 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
         None => Budget::Samples(args.spp.unwrap_or(scene.spp)),
     };
-    let opts = RenderOptions { budget, seed: args.seed.unwrap_or(scene.seed), threads: args.threads.unwrap_or(0), tile_size: 32 };
+    let opts = RenderOptions {
+        budget,
+        seed: args.seed.unwrap_or(scene.seed),
+        threads: args.threads.unwrap_or(0),
+        tile_size: 32,
+    };
     let bar = ProgressBar::new(1);
-    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% eta {eta}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     let out = render(&scene, integrator.as_ref(), &opts, &|done, total| {
         bar.set_length(total);
         bar.set_position(done);
@@ -150,7 +180,13 @@ pub fn peak_rss_bytes() -> u64 {
 }
 
 /// Writes the EXR and the PNG preview beside it.
-pub fn write_outputs(output: &Path, scene: &Scene, integrator: &str, opts: &RenderOptions, out: &RenderOutput) -> anyhow::Result<()> {
+pub fn write_outputs(
+    output: &Path,
+    scene: &Scene,
+    integrator: &str,
+    opts: &RenderOptions,
+    out: &RenderOutput,
+) -> anyhow::Result<()> {
     let rgb = out.film.average();
     let attributes = vec![
         ("tessera/integrator".to_string(), integrator.to_string()),
@@ -164,6 +200,7 @@ pub fn write_outputs(output: &Path, scene: &Scene, integrator: &str, opts: &Rend
     }
     write_exr(output, out.film.width, out.film.height, &rgb, Some(&out.film.count), &attributes)?;
     let png = output.with_extension("png");
-    write_png(&png, out.film.width, out.film.height, &rgb).with_context(|| format!("cannot write {}", png.display()))?;
+    write_png(&png, out.film.width, out.film.height, &rgb)
+        .with_context(|| format!("cannot write {}", png.display()))?;
     Ok(())
 }

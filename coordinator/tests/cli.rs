@@ -16,7 +16,13 @@ fn scene(name: &str) -> PathBuf {
 fn render_writes_exr_and_png_with_the_requested_samples() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("box.exr");
-    let run = tessera().args(["render"]).arg(scene("cornell-box")).args(["--spp", "2", "--seed", "3", "--threads", "2", "-o"]).arg(&out).output().unwrap();
+    let run = tessera()
+        .args(["render"])
+        .arg(scene("cornell-box"))
+        .args(["--spp", "2", "--seed", "3", "--threads", "2", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(stdout.contains("2 spp") && stdout.contains("samples/s"), "{stdout}");
@@ -30,7 +36,13 @@ fn render_writes_exr_and_png_with_the_requested_samples() {
 #[test]
 fn default_output_is_named_after_the_scene_folder() {
     let dir = tempfile::tempdir().unwrap();
-    let run = tessera().current_dir(dir.path()).args(["render"]).arg(scene("veach-mis")).args(["--spp", "1"]).output().unwrap();
+    let run = tessera()
+        .current_dir(dir.path())
+        .args(["render"])
+        .arg(scene("veach-mis"))
+        .args(["--spp", "1"])
+        .output()
+        .unwrap();
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     assert!(dir.path().join("veach-mis.exr").exists() && dir.path().join("veach-mis.png").exists());
 }
@@ -55,7 +67,8 @@ fn bad_arguments_fail_cleanly() {
     let run = tessera().args(["render", "/nonexistent/scene.xml"]).output().unwrap();
     assert_eq!(run.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/scene.xml"));
-    let run = tessera().args(["render"]).arg(scene("cornell-box")).args(["--spp", "1", "--time", "1"]).output().unwrap();
+    let run =
+        tessera().args(["render"]).arg(scene("cornell-box")).args(["--spp", "1", "--time", "1"]).output().unwrap();
     assert!(!run.status.success(), "--spp and --time exclude each other");
 }
 
@@ -63,7 +76,13 @@ fn bad_arguments_fail_cleanly() {
 fn time_budget_renders_at_least_one_pass() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("t.exr");
-    let run = tessera().args(["render"]).arg(scene("glossy-interreflection")).args(["--time", "0.5", "-o"]).arg(&out).output().unwrap();
+    let run = tessera()
+        .args(["render"])
+        .arg(scene("glossy-interreflection"))
+        .args(["--time", "0.5", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let counts = tessera_common::film::exr::read_sample_counts(&out).unwrap();
     assert!(counts[0] >= 1 && counts.iter().all(|&c| c == counts[0]), "every pixel has the same sample count");

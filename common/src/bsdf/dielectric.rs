@@ -103,7 +103,13 @@ pub struct RoughDielectric {
 #[inline]
 fn half_vector(wo: Vec3, wi: Vec3, eta: f32) -> Option<(Vec3, f32, bool)> {
     let reflection = wo.z * wi.z > 0.0;
-    let eta_rel = if reflection { 1.0 } else if wo.z > 0.0 { eta } else { 1.0 / eta };
+    let eta_rel = if reflection {
+        1.0
+    } else if wo.z > 0.0 {
+        eta
+    } else {
+        1.0 / eta
+    };
     let m = (wi * eta_rel + wo).try_normalize()?;
     let m = if m.z < 0.0 { -m } else { m };
     // discard microfacets that face away from either direction

@@ -131,8 +131,17 @@ mod tests {
     fn diffuse_fresnel_fit_matches_integral() {
         for eta in [1.0 / 1.5f32, 1.33, 1.5] {
             let n = 20_000;
-            let integral: f32 = (0..n).map(|i| { let mu = (i as f32 + 0.5) / n as f32; 2.0 * fresnel_dielectric(mu, eta).0 * mu / n as f32 }).sum();
-            assert!((fresnel_diffuse_reflectance(eta) - integral).abs() < 0.01, "eta {eta}: fit {} integral {integral}", fresnel_diffuse_reflectance(eta));
+            let integral: f32 = (0..n)
+                .map(|i| {
+                    let mu = (i as f32 + 0.5) / n as f32;
+                    2.0 * fresnel_dielectric(mu, eta).0 * mu / n as f32
+                })
+                .sum();
+            assert!(
+                (fresnel_diffuse_reflectance(eta) - integral).abs() < 0.01,
+                "eta {eta}: fit {} integral {integral}",
+                fresnel_diffuse_reflectance(eta)
+            );
         }
     }
 

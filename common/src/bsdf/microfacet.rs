@@ -34,7 +34,12 @@ impl Microfacet {
 
     /// A distribution with alphas clamped to [`Self::MIN_ALPHA`].
     pub fn new(kind: MicrofacetKind, alpha_u: f32, alpha_v: f32, sample_visible: bool) -> Self {
-        Microfacet { kind, alpha_u: alpha_u.max(Self::MIN_ALPHA), alpha_v: alpha_v.max(Self::MIN_ALPHA), sample_visible }
+        Microfacet {
+            kind,
+            alpha_u: alpha_u.max(Self::MIN_ALPHA),
+            alpha_v: alpha_v.max(Self::MIN_ALPHA),
+            sample_visible,
+        }
     }
 
     /// Normal distribution `D(m)` (area density of microfacet normals, projected: ∫D cos = 1).

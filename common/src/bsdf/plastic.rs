@@ -4,7 +4,7 @@
 //! (`nonlinear` = false: the internal-reflection sum uses the average internal reflectance).
 
 use super::dielectric::RoughDielectric;
-use super::fresnel::{fresnel_diffuse_reflectance, fresnel_dielectric, reflect, reflect_z, refract};
+use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_z, refract};
 use super::microfacet::Microfacet;
 use super::{BsdfSample, TransportMode};
 use crate::math::{INV_PI, Rgb, mean, warp};
@@ -59,7 +59,13 @@ impl Plastic {
         let f_i = fresnel_dielectric(wo.z, self.eta).0;
         let p_spec = self.prob_specular(f_i);
         if uc < p_spec {
-            return Some(BsdfSample::delta(reflect_z(wo), self.specular_reflectance * (f_i / p_spec), p_spec, 1.0, false));
+            return Some(BsdfSample::delta(
+                reflect_z(wo),
+                self.specular_reflectance * (f_i / p_spec),
+                p_spec,
+                1.0,
+                false,
+            ));
         }
         let wi = warp::square_to_cosine_hemisphere(u);
         if wi.z <= 0.0 {
@@ -107,16 +113,28 @@ pub struct RoughPlastic {
 
 impl RoughPlastic {
     /// A rough plastic; precomputes the coating's transmittance table by quadrature.
-    pub fn new(distribution: Microfacet, eta: f32, diffuse_reflectance: Rgb, specular_reflectance: Option<Rgb>, nonlinear: bool) -> Self {
+    pub fn new(
+        distribution: Microfacet,
+        eta: f32,
+        diffuse_reflectance: Rgb,
+        specular_reflectance: Option<Rgb>,
+        nonlinear: bool,
+    ) -> Self {
         let s_mean = specular_reflectance.map_or(1.0, mean);
-        let outside = RoughDielectric { distribution, eta, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE };
+        let outside =
+            RoughDielectric { distribution, eta, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE };
         let inside = RoughDielectric { distribution, eta: 1.0 / eta, ..outside.clone() };
         let external_transmittance = (0..TRANSMITTANCE_RES)
             .map(|i| coating_albedo(&outside, (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6), true))
             .collect();
         // 2 ∫ R(μ) μ dμ from inside, by the midpoint rule
         let n = TRANSMITTANCE_RES;
-        let internal_reflectance = (0..n).map(|i| { let mu = (i as f32 + 0.5) / n as f32; 2.0 * coating_albedo(&inside, mu, false) * mu / n as f32 }).sum();
+        let internal_reflectance = (0..n)
+            .map(|i| {
+                let mu = (i as f32 + 0.5) / n as f32;
+                2.0 * coating_albedo(&inside, mu, false) * mu / n as f32
+            })
+            .sum();
         RoughPlastic {
             distribution,
             eta,
@@ -170,7 +188,11 @@ impl RoughPlastic {
             value += self.specular_reflectance * (f * d * g / (4.0 * wo.z * wi.z));
         }
         let r = self.diffuse_reflectance;
-        let denom = if self.nonlinear { Rgb::ONE - r * self.internal_reflectance } else { Rgb::splat(1.0 - self.internal_reflectance) };
+        let denom = if self.nonlinear {
+            Rgb::ONE - r * self.internal_reflectance
+        } else {
+            Rgb::splat(1.0 - self.internal_reflectance)
+        };
         value + r / denom * (INV_PI / (self.eta * self.eta) * self.transmittance(wo.z) * self.transmittance(wi.z))
     }
 

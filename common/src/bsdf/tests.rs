@@ -20,18 +20,66 @@ fn smooth_models() -> Vec<(&'static str, Bxdf)> {
     let ak = Rgb::new(3.983, 2.386, 1.603);
     vec![
         ("diffuse", Bxdf::Diffuse(Diffuse { reflectance: Rgb::new(0.8, 0.5, 0.2) })),
-        ("roughconductor-ggx-0.3", Bxdf::RoughConductor(RoughConductor { distribution: ggx(0.3), eta: au, k: ak, specular_reflectance: Rgb::ONE })),
-        ("roughconductor-ggx-aniso", Bxdf::RoughConductor(RoughConductor { distribution: Microfacet::new(MicrofacetKind::Ggx, 0.15, 0.4, true), eta: au, k: ak, specular_reflectance: Rgb::ONE })),
-        ("roughconductor-beckmann-0.2", Bxdf::RoughConductor(RoughConductor { distribution: beckmann(0.2), eta: au, k: ak, specular_reflectance: Rgb::ONE })),
-        ("roughdielectric-ggx-0.3", Bxdf::RoughDielectric(RoughDielectric { distribution: ggx(0.3), eta: 1.5, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE })),
-        ("roughdielectric-beckmann-0.2", Bxdf::RoughDielectric(RoughDielectric { distribution: beckmann(0.2), eta: 1.5, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE })),
+        (
+            "roughconductor-ggx-0.3",
+            Bxdf::RoughConductor(RoughConductor {
+                distribution: ggx(0.3),
+                eta: au,
+                k: ak,
+                specular_reflectance: Rgb::ONE,
+            }),
+        ),
+        (
+            "roughconductor-ggx-aniso",
+            Bxdf::RoughConductor(RoughConductor {
+                distribution: Microfacet::new(MicrofacetKind::Ggx, 0.15, 0.4, true),
+                eta: au,
+                k: ak,
+                specular_reflectance: Rgb::ONE,
+            }),
+        ),
+        (
+            "roughconductor-beckmann-0.2",
+            Bxdf::RoughConductor(RoughConductor {
+                distribution: beckmann(0.2),
+                eta: au,
+                k: ak,
+                specular_reflectance: Rgb::ONE,
+            }),
+        ),
+        (
+            "roughdielectric-ggx-0.3",
+            Bxdf::RoughDielectric(RoughDielectric {
+                distribution: ggx(0.3),
+                eta: 1.5,
+                specular_reflectance: Rgb::ONE,
+                specular_transmittance: Rgb::ONE,
+            }),
+        ),
+        (
+            "roughdielectric-beckmann-0.2",
+            Bxdf::RoughDielectric(RoughDielectric {
+                distribution: beckmann(0.2),
+                eta: 1.5,
+                specular_reflectance: Rgb::ONE,
+                specular_transmittance: Rgb::ONE,
+            }),
+        ),
         ("plastic", Bxdf::Plastic(Plastic::new(1.49, Rgb::new(0.5, 0.3, 0.2), None, false))),
-        ("roughplastic-ggx-0.2", Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.2), 1.49, Rgb::new(0.5, 0.3, 0.2), None, false))),
+        (
+            "roughplastic-ggx-0.2",
+            Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.2), 1.49, Rgb::new(0.5, 0.3, 0.2), None, false)),
+        ),
     ]
 }
 
 fn directions() -> Vec<Vec3> {
-    vec![Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.5, 0.2, 0.6).normalize(), Vec3::new(-0.8, 0.3, 0.25).normalize(), Vec3::new(0.3, -0.2, -0.7).normalize()]
+    vec![
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::new(0.5, 0.2, 0.6).normalize(),
+        Vec3::new(-0.8, 0.3, 0.25).normalize(),
+        Vec3::new(0.3, -0.2, -0.7).normalize(),
+    ]
 }
 
 #[test]
@@ -80,7 +128,11 @@ fn sampled_values_agree_with_eval_and_pdf() {
                 let f = m.eval(wo, bs.wi, TransportMode::Radiance);
                 let pdf = m.pdf(wo, bs.wi);
                 assert!((pdf - bs.pdf).abs() <= 1e-3 * pdf.max(1.0), "{name}: pdf {pdf} vs sampled {}", bs.pdf);
-                assert!((f - bs.f).abs().max_element() <= 1e-3 * f.max_element().max(1.0), "{name}: f {f} vs sampled {}", bs.f);
+                assert!(
+                    (f - bs.f).abs().max_element() <= 1e-3 * f.max_element().max(1.0),
+                    "{name}: f {f} vs sampled {}",
+                    bs.f
+                );
                 let w = f * bs.wi.z.abs() / pdf;
                 assert!((w - bs.weight).abs().max_element() <= 1e-3 * w.max_element().max(1.0), "{name}: weight");
                 assert!(bs.weight.is_finite() && bs.weight.min_element() >= 0.0);
@@ -105,7 +157,10 @@ fn bsdfs_are_reciprocal() {
             let lhs = m.eval(a, b, TransportMode::Importance) * eta_of(a) * eta_of(a);
             let rhs = m.eval(b, a, TransportMode::Importance) * eta_of(b) * eta_of(b);
             let scale = lhs.max_element().max(rhs.max_element()).max(1e-3);
-            assert!((lhs - rhs).abs().max_element() <= 2e-3 * scale, "{name}: f(a,b)η_a²={lhs} f(b,a)η_b²={rhs} a={a} b={b}");
+            assert!(
+                (lhs - rhs).abs().max_element() <= 2e-3 * scale,
+                "{name}: f(a,b)η_a²={lhs} f(b,a)η_b²={rhs} a={a} b={b}"
+            );
         }
     }
 }
@@ -126,11 +181,31 @@ fn albedo(m: &Material, wo: Vec3, n: u32) -> Rgb {
 fn albedo_never_exceeds_one() {
     let white = |b: Bxdf| Material::one_sided(b);
     let mut models: Vec<(&str, Material)> = smooth_models().into_iter().map(|(n, b)| (n, white(b))).collect();
-    models.push(("dielectric", white(Bxdf::Dielectric(Dielectric { eta: 1.5, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE }))));
-    models.push(("thindielectric", white(Bxdf::ThinDielectric(ThinDielectric { eta: 1.5, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE }))));
-    models.push(("conductor", white(Bxdf::Conductor(Conductor { eta: Rgb::ZERO, k: Rgb::ONE, specular_reflectance: Rgb::ONE }))));
+    models.push((
+        "dielectric",
+        white(Bxdf::Dielectric(Dielectric {
+            eta: 1.5,
+            specular_reflectance: Rgb::ONE,
+            specular_transmittance: Rgb::ONE,
+        })),
+    ));
+    models.push((
+        "thindielectric",
+        white(Bxdf::ThinDielectric(ThinDielectric {
+            eta: 1.5,
+            specular_reflectance: Rgb::ONE,
+            specular_transmittance: Rgb::ONE,
+        })),
+    ));
+    models.push((
+        "conductor",
+        white(Bxdf::Conductor(Conductor { eta: Rgb::ZERO, k: Rgb::ONE, specular_reflectance: Rgb::ONE })),
+    ));
     models.push(("plastic-white", white(Bxdf::Plastic(Plastic::new(1.5, Rgb::ONE, None, false)))));
-    models.push(("roughplastic-white", white(Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.3), 1.5, Rgb::ONE, None, false)))));
+    models.push((
+        "roughplastic-white",
+        white(Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.3), 1.5, Rgb::ONE, None, false))),
+    ));
     for (name, m) in models {
         for wo in directions().into_iter().filter(|w| w.z > 0.0) {
             let a = albedo(&m, wo, 100_000);
@@ -164,12 +239,20 @@ fn white_furnace_diffuse_and_rough_conductor() {
         }
         // ... and the full albedo, estimated by sampling, equals an independent quadrature of
         // eval and stays at most 1 (Smith single scattering loses energy as roughness grows)
-        let m = Material::one_sided(Bxdf::RoughConductor(RoughConductor { distribution: dist, eta: Rgb::ZERO, k: Rgb::ONE, specular_reflectance: Rgb::ONE }));
+        let m = Material::one_sided(Bxdf::RoughConductor(RoughConductor {
+            distribution: dist,
+            eta: Rgb::ZERO,
+            k: Rgb::ONE,
+            specular_reflectance: Rgb::ONE,
+        }));
         for wo in [Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
             let sampled = albedo(&m, wo, 400_000).x;
             let quadrature = albedo_by_quadrature(&m, wo);
             assert!(sampled <= 1.0 + 1e-3, "alpha {alpha}: {sampled}");
-            assert!((sampled - quadrature).abs() < 0.01, "rough conductor furnace alpha {alpha} wo {wo}: sampled {sampled} quadrature {quadrature}");
+            assert!(
+                (sampled - quadrature).abs() < 0.01,
+                "rough conductor furnace alpha {alpha} wo {wo}: sampled {sampled} quadrature {quadrature}"
+            );
             if alpha <= 0.05 {
                 assert!(sampled > 0.97, "a nearly smooth perfect conductor reflects almost everything: {sampled}");
             }
@@ -191,7 +274,9 @@ fn albedo_by_quadrature(m: &Material, wo: Vec3) -> f32 {
         for j in 0..np {
             let phi = (j as f64 + 0.5) / np as f64 * 2.0 * std::f64::consts::PI;
             let wi = Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32);
-            sum += (m.eval(wo, wi, TransportMode::Importance).x * wi.z.abs()) as f64 * dz * (2.0 * std::f64::consts::PI / np as f64);
+            sum += (m.eval(wo, wi, TransportMode::Importance).x * wi.z.abs()) as f64
+                * dz
+                * (2.0 * std::f64::consts::PI / np as f64);
         }
     }
     sum as f32
@@ -213,7 +298,11 @@ fn twosided_mirrors_the_front() {
 
 #[test]
 fn smooth_dielectric_conserves_energy_and_scales_radiance() {
-    let m = Material::one_sided(Bxdf::Dielectric(Dielectric { eta: 1.5, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE }));
+    let m = Material::one_sided(Bxdf::Dielectric(Dielectric {
+        eta: 1.5,
+        specular_reflectance: Rgb::ONE,
+        specular_transmittance: Rgb::ONE,
+    }));
     let wo = Vec3::new(0.6, 0.0, 0.8);
     let f = fresnel::fresnel_dielectric(0.8, 1.5).0;
     let r = m.sample(wo, f * 0.5, Vec2::ZERO, TransportMode::Radiance).unwrap();

@@ -58,7 +58,20 @@ impl PerspectiveCamera {
         let origin = to_world.point(Vec3::ZERO);
         let forward = to_world.vector(Vec3::Z).normalize();
         let image_plane_area = (2.0 * tan_half_x) * (2.0 * tan_half_x / aspect);
-        PerspectiveCamera { to_world, origin, forward, width, height, tan_half_x, aspect, near_clip, far_clip, image_plane_area, to_world_f32: to_world.m.as_mat4(), to_camera_f32: to_world.inv_f32() }
+        PerspectiveCamera {
+            to_world,
+            origin,
+            forward,
+            width,
+            height,
+            tan_half_x,
+            aspect,
+            near_clip,
+            far_clip,
+            image_plane_area,
+            to_world_f32: to_world.m.as_mat4(),
+            to_camera_f32: to_world.inv_f32(),
+        }
     }
 
     /// The primary ray through continuous raster position `raster` (pixels, (0,0) = top-left).
@@ -134,7 +147,14 @@ mod tests {
     use super::*;
 
     fn cam() -> PerspectiveCamera {
-        PerspectiveCamera::new(Transform::look_at(glam::DVec3::ZERO, glam::DVec3::Z, glam::DVec3::Y).unwrap(), 60.0, 200, 100, 0.01, 1000.0)
+        PerspectiveCamera::new(
+            Transform::look_at(glam::DVec3::ZERO, glam::DVec3::Z, glam::DVec3::Y).unwrap(),
+            60.0,
+            200,
+            100,
+            0.01,
+            1000.0,
+        )
     }
 
     #[test]

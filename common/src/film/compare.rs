@@ -43,7 +43,15 @@ pub fn relmse(a: &[[f32; 3]], reference: &[[f32; 3]], drop: f64) -> f64 {
     let mut err: Vec<f64> = a
         .iter()
         .zip(reference)
-        .map(|(x, r)| (0..3).map(|c| { let (x, r) = (x[c] as f64, r[c] as f64); (x - r) * (x - r) / (r * r + 1e-4) }).sum::<f64>() / 3.0)
+        .map(|(x, r)| {
+            (0..3)
+                .map(|c| {
+                    let (x, r) = (x[c] as f64, r[c] as f64);
+                    (x - r) * (x - r) / (r * r + 1e-4)
+                })
+                .sum::<f64>()
+                / 3.0
+        })
         .collect();
     if drop > 0.0 && err.len() > 1000 {
         let mut sorted = err.clone();
@@ -116,14 +124,18 @@ mod tests {
     use crate::sampler::Sampler;
 
     fn noisy(reference: &[[f32; 3]], seed: u64, sigma: f32, offset: f32) -> Vec<[f32; 3]> {
-        reference.iter().enumerate().map(|(i, r)| {
-            let mut s = Sampler::for_pixel(seed, i as u32, 0);
-            r.map(|v| {
-                // sum of 12 uniforms: approximately normal, unit variance
-                let g: f32 = (0..12).map(|_| s.next_1d()).sum::<f32>() - 6.0;
-                v * (1.0 + offset) + sigma * v * g
+        reference
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let mut s = Sampler::for_pixel(seed, i as u32, 0);
+                r.map(|v| {
+                    // sum of 12 uniforms: approximately normal, unit variance
+                    let g: f32 = (0..12).map(|_| s.next_1d()).sum::<f32>() - 6.0;
+                    v * (1.0 + offset) + sigma * v * g
+                })
             })
-        }).collect()
+            .collect()
     }
 
     #[test]

@@ -24,7 +24,14 @@ fn err(path: &Path, e: impl std::fmt::Display) -> ExrError {
 }
 
 /// Writes the beauty image and per-pixel sample counts.
-pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]], counts: Option<&[u32]>, attributes: &[(String, String)]) -> std::result::Result<(), ExrError> {
+pub fn write_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    counts: Option<&[u32]>,
+    attributes: &[(String, String)],
+) -> std::result::Result<(), ExrError> {
     let (w, h) = (width as usize, height as usize);
     let mut channels = smallvec::SmallVec::<[AnyChannel<FlatSamples>; 4]>::new();
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
@@ -33,7 +40,8 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]], counts:
     if let Some(counts) = counts {
         channels.push(AnyChannel::new("sample_count.Y", FlatSamples::U32(counts.to_vec())));
     }
-    let layer = Layer::new(Vec2(w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
+    let layer =
+        Layer::new(Vec2(w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
     let mut attrs = ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(w, h)));
     for (k, v) in attributes {
         attrs.other.insert(Text::from(k.as_str()), AttributeValue::Text(Text::from(v.as_str())));
@@ -55,7 +63,14 @@ pub struct RgbImage {
 /// Reads R, G, B from the part named `beauty` if there is one, else the first part (the rule
 /// of `exrcompare.py`). Channels may be plain or prefixed with `beauty.`.
 pub fn read_rgb(path: &Path) -> std::result::Result<RgbImage, ExrError> {
-    let image = read().no_deep_data().largest_resolution_level().all_channels().all_layers().all_attributes().from_file(path).map_err(|e| err(path, e))?;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| err(path, e))?;
     let layer = image
         .layer_data
         .iter()
@@ -64,18 +79,46 @@ pub fn read_rgb(path: &Path) -> std::result::Result<RgbImage, ExrError> {
         .ok_or_else(|| err(path, "no image part"))?;
     let size = layer.size;
     let find = |c: &str| {
-        layer.channel_data.list.iter().find(|ch| { let n = ch.name.to_string(); n == c || n == format!("beauty.{c}") }).ok_or_else(|| err(path, format!("no channel {c}")))
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|ch| {
+                let n = ch.name.to_string();
+                n == c || n == format!("beauty.{c}")
+            })
+            .ok_or_else(|| err(path, format!("no channel {c}")))
     };
     let (r, g, b) = (find("R")?, find("G")?, find("B")?);
     let n = size.0 * size.1;
-    let pixels = (0..n).map(|i| [r.sample_data.value_by_flat_index(i).to_f32(), g.sample_data.value_by_flat_index(i).to_f32(), b.sample_data.value_by_flat_index(i).to_f32()]).collect();
+    let pixels = (0..n)
+        .map(|i| {
+            [
+                r.sample_data.value_by_flat_index(i).to_f32(),
+                g.sample_data.value_by_flat_index(i).to_f32(),
+                b.sample_data.value_by_flat_index(i).to_f32(),
+            ]
+        })
+        .collect();
     Ok(RgbImage { width: size.0 as u32, height: size.1 as u32, pixels })
 }
 
 /// Reads the `sample_count.Y` channel of a Tessera EXR.
 pub fn read_sample_counts(path: &Path) -> std::result::Result<Vec<u32>, ExrError> {
-    let image = read().no_deep_data().largest_resolution_level().all_channels().all_layers().all_attributes().from_file(path).map_err(|e| err(path, e))?;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| err(path, e))?;
     let layer = image.layer_data.first().ok_or_else(|| err(path, "no image part"))?;
-    let ch = layer.channel_data.list.iter().find(|c| c.name.to_string() == "sample_count.Y").ok_or_else(|| err(path, "no channel sample_count.Y"))?;
+    let ch = layer
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "sample_count.Y")
+        .ok_or_else(|| err(path, "no channel sample_count.Y"))?;
     Ok((0..layer.size.0 * layer.size.1).map(|i| ch.sample_data.value_by_flat_index(i).to_u32()).collect())
 }

@@ -71,7 +71,9 @@ impl TileAccum {
     /// Adds `value` to the sums of pixel `local`, zeroing (and counting) non-finite values.
     #[inline]
     fn accumulate(&mut self, local: usize, value: Rgb) {
-        let v = if value.is_finite() { value } else {
+        let v = if value.is_finite() {
+            value
+        } else {
             self.non_finite += 1;
             Rgb::ZERO
         };
@@ -140,7 +142,18 @@ impl Film {
 
     /// The image: per-pixel averages as f32 RGB (zero where no sample landed).
     pub fn average(&self) -> Vec<[f32; 3]> {
-        self.sum.iter().zip(&self.count).map(|(s, &n)| if n == 0 { [0.0; 3] } else { let inv = 1.0 / n as f64; [(s[0] * inv) as f32, (s[1] * inv) as f32, (s[2] * inv) as f32] }).collect()
+        self.sum
+            .iter()
+            .zip(&self.count)
+            .map(|(s, &n)| {
+                if n == 0 {
+                    [0.0; 3]
+                } else {
+                    let inv = 1.0 / n as f64;
+                    [(s[0] * inv) as f32, (s[1] * inv) as f32, (s[2] * inv) as f32]
+                }
+            })
+            .collect()
     }
 
     /// Total samples.

@@ -21,12 +21,12 @@
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
 use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
+use super::observer::{NoObserver, SampleObserver};
 use super::path::light_path::trace_light_path;
 use super::path::mis::{MergeCounts, SampleCounts};
-use super::vcm::{MergeConfig, PhotonMap, merge, merge_radius_max};
-use super::observer::{NoObserver, SampleObserver};
 use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
+use super::vcm::{MergeConfig, PhotonMap, merge, merge_radius_max};
 use super::{Integrator, PathSettings, TileRequest};
 use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
@@ -80,7 +80,13 @@ impl LightCache {
             .map(|c| {
                 let mut out = Vec::new();
                 for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
-                    trace_light_path(scene, &mut Sampler::for_light_path(seed, index, iteration), max_edges, rr_depth, &mut out);
+                    trace_light_path(
+                        scene,
+                        &mut Sampler::for_light_path(seed, index, iteration),
+                        max_edges,
+                        rr_depth,
+                        &mut out,
+                    );
                 }
                 out
             })
@@ -111,7 +117,13 @@ impl Bidir<NoObserver> {
 
     /// The same integrator reporting its samples to `observer`.
     pub fn with_observer<O: SampleObserver>(self, observer: O) -> Bidir<O> {
-        Bidir { settings: self.settings, light_paths_per_pixel: self.light_paths_per_pixel, connections: self.connections, merge: self.merge, observer }
+        Bidir {
+            settings: self.settings,
+            light_paths_per_pixel: self.light_paths_per_pixel,
+            connections: self.connections,
+            merge: self.merge,
+            observer,
+        }
     }
 }
 
@@ -124,11 +136,18 @@ impl<O: SampleObserver> Bidir<O> {
     pub fn counts(&self, it: &Iteration, pixel: u32, d1: f32) -> SampleCounts {
         let cache = &it.cache;
         let n = cache.paths as f32;
-        let connect = if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
+        let connect =
+            if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
         let merge = self.merge.as_ref().map(|m| {
             let r = super::vcm::path_radius(d1, it.radius_max);
             let rc = d1 * (1.0f32).to_radians().tan();
-            MergeCounts { area: std::f32::consts::PI * r * r, count: n * m.mask.at(pixel), correlation_aware: m.correlation_aware, correlation_area: std::f32::consts::PI * rc * rc, light_paths: n }
+            MergeCounts {
+                area: std::f32::consts::PI * r * r,
+                count: n * m.mask.at(pixel),
+                correlation_aware: m.correlation_aware,
+                correlation_area: std::f32::consts::PI * rc * rc,
+                light_paths: n,
+            }
         });
         SampleCounts { hit: 1.0, next_event: 1.0, connect, light_trace: n, merge }
     }
@@ -150,7 +169,9 @@ impl<O: SampleObserver> Bidir<O> {
                     }
                     // the splat pixel's χ and the radius of a camera path whose primary hit is the
                     // light subpath's last vertex
-                    let Some(raster) = scene.camera.raster_of(light[light.len() - 1].p - scene.camera.origin) else { continue };
+                    let Some(raster) = scene.camera.raster_of(light[light.len() - 1].p - scene.camera.origin) else {
+                        continue;
+                    };
                     let pixel = raster.y as u32 * width + raster.x as u32;
                     let counts = self.counts(it, pixel, (light[light.len() - 1].p - scene.camera.origin).length());
                     if let Some((w, raster)) = light_trace(scene, light, &counts, scale, &self.observer) {
@@ -165,7 +186,16 @@ impl<O: SampleObserver> Bidir<O> {
     /// One camera path through pixel (x, y): the sum of its weighted contributions.
     #[allow(clippy::too_many_arguments)]
     #[allow(clippy::too_many_arguments)]
-    fn camera_path(&self, scene: &Scene, it: &Iteration, x: u32, y: u32, seed: u64, iteration: u32, verts: &mut Vec<PathVertex>) -> Rgb {
+    fn camera_path(
+        &self,
+        scene: &Scene,
+        it: &Iteration,
+        x: u32,
+        y: u32,
+        seed: u64,
+        iteration: u32,
+        verts: &mut Vec<PathVertex>,
+    ) -> Rgb {
         let cam = &scene.camera;
         let cache = &it.cache;
         let pixels = (cam.width * cam.height) as f32;
@@ -192,7 +222,19 @@ impl<O: SampleObserver> Bidir<O> {
                 if !(self.settings.hide_emitters && depth == 1) {
                     for &li in &scene.infinite_lights {
                         let crate::light::Light::Constant { radiance } = scene.lights[li as usize] else { continue };
-                        let env = PathVertex { p: ray.o + ray.d * (2.0 * scene.bounds_radius), n_geo: -ray.d, n_shading: -ray.d, wo: -ray.d, beta, pdf_fwd: pdf_dir, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Light { light: li }, delta: false, depth };
+                        let env = PathVertex {
+                            p: ray.o + ray.d * (2.0 * scene.bounds_radius),
+                            n_geo: -ray.d,
+                            n_shading: -ray.d,
+                            wo: -ray.d,
+                            beta,
+                            pdf_fwd: pdf_dir,
+                            pdf_rev: 0.0,
+                            pdf_next_event: 0.0,
+                            kind: VertexKind::Light { light: li },
+                            delta: false,
+                            depth,
+                        };
                         verts.push(env);
                         total += emitter_hit(scene, verts, li, radiance, &counts, &report);
                         verts.pop();
@@ -246,7 +288,9 @@ impl<O: SampleObserver> Bidir<O> {
                 if cache.selectable.is_empty() || !material.has_smooth_lobe() {
                     continue;
                 }
-                let pick = cache.selectable[((u * cache.selectable.len() as f32) as usize).min(cache.selectable.len() - 1)] as usize;
+                let pick = cache.selectable
+                    [((u * cache.selectable.len() as f32) as usize).min(cache.selectable.len() - 1)]
+                    as usize;
                 let light = cache.subpath(pick);
                 if depth + light.len() as u32 > max_edges {
                     continue;
@@ -282,7 +326,8 @@ impl<O: SampleObserver> Bidir<O> {
             let n = verts.len();
             if n >= 3 {
                 let before = verts[n - 2];
-                verts[n - 2].pdf_rev = density_at_vertex(if bs.delta { 0.0 } else { material.pdf(bs.wi, wo) }, hit.p, &before, false);
+                verts[n - 2].pdf_rev =
+                    density_at_vertex(if bs.delta { 0.0 } else { material.pdf(bs.wi, wo) }, hit.p, &before, false);
             }
             verts[n - 1].delta = bs.delta;
             pdf_dir = if bs.delta { 0.0 } else { bs.pdf };
@@ -306,7 +351,10 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
 
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
         let (w, h) = (scene.camera.width, scene.camera.height);
-        assert!(tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h, "invariant: bdpt renders full-frame tiles");
+        assert!(
+            tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h,
+            "invariant: bdpt renders full-frame tiles"
+        );
         let n = light_path_count(self.light_paths_per_pixel, w * h);
         for iteration in tile.samples.clone() {
             if self.settings.max_depth == 0 {
@@ -316,14 +364,23 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
-            let cache = LightCache::trace(scene, tile.seed, iteration, n, self.max_edges().saturating_sub(1), self.settings.rr_depth);
+            let cache = LightCache::trace(
+                scene,
+                tile.seed,
+                iteration,
+                n,
+                self.max_edges().saturating_sub(1),
+                self.settings.rr_depth,
+            );
             let radius_max = merge_radius_max(scene);
             let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
             let it = Iteration { cache, photons, radius_max };
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
             let rows: Vec<Vec<Rgb>> = (0..h)
                 .into_par_iter()
-                .map_init(Vec::new, |verts, y| (0..w).map(|x| self.camera_path(scene, &it, x, y, tile.seed, iteration, verts)).collect())
+                .map_init(Vec::new, |verts, y| {
+                    (0..w).map(|x| self.camera_path(scene, &it, x, y, tile.seed, iteration, verts)).collect()
+                })
                 .collect();
             for (y, row) in rows.iter().enumerate() {
                 for (x, value) in row.iter().enumerate() {

@@ -49,14 +49,20 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, glam::Ve
     let cs = cam.sample_direct(v.p)?;
     let value = match v.kind {
         VertexKind::Light { light } => match &scene.lights[light as usize] {
-            Light::Area { radiance, .. } => Light::eval_area(*radiance, v.n_geo, cs.wi) * (v.n_geo.dot(cs.wi).abs() * v.beta.x),
+            Light::Area { radiance, .. } => {
+                Light::eval_area(*radiance, v.n_geo, cs.wi) * (v.n_geo.dot(cs.wi).abs() * v.beta.x)
+            }
             Light::Point { intensity, .. } => *intensity * v.beta.x,
             Light::Constant { .. } => return None,
         },
         VertexKind::Camera => return None,
         VertexKind::Surface { material } => {
             let frame = v.frame();
-            let f = scene.materials[material as usize].eval(frame.to_local(v.wo), frame.to_local(cs.wi), TransportMode::Importance);
+            let f = scene.materials[material as usize].eval(
+                frame.to_local(v.wo),
+                frame.to_local(cs.wi),
+                TransportMode::Importance,
+            );
             v.beta * f * (v.importance_correction(v.wo, cs.wi) * v.n_shading.dot(cs.wi).abs())
         }
     };
@@ -64,7 +70,9 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, glam::Ve
         return None;
     }
     let shadow = match v.kind {
-        VertexKind::Light { .. } if v.n_geo == glam::Vec3::ZERO => crate::geometry::Ray { o: v.p, d: cs.wi, tmax: cs.dist * (1.0 - crate::math::SHADOW_EPSILON) },
+        VertexKind::Light { .. } if v.n_geo == glam::Vec3::ZERO => {
+            crate::geometry::Ray { o: v.p, d: cs.wi, tmax: cs.dist * (1.0 - crate::math::SHADOW_EPSILON) }
+        }
         _ => {
             let o = crate::geometry::offset_ray_origin(v.p, v.n_geo, cs.wi);
             crate::geometry::Ray { o, d: cs.wi, tmax: (cam.origin - o).length() * (1.0 - crate::math::SHADOW_EPSILON) }
@@ -83,7 +91,14 @@ impl LightTracer {
     }
 
     /// Splats of light paths `range` of iteration `iteration`.
-    fn trace_chunk(&self, scene: &Scene, seed: u64, iteration: u32, range: std::ops::Range<u32>, scale: f32) -> Vec<(u32, Rgb)> {
+    fn trace_chunk(
+        &self,
+        scene: &Scene,
+        seed: u64,
+        iteration: u32,
+        range: std::ops::Range<u32>,
+        scale: f32,
+    ) -> Vec<(u32, Rgb)> {
         let mut splats = Vec::new();
         let mut vertices = Vec::with_capacity(16);
         let width = scene.camera.width;
@@ -113,7 +128,10 @@ impl Integrator for LightTracer {
 
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
         let (w, h) = (scene.camera.width, scene.camera.height);
-        assert!(tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h, "invariant: light tracing renders full-frame tiles");
+        assert!(
+            tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h,
+            "invariant: light tracing renders full-frame tiles"
+        );
         if self.settings.max_depth == 0 {
             accum.count_iterations(tile.samples.len() as u32);
             return;
@@ -124,7 +142,15 @@ impl Integrator for LightTracer {
         for iteration in tile.samples.clone() {
             let chunks: Vec<Vec<(u32, Rgb)>> = (0..n.div_ceil(LIGHT_PATH_CHUNK))
                 .into_par_iter()
-                .map(|c| self.trace_chunk(scene, tile.seed, iteration, c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(n), scale))
+                .map(|c| {
+                    self.trace_chunk(
+                        scene,
+                        tile.seed,
+                        iteration,
+                        c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(n),
+                        scale,
+                    )
+                })
                 .collect();
             for splats in &chunks {
                 for (pixel, value) in splats {

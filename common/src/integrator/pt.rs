@@ -64,7 +64,9 @@ impl PathTracer {
         loop {
             // ---- emission found by the previous bounce (or the camera ray) ----
             let emitted = match &si {
-                None if !(s.hide_emitters && depth == 0) => self.environment(scene, ray.d, prev_p, prev_pdf, prev_delta),
+                None if !(s.hide_emitters && depth == 0) => {
+                    self.environment(scene, ray.d, prev_p, prev_pdf, prev_delta)
+                }
                 None => Rgb::ZERO,
                 Some(hit) => self.surface_emission(scene, hit, prev_p, prev_pdf, prev_delta),
             };
@@ -119,8 +121,11 @@ impl PathTracer {
         for &i in &scene.infinite_lights {
             let light = &scene.lights[i as usize];
             let Light::Constant { radiance } = light else { continue };
-            let w = if prev_delta { 1.0 } else {
-                let pdf_light = scene.light_sampler.pmf(i as usize) * light.pdf_direct(&scene.light_context(), prev_p, prev_p + d, -d);
+            let w = if prev_delta {
+                1.0
+            } else {
+                let pdf_light = scene.light_sampler.pmf(i as usize)
+                    * light.pdf_direct(&scene.light_context(), prev_p, prev_p + d, -d);
                 power_heuristic(prev_pdf, pdf_light)
             };
             total += *radiance * w;
@@ -129,7 +134,14 @@ impl PathTracer {
     }
 
     /// Radiance emitted by a surface towards the path, MIS-weighted against light sampling.
-    fn surface_emission(&self, scene: &Scene, hit: &SurfaceInteraction, prev_p: Vec3, prev_pdf: f32, prev_delta: bool) -> Rgb {
+    fn surface_emission(
+        &self,
+        scene: &Scene,
+        hit: &SurfaceInteraction,
+        prev_p: Vec3,
+        prev_pdf: f32,
+        prev_delta: bool,
+    ) -> Rgb {
         let Some(li) = scene.shapes[hit.shape as usize].light else { return Rgb::ZERO };
         let light = &scene.lights[li as usize];
         let Light::Area { radiance, .. } = light else { return Rgb::ZERO };
@@ -140,13 +152,23 @@ impl PathTracer {
         if prev_delta {
             return le;
         }
-        let pdf_light = scene.light_sampler.pmf(li as usize) * light.pdf_direct(&scene.light_context(), prev_p, hit.p, hit.n_geo);
+        let pdf_light =
+            scene.light_sampler.pmf(li as usize) * light.pdf_direct(&scene.light_context(), prev_p, hit.p, hit.n_geo);
         le * power_heuristic(prev_pdf, pdf_light)
     }
 
     /// One light sample at `hit`: unoccluded radiance × BSDF × cosine / pdf, MIS-weighted.
     #[allow(clippy::too_many_arguments)]
-    fn next_event(&self, scene: &Scene, ctx: &crate::light::LightContext, hit: &SurfaceInteraction, material: &crate::bsdf::Material, wo: Vec3, u_light: f32, u_pos: Vec2) -> Option<Rgb> {
+    fn next_event(
+        &self,
+        scene: &Scene,
+        ctx: &crate::light::LightContext,
+        hit: &SurfaceInteraction,
+        material: &crate::bsdf::Material,
+        wo: Vec3,
+        u_light: f32,
+        u_pos: Vec2,
+    ) -> Option<Rgb> {
         let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
         let light = &scene.lights[li];
         let ds = light.sample_direct(ctx, hit.p, u_pos)?;

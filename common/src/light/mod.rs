@@ -118,16 +118,34 @@ impl Light {
                 let delta = *position - p_ref;
                 let dist2 = delta.length_squared();
                 let dist = dist2.sqrt();
-                (dist > 0.0).then(|| DirectSample { p: *position, n: Vec3::ZERO, wi: delta / dist, dist, radiance: *intensity / dist2, pdf: 1.0, delta: true })
+                (dist > 0.0).then(|| DirectSample {
+                    p: *position,
+                    n: Vec3::ZERO,
+                    wi: delta / dist,
+                    dist,
+                    radiance: *intensity / dist2,
+                    pdf: 1.0,
+                    delta: true,
+                })
             }
             Light::Constant { radiance } => {
                 let wi = warp::square_to_uniform_sphere(u);
-                Some(DirectSample { p: p_ref + wi * (2.0 * ctx.radius), n: -wi, wi, dist: f32::INFINITY, radiance: *radiance, pdf: warp::uniform_sphere_pdf(), delta: false })
+                Some(DirectSample {
+                    p: p_ref + wi * (2.0 * ctx.radius),
+                    n: -wi,
+                    wi,
+                    dist: f32::INFINITY,
+                    radiance: *radiance,
+                    pdf: warp::uniform_sphere_pdf(),
+                    delta: false,
+                })
             }
             Light::Area { shape, radiance } => {
                 let shape = &ctx.shapes[*shape as usize];
                 let (sp, pdf) = match &shape.geometry {
-                    ShapeGeometry::Sphere { center, radius } if (p_ref - *center).length_squared() > radius * radius * 1.0001 => {
+                    ShapeGeometry::Sphere { center, radius }
+                        if (p_ref - *center).length_squared() > radius * radius * 1.0001 =>
+                    {
                         sample_sphere_cone(p_ref, *center, *radius, shape.flip_normals, u)?
                     }
                     _ => {
@@ -147,7 +165,15 @@ impl Light {
                     return None;
                 }
                 let wi = delta / dist;
-                Some(DirectSample { p: sp.p, n: sp.n, wi, dist, radiance: Self::eval_area(*radiance, sp.n, -wi), pdf, delta: false })
+                Some(DirectSample {
+                    p: sp.p,
+                    n: sp.n,
+                    wi,
+                    dist,
+                    radiance: Self::eval_area(*radiance, sp.n, -wi),
+                    pdf,
+                    delta: false,
+                })
             }
         }
     }
@@ -179,21 +205,45 @@ impl Light {
         match self {
             Light::Point { position, intensity } => {
                 let d = warp::square_to_uniform_sphere(u_dir);
-                Some(EmissionSample { p: *position, n: Vec3::ZERO, d, radiance: *intensity, pdf_pos: 1.0, pdf_dir: warp::uniform_sphere_pdf(), delta_pos: true })
+                Some(EmissionSample {
+                    p: *position,
+                    n: Vec3::ZERO,
+                    d,
+                    radiance: *intensity,
+                    pdf_pos: 1.0,
+                    pdf_dir: warp::uniform_sphere_pdf(),
+                    delta_pos: true,
+                })
             }
             Light::Constant { radiance } => {
                 let d = -warp::square_to_uniform_sphere(u_dir);
                 let frame = Frame::from_normal(d);
                 let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
                 let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
-                Some(EmissionSample { p, n: d, d, radiance: *radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir: warp::uniform_sphere_pdf(), delta_pos: false })
+                Some(EmissionSample {
+                    p,
+                    n: d,
+                    d,
+                    radiance: *radiance,
+                    pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius),
+                    pdf_dir: warp::uniform_sphere_pdf(),
+                    delta_pos: false,
+                })
             }
             Light::Area { shape, radiance } => {
                 let shape = &ctx.shapes[*shape as usize];
                 let sp = shape.sample_area(ctx.meshes, u_pos);
                 let local = warp::square_to_cosine_hemisphere(u_dir);
                 let d = Frame::from_normal(sp.n).to_world(local);
-                Some(EmissionSample { p: sp.p, n: sp.n, d, radiance: *radiance, pdf_pos: 1.0 / shape.area, pdf_dir: local.z * INV_PI, delta_pos: false })
+                Some(EmissionSample {
+                    p: sp.p,
+                    n: sp.n,
+                    d,
+                    radiance: *radiance,
+                    pdf_pos: 1.0 / shape.area,
+                    pdf_dir: local.z * INV_PI,
+                    delta_pos: false,
+                })
             }
         }
     }

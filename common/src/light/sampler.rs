@@ -17,7 +17,13 @@ impl LightSampler {
         }
         let pmf: Vec<f32> = weights.iter().map(|w| w / total).collect();
         let mut acc = 0.0;
-        let cdf = pmf.iter().map(|p| { acc += p; acc }).collect();
+        let cdf = pmf
+            .iter()
+            .map(|p| {
+                acc += p;
+                acc
+            })
+            .collect();
         LightSampler { pmf, cdf }
     }
 

@@ -7,22 +7,37 @@ use crate::testing::chi2::chi2_test;
 
 fn shapes() -> (Vec<Shape>, Vec<Mesh>) {
     let mut rect = Mesh::rectangle();
-    let t = Transform::translate(glam::DVec3::new(0.3, 0.2, 2.0)).after(&Transform::rotate(glam::DVec3::X, 160.0).unwrap().after(&Transform::scale(glam::DVec3::new(0.8, 0.5, 1.0)).unwrap()));
+    let t = Transform::translate(glam::DVec3::new(0.3, 0.2, 2.0)).after(
+        &Transform::rotate(glam::DVec3::X, 160.0)
+            .unwrap()
+            .after(&Transform::scale(glam::DVec3::new(0.8, 0.5, 1.0)).unwrap()),
+    );
     rect.transform(&t);
     let mut cube = Mesh::cube();
-    cube.transform(&Transform::translate(glam::DVec3::new(-1.0, 0.5, 1.5)).after(&Transform::scale(glam::DVec3::splat(0.4)).unwrap()));
+    cube.transform(
+        &Transform::translate(glam::DVec3::new(-1.0, 0.5, 1.5))
+            .after(&Transform::scale(glam::DVec3::splat(0.4)).unwrap()),
+    );
     let meshes = vec![rect, cube];
     let mk = |geometry, mesh: Option<&Mesh>| {
         let area = match &geometry {
-            ShapeGeometry::Mesh(m) => { let m: &Mesh = &meshes[*m as usize]; (0..m.triangles.len()).map(|i| m.triangle_area(i)).sum() }
+            ShapeGeometry::Mesh(m) => {
+                let m: &Mesh = &meshes[*m as usize];
+                (0..m.triangles.len()).map(|i| m.triangle_area(i)).sum()
+            }
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
             ShapeGeometry::Disk { .. } => PI * 0.5 * 0.3,
         };
-        let mut s = Shape { geometry, material: 0, light: Some(0), flip_normals: false, area, area_cdf: vec![], id: None };
+        let mut s =
+            Shape { geometry, material: 0, light: Some(0), flip_normals: false, area, area_cdf: vec![], id: None };
         s.prepare_area_sampling(mesh);
         s
     };
-    let disk_t = Transform::translate(glam::DVec3::new(0.0, -1.0, 1.0)).after(&Transform::rotate(glam::DVec3::X, -70.0).unwrap().after(&Transform::scale(glam::DVec3::new(0.5, 0.3, 1.0)).unwrap()));
+    let disk_t = Transform::translate(glam::DVec3::new(0.0, -1.0, 1.0)).after(
+        &Transform::rotate(glam::DVec3::X, -70.0)
+            .unwrap()
+            .after(&Transform::scale(glam::DVec3::new(0.5, 0.3, 1.0)).unwrap()),
+    );
     let shapes = vec![
         mk(ShapeGeometry::Mesh(0), Some(&meshes[0])),
         mk(ShapeGeometry::Mesh(1), Some(&meshes[1])),
@@ -38,13 +53,18 @@ fn direct_sampling_matches_pdf_chi2() {
     let (shapes, meshes) = shapes();
     let ctx = LightContext { shapes: &shapes, meshes: &meshes, center: Vec3::ZERO, radius: 10.0 };
     // shape 3 is a tiny sphere tested by `tiny_sphere_cone_is_uniform` instead
-    let mut lights: Vec<(String, Light)> = [0usize, 1, 2, 4].iter().map(|&i| (format!("area on shape {i}"), Light::Area { shape: i as u32, radiance: Rgb::ONE })).collect();
+    let mut lights: Vec<(String, Light)> = [0usize, 1, 2, 4]
+        .iter()
+        .map(|&i| (format!("area on shape {i}"), Light::Area { shape: i as u32, radiance: Rgb::ONE }))
+        .collect();
     lights.push(("constant".into(), Light::Constant { radiance: Rgb::ONE }));
     let alpha = 1.0 - 0.99f64.powf(1.0 / lights.len() as f64);
     let p_ref = Vec3::new(0.0, 0.0, 0.0);
     for (name, light) in &lights {
         let accel = match light {
-            Light::Area { shape, .. } => Some(crate::scene::accel::Accel::build(std::slice::from_ref(&shapes[*shape as usize]), &meshes)),
+            Light::Area { shape, .. } => {
+                Some(crate::scene::accel::Accel::build(std::slice::from_ref(&shapes[*shape as usize]), &meshes))
+            }
             _ => None,
         };
         let r = chi2_test(
@@ -65,10 +85,12 @@ fn direct_sampling_matches_pdf_chi2() {
                 Some(d.wi)
             },
             |w| match (light, &accel) {
-                (Light::Area { shape, .. }, Some(accel)) => match first_hit(accel, &shapes[*shape as usize], &meshes, p_ref, w) {
-                    Some((p, n)) => light.pdf_direct(&ctx, p_ref, p, n),
-                    None => 0.0,
-                },
+                (Light::Area { shape, .. }, Some(accel)) => {
+                    match first_hit(accel, &shapes[*shape as usize], &meshes, p_ref, w) {
+                        Some((p, n)) => light.pdf_direct(&ctx, p_ref, p, n),
+                        None => 0.0,
+                    }
+                }
                 _ => light.pdf_direct(&ctx, p_ref, p_ref + w, -w),
             },
         );
@@ -106,7 +128,12 @@ fn tiny_sphere_cone_is_uniform() {
 fn emission_direction_sampling_matches_pdf_chi2() {
     let (shapes, meshes) = shapes();
     let ctx = LightContext { shapes: &shapes, meshes: &meshes, center: Vec3::ZERO, radius: 10.0 };
-    let lights = [Light::Area { shape: 0, radiance: Rgb::ONE }, Light::Area { shape: 2, radiance: Rgb::ONE }, Light::Point { position: Vec3::ONE, intensity: Rgb::ONE }, Light::Constant { radiance: Rgb::ONE }];
+    let lights = [
+        Light::Area { shape: 0, radiance: Rgb::ONE },
+        Light::Area { shape: 2, radiance: Rgb::ONE },
+        Light::Point { position: Vec3::ONE, intensity: Rgb::ONE },
+        Light::Constant { radiance: Rgb::ONE },
+    ];
     // Šidák-corrected 1 % for the family
     let alpha = 1.0 - 0.99f64.powf(1.0 / lights.len() as f64);
     for light in lights {
@@ -117,7 +144,10 @@ fn emission_direction_sampling_matches_pdf_chi2() {
             200_000,
             32,
             64,
-            |i| { let mut s = Sampler::for_pixel(6, i as u32, 0); light.sample_emission(&ctx, u_pos, s.next_2d()).map(|e| e.d) },
+            |i| {
+                let mut s = Sampler::for_pixel(6, i as u32, 0);
+                light.sample_emission(&ctx, u_pos, s.next_2d()).map(|e| e.d)
+            },
             |d| light.pdf_emission(&ctx, e0.n, d).1,
         );
         assert!(r.passes(alpha), "{light:?}: {r:?}");
@@ -141,11 +171,20 @@ fn area_light_emits_only_on_its_front() {
 }
 
 /// Brute-force ray/shape intersection for the test's pdf lookups.
-fn first_hit(accel: &crate::scene::accel::Accel, shape: &Shape, meshes: &[Mesh], o: Vec3, d: Vec3) -> Option<(Vec3, Vec3)> {
+fn first_hit(
+    accel: &crate::scene::accel::Accel,
+    shape: &Shape,
+    meshes: &[Mesh],
+    o: Vec3,
+    d: Vec3,
+) -> Option<(Vec3, Vec3)> {
     let hit = accel.closest_hit(&crate::geometry::Ray::new(o, d))?;
     let p = o + d * hit.t;
     let n = match &shape.geometry {
-        ShapeGeometry::Mesh(m) => { let [a, b, c] = meshes[*m as usize].corners(hit.index as usize); (b - a).cross(c - a).normalize() }
+        ShapeGeometry::Mesh(m) => {
+            let [a, b, c] = meshes[*m as usize].corners(hit.index as usize);
+            (b - a).cross(c - a).normalize()
+        }
         ShapeGeometry::Sphere { center, .. } => (p - *center).normalize(),
         ShapeGeometry::Disk { normal, .. } => *normal,
     };

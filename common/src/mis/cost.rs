@@ -28,7 +28,14 @@ pub struct CostConstants {
 
 impl Default for CostConstants {
     fn default() -> Self {
-        CostConstants { camera_vertex: 1.0, light_vertex: 1.0, connection: 0.3, photon_shading: 0.25, query: 0.045, build: 0.175 }
+        CostConstants {
+            camera_vertex: 1.0,
+            light_vertex: 1.0,
+            connection: 0.3,
+            photon_shading: 0.25,
+            query: 0.045,
+            build: 0.175,
+        }
     }
 }
 
@@ -52,7 +59,14 @@ impl Default for PathStatistics {
 
 /// Cost of one pixel under `candidate` with merge probability `chi`, for `pixels` pixels;
 /// `map_built` says whether the photon map is built at all this iteration.
-pub fn pixel_cost(k: &CostConstants, s: &PathStatistics, candidate: &Candidate, chi: f64, map_built: bool, pixels: u32) -> f64 {
+pub fn pixel_cost(
+    k: &CostConstants,
+    s: &PathStatistics,
+    candidate: &Candidate,
+    chi: f64,
+    map_built: bool,
+    pixels: u32,
+) -> f64 {
     let nu = candidate.nu as f64;
     let n = candidate.light_paths(pixels) as f64;
     let (lc, ll) = (s.camera_vertices, s.light_vertices);
@@ -78,7 +92,8 @@ mod tests {
         let c = Candidate { nu: 1.0, connections: 2, merge: true };
         let pixels = 1000;
         let log = (1000.0f64 * 3.0).ln();
-        let expected = 4.0 + 4.0 * 2.0 * 0.3 + 3.0 + 0.175 * 3.0 * log + 0.5 * (0.045 * 4.0 * log + 0.25 * 1e-5 * 4.0 * 1000.0);
+        let expected =
+            4.0 + 4.0 * 2.0 * 0.3 + 3.0 + 0.175 * 3.0 * log + 0.5 * (0.045 * 4.0 * log + 0.25 * 1e-5 * 4.0 * 1000.0);
         assert!((pixel_cost(&k, &s, &c, 0.5, true, pixels) - expected).abs() < 1e-9);
     }
 

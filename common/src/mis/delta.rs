@@ -108,7 +108,13 @@ mod tests {
         let a = [1.0, 1.0]; // proxy counts
         let analytic = |n: [f64; 2]| {
             let steps = 200_000;
-            (0..steps).map(|i| { let x = (i as f64 + 0.5) / steps as f64; f(x) * f(x) / (n[0] * p[0](x) + n[1] * p[1](x)) }).sum::<f64>() / steps as f64
+            (0..steps)
+                .map(|i| {
+                    let x = (i as f64 + 0.5) / steps as f64;
+                    f(x) * f(x) / (n[0] * p[0](x) + n[1] * p[1](x))
+                })
+                .sum::<f64>()
+                / steps as f64
         };
         for n in [[1.0, 1.0], [2.0, 0.5], [1.0, 3.0], [0.5, 0.0]] {
             let iterations = 40_000u32;
@@ -124,7 +130,13 @@ mod tests {
                     let y = f(x) / denom_m; // balance-weighted contribution
                     let proxy_sum = a[0] * p[0](x) + a[1] * p[1](x);
                     // proxy weights, grouped: technique 0 as "pt", technique 1 as "lt"
-                    let w = ProxyWeights { pt: a[0] * p[0](x) / proxy_sum, lt: a[1] * p[1](x) / proxy_sum, con: 0.0, vm: 0.0, vm_correlated: 0.0 };
+                    let w = ProxyWeights {
+                        pt: a[0] * p[0](x) / proxy_sum,
+                        lt: a[1] * p[1](x) / proxy_sum,
+                        con: 0.0,
+                        vm: 0.0,
+                        vm_correlated: 0.0,
+                    };
                     let ratio = |k: [f64; 2]| CountRatios { pt: k[0] / a[0], lt: k[1] / a[1], con: 0.0, vm: 0.0 };
                     match correction(&w, &ratio(n), &ratio(m)) {
                         Delta::Finite(d) => per_iteration += d * y * y,

@@ -84,9 +84,14 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let k = input.candidates.len();
     // ---- filtered moments, one image per candidate ----
     let filtered: Vec<Image> = (0..k)
-        .map(|c| Image::from_data(w, h, (0..pixels).map(|p| m.moment(p, c) as f32).collect()).box_blur(input.filters.moment_box))
+        .map(|c| {
+            Image::from_data(w, h, (0..pixels).map(|p| m.moment(p, c) as f32).collect())
+                .box_blur(input.filters.moment_box)
+        })
         .collect();
-    let cost = |cand: &Candidate, chi: f64| pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels);
+    let cost = |cand: &Candidate, chi: f64| {
+        pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels)
+    };
     // ---- pixel level: the merge bit of the best full candidate ----
     let mut merge_bits = Image::filled(w, h, 0.0);
     for p in 0..w * h {
@@ -105,14 +110,20 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     }
     let merge_mask = merge_bits.dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box);
     // ---- image level ----
-    let thresholds: Vec<f32> = filtered.iter().map(|img| img.histogram_quantile(input.filters.outlier_quantile)).collect();
+    let thresholds: Vec<f32> =
+        filtered.iter().map(|img| img.histogram_quantile(input.filters.outlier_quantile)).collect();
     let mut groups: Vec<(f32, u32)> = Vec::new();
     for c in input.candidates {
         if !groups.contains(&(c.nu, c.connections)) {
             groups.push((c.nu, c.connections));
         }
     }
-    let find = |nu: f32, conn: u32, merge: bool| input.candidates.iter().position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()));
+    let find = |nu: f32, conn: u32, merge: bool| {
+        input
+            .candidates
+            .iter()
+            .position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()))
+    };
     let mut scores = Vec::new();
     for &(nu, conn) in &groups {
         let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
@@ -136,7 +147,10 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         }
         scores.push(ImageLevelScore { nu, connections: conn, relative_moment: rel, cost: total_cost });
     }
-    let best = scores.iter().filter(|s| s.relative_moment.is_finite()).min_by(|a, b| (a.relative_moment * a.cost).total_cmp(&(b.relative_moment * b.cost)));
+    let best = scores
+        .iter()
+        .filter(|s| s.relative_moment.is_finite())
+        .min_by(|a, b| (a.relative_moment * a.cost).total_cmp(&(b.relative_moment * b.cost)));
     let (nu, connections) = best.map_or((0.0, 0), |s| (s.nu, s.connections));
     Decision { nu, connections, merge_mask, scores }
 }
@@ -153,7 +167,12 @@ mod tests {
         for p in 0..w * h {
             for (c, cand) in candidates.iter().enumerate() {
                 let v = value(p, cand);
-                b.add(p, c, if v.is_finite() { Delta::Finite(1.0) } else { Delta::Infinite }, if v.is_finite() { v } else { 0.0 });
+                b.add(
+                    p,
+                    c,
+                    if v.is_finite() { Delta::Finite(1.0) } else { Delta::Infinite },
+                    if v.is_finite() { v } else { 0.0 },
+                );
             }
         }
         b.iterations = 1;
@@ -161,14 +180,24 @@ mod tests {
     }
 
     fn run(candidates: &[Candidate], moments: &MomentBuffer, image: &Image) -> Decision {
-        optimize(&OptimizerInput { candidates, moments, image, statistics: PathStatistics::default(), constants: CostConstants::default(), filters: FilterSettings::default() })
+        optimize(&OptimizerInput {
+            candidates,
+            moments,
+            image,
+            statistics: PathStatistics::default(),
+            constants: CostConstants::default(),
+            filters: FilterSettings::default(),
+        })
     }
 
     #[test]
     fn merging_that_wins_in_a_disk_gives_a_dilated_blurred_disk() {
         let candidates = CandidateConfig::vcm().candidates();
         let (w, h) = (96u32, 96u32);
-        let in_disk = |p: u32| { let (x, y) = ((p % w) as f32 - 48.0, (p / w) as f32 - 48.0); x * x + y * y < 10.0 * 10.0 };
+        let in_disk = |p: u32| {
+            let (x, y) = ((p % w) as f32 - 48.0, (p / w) as f32 - 48.0);
+            x * x + y * y < 10.0 * 10.0
+        };
         // merging is 1000x better inside the disk, useless (no better, more costly) outside
         let b = buffer(w, h, &candidates, |p, c| if c.merge && in_disk(p) { 0.001 } else { 1.0 });
         let d = run(&candidates, &b, &Image::filled(w as usize, h as usize, 1.0));
@@ -187,10 +216,18 @@ mod tests {
     fn a_two_times_lower_moment_at_equal_cost_wins_and_scaling_changes_nothing() {
         let candidates = CandidateConfig::bdpt().candidates();
         let target = Candidate { nu: 0.5, connections: 2, merge: false };
-        let cost_target = pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, true, 32 * 32);
+        let cost_target =
+            pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, true, 32 * 32);
         // every candidate's moment × cost equals 1, except the target's, which is 0.5
         let m = |_: u32, c: &Candidate| {
-            let cc = pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, !c.is_path_tracing(), 32 * 32);
+            let cc = pixel_cost(
+                &CostConstants::default(),
+                &PathStatistics::default(),
+                c,
+                0.0,
+                !c.is_path_tracing(),
+                32 * 32,
+            );
             if *c == target { 0.5 / cost_target } else { 1.0 / cc }
         };
         let img = Image::filled(32, 32, 0.7);
@@ -205,7 +242,9 @@ mod tests {
     fn candidates_that_cannot_sample_never_win() {
         let candidates = CandidateConfig::bdpt().candidates();
         // path tracing looks cheapest and perfect, but cannot sample some paths: infinite
-        let b = buffer(16, 16, &candidates, |p, c| if c.is_path_tracing() { if p == 5 { f64::INFINITY } else { 0.0 } } else { 1.0 });
+        let b = buffer(16, 16, &candidates, |p, c| {
+            if c.is_path_tracing() { if p == 5 { f64::INFINITY } else { 0.0 } } else { 1.0 }
+        });
         let d = run(&candidates, &b, &Image::filled(16, 16, 1.0));
         assert!(d.nu > 0.0, "a bidirectional candidate is chosen: {d:?}");
     }

@@ -21,13 +21,23 @@ impl Sampler {
     /// Sampler for camera sample `sample_index` of pixel `pixel_index`.
     #[inline]
     pub fn for_pixel(seed: u64, pixel_index: u32, sample_index: u32) -> Self {
-        Sampler::Independent(IndependentSampler::new(hash_words(&[DOMAIN_CAMERA, seed, pixel_index as u64, sample_index as u64])))
+        Sampler::Independent(IndependentSampler::new(hash_words(&[
+            DOMAIN_CAMERA,
+            seed,
+            pixel_index as u64,
+            sample_index as u64,
+        ])))
     }
 
     /// Sampler for light path `path_index` of iteration `iteration`.
     #[inline]
     pub fn for_light_path(seed: u64, path_index: u32, iteration: u32) -> Self {
-        Sampler::Independent(IndependentSampler::new(hash_words(&[DOMAIN_LIGHT, seed, path_index as u64, iteration as u64])))
+        Sampler::Independent(IndependentSampler::new(hash_words(&[
+            DOMAIN_LIGHT,
+            seed,
+            path_index as u64,
+            iteration as u64,
+        ])))
     }
 
     /// Next uniform number in [0, 1).
@@ -74,10 +84,22 @@ mod tests {
 
     #[test]
     fn sampler_is_a_pure_function_of_its_identity() {
-        let a: Vec<f32> = { let mut s = Sampler::for_pixel(7, 100, 3); (0..16).map(|_| s.next_1d()).collect() };
-        let b: Vec<f32> = { let mut s = Sampler::for_pixel(7, 100, 3); (0..16).map(|_| s.next_1d()).collect() };
-        let c: Vec<f32> = { let mut s = Sampler::for_pixel(8, 100, 3); (0..16).map(|_| s.next_1d()).collect() };
-        let d: Vec<f32> = { let mut s = Sampler::for_light_path(7, 100, 3); (0..16).map(|_| s.next_1d()).collect() };
+        let a: Vec<f32> = {
+            let mut s = Sampler::for_pixel(7, 100, 3);
+            (0..16).map(|_| s.next_1d()).collect()
+        };
+        let b: Vec<f32> = {
+            let mut s = Sampler::for_pixel(7, 100, 3);
+            (0..16).map(|_| s.next_1d()).collect()
+        };
+        let c: Vec<f32> = {
+            let mut s = Sampler::for_pixel(8, 100, 3);
+            (0..16).map(|_| s.next_1d()).collect()
+        };
+        let d: Vec<f32> = {
+            let mut s = Sampler::for_light_path(7, 100, 3);
+            (0..16).map(|_| s.next_1d()).collect()
+        };
         assert_eq!(a, b);
         assert_ne!(a, c);
         assert_ne!(a, d);

@@ -7,9 +7,13 @@
 
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use crate::geometry::Ray;
-use glam::{Vec3, Vec3A};
 use glam::UVec2;
-use obvhs::{Boundable, BvhBuildParams, aabb::Aabb, cwbvh::{CwBvh, Traversal}};
+use glam::{Vec3, Vec3A};
+use obvhs::{
+    Boundable, BvhBuildParams,
+    aabb::Aabb,
+    cwbvh::{CwBvh, Traversal},
+};
 
 /// What the BVH stores per primitive, in BVH order.
 #[derive(Clone, Copy, Debug)]
@@ -73,7 +77,13 @@ struct WatertightRay {
 impl WatertightRay {
     fn new(d: Vec3) -> Self {
         let a = d.abs();
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        let kz = if a.x > a.y {
+            if a.x > a.z { 0 } else { 2 }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if d[kz] < 0.0 {
@@ -109,7 +119,9 @@ impl WatertightRay {
             return None;
         }
         let t_scaled = u * (s.z * a[kz]) + v * (s.z * b[kz]) + w * (s.z * c[kz]);
-        if (det > 0.0 && (t_scaled <= 0.0 || t_scaled >= tmax * det)) || (det < 0.0 && (t_scaled >= 0.0 || t_scaled <= tmax * det)) {
+        if (det > 0.0 && (t_scaled <= 0.0 || t_scaled >= tmax * det))
+            || (det < 0.0 && (t_scaled >= 0.0 || t_scaled <= tmax * det))
+        {
             return None;
         }
         let inv = 1.0 / det;
@@ -169,7 +181,8 @@ impl Accel {
                     }
                 }
                 ShapeGeometry::Sphere { center, radius } => {
-                    let p = Prim { geom: Geom::Sphere { center: *center, radius: *radius }, shape: si as u32, index: 0 };
+                    let p =
+                        Prim { geom: Geom::Sphere { center: *center, radius: *radius }, shape: si as u32, index: 0 };
                     bounds.push(p.aabb());
                     prims.push(p);
                 }
@@ -190,7 +203,11 @@ impl Accel {
         }
         let bounded: Vec<Bounded> = bounds.into_iter().map(Bounded).collect();
         let mut build_time = std::time::Duration::ZERO;
-        let bvh = if bounded.is_empty() { CwBvh::default() } else { obvhs::cwbvh::builder::build_cwbvh(&bounded, BvhBuildParams::fast_build(), &mut build_time) };
+        let bvh = if bounded.is_empty() {
+            CwBvh::default()
+        } else {
+            obvhs::cwbvh::builder::build_cwbvh(&bounded, BvhBuildParams::fast_build(), &mut build_time)
+        };
         // store primitives in BVH leaf order so the traversal callback indexes them directly
         let prims = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
         Accel { bvh, prims, disks }
@@ -252,7 +269,10 @@ impl Accel {
             let mut node;
             'outer: {
                 obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
-                    if self.intersect_prim(&self.prims[state.primitive_id as usize], &wt, ray.o, ray.d, ray.tmax).is_some() {
+                    if self
+                        .intersect_prim(&self.prims[state.primitive_id as usize], &wt, ray.o, ray.d, ray.tmax)
+                        .is_some()
+                    {
                         hit = true;
                         break 'outer;
                     }
@@ -278,7 +298,15 @@ mod tests {
     fn cube_scene(t: &Transform) -> (Vec<Shape>, Vec<Mesh>) {
         let mut mesh = Mesh::cube();
         mesh.transform(t);
-        let shape = Shape { geometry: ShapeGeometry::Mesh(0), material: 0, light: None, flip_normals: false, area: 1.0, area_cdf: vec![], id: None };
+        let shape = Shape {
+            geometry: ShapeGeometry::Mesh(0),
+            material: 0,
+            light: None,
+            flip_normals: false,
+            area: 1.0,
+            area_cdf: vec![],
+            id: None,
+        };
         (vec![shape], vec![mesh])
     }
 
@@ -286,7 +314,8 @@ mod tests {
     /// from inside never escape.
     #[test]
     fn closed_mesh_has_no_leaks_at_edges_and_vertices() {
-        let t = Transform::translate(DVec3::new(0.3, -0.2, 0.7)).after(&Transform::rotate(DVec3::new(1.0, 2.0, 3.0).normalize(), 37.0).unwrap());
+        let t = Transform::translate(DVec3::new(0.3, -0.2, 0.7))
+            .after(&Transform::rotate(DVec3::new(1.0, 2.0, 3.0).normalize(), 37.0).unwrap());
         let (shapes, meshes) = cube_scene(&t);
         let accel = Accel::build(&shapes, &meshes);
         let center = t.point(Vec3::ZERO);
@@ -334,7 +363,10 @@ mod tests {
     #[test]
     fn closest_hit_is_the_nearest_of_several_shapes() {
         let (mut shapes, meshes) = cube_scene(&Transform::IDENTITY);
-        shapes.push(Shape { geometry: ShapeGeometry::Sphere { center: Vec3::new(0.0, 0.0, -5.0), radius: 1.0 }, ..shapes[0].clone() });
+        shapes.push(Shape {
+            geometry: ShapeGeometry::Sphere { center: Vec3::new(0.0, 0.0, -5.0), radius: 1.0 },
+            ..shapes[0].clone()
+        });
         let accel = Accel::build(&shapes, &meshes);
         let hit = accel.closest_hit(&Ray::new(Vec3::new(0.0, 0.0, -10.0), Vec3::Z)).unwrap();
         assert_eq!(hit.shape, 1);

@@ -35,7 +35,16 @@ struct SensorSettings {
 
 pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> {
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut b = Builder { tree, dir, shapes: vec![], meshes: vec![], materials: vec![], material_ids: HashMap::new(), lights: vec![], light_weights: vec![] };
+    let mut b = Builder {
+        tree,
+        dir,
+        shapes: vec![],
+        meshes: vec![],
+        materials: vec![],
+        material_ids: HashMap::new(),
+        lights: vec![],
+        light_weights: vec![],
+    };
     let mut sensor: Option<(SensorSettings, &Location)> = None;
     let mut integrator: Option<IntegratorSettings> = None;
     for e in &tree.elements {
@@ -55,7 +64,10 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
             }
             "sensor" => {
                 if let Some((_, first)) = &sensor {
-                    return Err(SceneError::at(&e.location, format!("only one <sensor> is supported (first at {first})")));
+                    return Err(SceneError::at(
+                        &e.location,
+                        format!("only one <sensor> is supported (first at {first})"),
+                    ));
                 }
                 sensor = Some((build_sensor(e)?, &e.location));
             }
@@ -70,22 +82,51 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
         }
     }
     let (sensor, _) = sensor.ok_or_else(|| SceneError::file(path, "the scene has no <sensor>"))?;
-    let integrator = integrator.unwrap_or(IntegratorSettings { kind: "path".into(), max_depth: None, rr_depth: 5, hide_emitters: false });
-    Ok(Scene::assemble(path, b.shapes, b.meshes, b.materials, b.lights, b.light_weights, sensor.camera, sensor.spp, sensor.seed, integrator))
+    let integrator = integrator.unwrap_or(IntegratorSettings {
+        kind: "path".into(),
+        max_depth: None,
+        rr_depth: 5,
+        hide_emitters: false,
+    });
+    Ok(Scene::assemble(
+        path,
+        b.shapes,
+        b.meshes,
+        b.materials,
+        b.lights,
+        b.light_weights,
+        sensor.camera,
+        sensor.spp,
+        sensor.seed,
+        integrator,
+    ))
 }
 
 fn build_integrator(e: &Element) -> Result<IntegratorSettings, SceneError> {
     if e.plugin != "path" {
-        return Err(SceneError::at(&e.location, format!("unsupported integrator \"{}\" in the scene file (use type=\"path\"; choose Tessera's integrator with --integrator)", e.plugin)));
+        return Err(SceneError::at(
+            &e.location,
+            format!(
+                "unsupported integrator \"{}\" in the scene file (use type=\"path\"; choose Tessera's integrator with --integrator)",
+                e.plugin
+            ),
+        ));
     }
     let max_depth = match e.integer("max_depth")?.unwrap_or(-1) {
         -1 => None,
         d if d >= 0 => Some(d.min(u32::MAX as i64) as u32),
-        d => return Err(SceneError::at(e.location_of("max_depth"), format!("\"max_depth\" must be -1 (unlimited) or non-negative, found {d}"))),
+        d => {
+            return Err(SceneError::at(
+                e.location_of("max_depth"),
+                format!("\"max_depth\" must be -1 (unlimited) or non-negative, found {d}"),
+            ));
+        }
     };
     let rr_depth = match e.integer("rr_depth")?.unwrap_or(5) {
         d if d > 0 => d.min(u32::MAX as i64) as u32,
-        d => return Err(SceneError::at(e.location_of("rr_depth"), format!("\"rr_depth\" must be positive, found {d}"))),
+        d => {
+            return Err(SceneError::at(e.location_of("rr_depth"), format!("\"rr_depth\" must be positive, found {d}")));
+        }
     };
     let hide_emitters = e.boolean_or("hide_emitters", false)?;
     e.check_all_used()?;
@@ -94,7 +135,10 @@ fn build_integrator(e: &Element) -> Result<IntegratorSettings, SceneError> {
 
 fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
     if e.plugin != "perspective" {
-        return Err(SceneError::at(&e.location, format!("unsupported sensor \"{}\" (supported: perspective)", e.plugin)));
+        return Err(SceneError::at(
+            &e.location,
+            format!("unsupported sensor \"{}\" (supported: perspective)", e.plugin),
+        ));
     }
     let (mut width, mut height) = (768u32, 576u32);
     let (mut spp, mut seed) = (4u32, 0u64);
@@ -105,16 +149,28 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
                 have_film = true;
                 (width, height) = build_film(c)?;
             }
-            ("film", other) => return Err(SceneError::at(&c.location, format!("unsupported film \"{other}\" (supported: hdrfilm)"))),
+            ("film", other) => {
+                return Err(SceneError::at(&c.location, format!("unsupported film \"{other}\" (supported: hdrfilm)")));
+            }
             ("sampler", "independent") => {
                 spp = match c.integer("sample_count")?.unwrap_or(4) {
                     n if n > 0 && n <= u32::MAX as i64 => n as u32,
-                    n => return Err(SceneError::at(c.location_of("sample_count"), format!("\"sample_count\" must be positive, found {n}"))),
+                    n => {
+                        return Err(SceneError::at(
+                            c.location_of("sample_count"),
+                            format!("\"sample_count\" must be positive, found {n}"),
+                        ));
+                    }
                 };
                 seed = c.integer("seed")?.unwrap_or(0) as u64;
                 c.check_all_used()?;
             }
-            ("sampler", other) => return Err(SceneError::at(&c.location, format!("unsupported sampler \"{other}\" (supported: independent)"))),
+            ("sampler", other) => {
+                return Err(SceneError::at(
+                    &c.location,
+                    format!("unsupported sampler \"{other}\" (supported: independent)"),
+                ));
+            }
             (tag, _) => return Err(SceneError::at(&c.location, format!("a sensor cannot contain <{tag}>"))),
         }
     }
@@ -125,34 +181,63 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
     let fov_x = fov_x_degrees(e, aspect)?;
     let to_world = e.transform("to_world")?;
     if to_world.uniform_scale(1e-3).is_none_or(|s| (s - 1.0).abs() > 1e-3) {
-        return Err(SceneError::at(e.location_of("to_world"), "the sensor's to_world must be a rigid transform (no scale or shear)"));
+        return Err(SceneError::at(
+            e.location_of("to_world"),
+            "the sensor's to_world must be a rigid transform (no scale or shear)",
+        ));
     }
     let near_clip = e.float_or("near_clip", 1e-2)?;
     let far_clip = e.float_or("far_clip", 1e4)?;
     if !(near_clip > 0.0 && far_clip > near_clip) {
-        return Err(SceneError::at(e.location_of("near_clip"), format!("need 0 < near_clip < far_clip, found {near_clip} and {far_clip}")));
+        return Err(SceneError::at(
+            e.location_of("near_clip"),
+            format!("need 0 < near_clip < far_clip, found {near_clip} and {far_clip}"),
+        ));
     }
     e.check_all_used()?;
-    Ok(SensorSettings { camera: PerspectiveCamera::new(to_world, fov_x as f32, width, height, near_clip, far_clip), spp, seed })
+    Ok(SensorSettings {
+        camera: PerspectiveCamera::new(to_world, fov_x as f32, width, height, near_clip, far_clip),
+        spp,
+        seed,
+    })
 }
 
 /// Mitsuba's `parse_fov`: the horizontal field of view from `fov` + `fov_axis` or `focal_length`.
 fn fov_x_degrees(e: &Element, aspect: f64) -> Result<f64, SceneError> {
     let (fov, axis) = match (e.float("fov")?, e.string("focal_length")?) {
-        (Some(_), Some(_)) => return Err(SceneError::at(e.location_of("fov"), "give either \"fov\" or \"focal_length\", not both")),
+        (Some(_), Some(_)) => {
+            return Err(SceneError::at(e.location_of("fov"), "give either \"fov\" or \"focal_length\", not both"));
+        }
         (Some(fov), None) => {
             let axis = e.string("fov_axis")?.unwrap_or("x").to_ascii_lowercase();
             let axis = match axis.as_str() {
-                "smaller" => if aspect > 1.0 { "y".to_string() } else { "x".to_string() },
-                "larger" => if aspect > 1.0 { "x".to_string() } else { "y".to_string() },
+                "smaller" => {
+                    if aspect > 1.0 {
+                        "y".to_string()
+                    } else {
+                        "x".to_string()
+                    }
+                }
+                "larger" => {
+                    if aspect > 1.0 {
+                        "x".to_string()
+                    } else {
+                        "y".to_string()
+                    }
+                }
                 _ => axis,
             };
             (fov as f64, axis)
         }
         (None, focal) => {
             let f = focal.unwrap_or("50mm");
-            let value: f64 = f.trim_end_matches("mm").parse().map_err(|_| SceneError::at(e.location_of("focal_length"), format!("focal length \"{f}\" must look like \"50mm\"")))?;
-            ((2.0 * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * value)).atan()).to_degrees(), "diagonal".to_string())
+            let value: f64 = f.trim_end_matches("mm").parse().map_err(|_| {
+                SceneError::at(e.location_of("focal_length"), format!("focal length \"{f}\" must look like \"50mm\""))
+            })?;
+            (
+                (2.0 * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * value)).atan()).to_degrees(),
+                "diagonal".to_string(),
+            )
         }
     };
     let half = |deg: f64| (0.5 * deg.to_radians()).tan();
@@ -164,10 +249,18 @@ fn fov_x_degrees(e: &Element, aspect: f64) -> Result<f64, SceneError> {
             let width = diagonal / (1.0 + 1.0 / (aspect * aspect)).sqrt();
             (2.0 * (0.5 * width).atan()).to_degrees()
         }
-        other => return Err(SceneError::at(e.location_of("fov_axis"), format!("\"fov_axis\" must be one of x, y, diagonal, smaller, larger; found \"{other}\""))),
+        other => {
+            return Err(SceneError::at(
+                e.location_of("fov_axis"),
+                format!("\"fov_axis\" must be one of x, y, diagonal, smaller, larger; found \"{other}\""),
+            ));
+        }
     };
     if !(fov_x > 0.0 && fov_x < 180.0) {
-        return Err(SceneError::at(e.location_of("fov"), format!("the field of view must lie in (0, 180) degrees, found {fov_x}")));
+        return Err(SceneError::at(
+            e.location_of("fov"),
+            format!("the field of view must lie in (0, 180) degrees, found {fov_x}"),
+        ));
     }
     Ok(fov_x)
 }
@@ -182,26 +275,41 @@ fn build_film(c: &Element) -> Result<(u32, u32), SceneError> {
     let (w, h) = (dim("width", 768)?, dim("height", 576)?);
     if let Some(f) = c.string("pixel_format")? {
         if !matches!(f, "rgb" | "rgba") {
-            return Err(SceneError::at(c.location_of("pixel_format"), format!("unsupported pixel_format \"{f}\" (rgb or rgba; Tessera writes RGB)")));
+            return Err(SceneError::at(
+                c.location_of("pixel_format"),
+                format!("unsupported pixel_format \"{f}\" (rgb or rgba; Tessera writes RGB)"),
+            ));
         }
     }
     if let Some(f) = c.string("component_format")? {
         if !matches!(f, "float16" | "float32") {
-            return Err(SceneError::at(c.location_of("component_format"), format!("unsupported component_format \"{f}\" (float16 or float32; Tessera writes float32)")));
+            return Err(SceneError::at(
+                c.location_of("component_format"),
+                format!("unsupported component_format \"{f}\" (float16 or float32; Tessera writes float32)"),
+            ));
         }
     }
     match c.children.as_slice() {
-        [] => tracing::warn!(file = %c.location, "hdrfilm has no rfilter: Mitsuba would use a gaussian, Tessera renders with a box filter"),
+        [] => {
+            tracing::warn!(file = %c.location, "hdrfilm has no rfilter: Mitsuba would use a gaussian, Tessera renders with a box filter")
+        }
         [f] if f.tag == "rfilter" && f.plugin == "box" => {
             if let Some(r) = f.float("radius")? {
                 if (r - 0.5).abs() > 1e-6 {
-                    return Err(SceneError::at(f.location_of("radius"), "only the box filter's default radius 0.5 is supported"));
+                    return Err(SceneError::at(
+                        f.location_of("radius"),
+                        "only the box filter's default radius 0.5 is supported",
+                    ));
                 }
             }
             f.check_all_used()?;
         }
-        [f] if f.tag == "rfilter" => return Err(SceneError::at(&f.location, format!("unsupported rfilter \"{}\" (supported: box)", f.plugin))),
-        [f, ..] => return Err(SceneError::at(&f.location, format!("a film can contain one <rfilter>, found <{}>", f.tag))),
+        [f] if f.tag == "rfilter" => {
+            return Err(SceneError::at(&f.location, format!("unsupported rfilter \"{}\" (supported: box)", f.plugin)));
+        }
+        [f, ..] => {
+            return Err(SceneError::at(&f.location, format!("a film can contain one <rfilter>, found <{}>", f.tag)));
+        }
     }
     c.check_all_used()?;
     Ok((w, h))
@@ -211,7 +319,12 @@ impl Builder<'_> {
     fn material_of(&mut self, e: &Element) -> Result<u32, SceneError> {
         if e.tag == "ref" {
             resolve(self.tree, e, "bsdf")?;
-            return self.material_ids.get(&e.plugin).copied().ok_or_else(|| SceneError::at(&e.location, format!("bsdf \"{}\" must be defined before the shape that uses it", e.plugin)));
+            return self.material_ids.get(&e.plugin).copied().ok_or_else(|| {
+                SceneError::at(
+                    &e.location,
+                    format!("bsdf \"{}\" must be defined before the shape that uses it", e.plugin),
+                )
+            });
         }
         self.materials.push(build_material(self.tree, e)?);
         Ok(self.materials.len() as u32 - 1)
@@ -221,7 +334,11 @@ impl Builder<'_> {
         let mut material = None;
         let mut emitter = None;
         for c in &e.children {
-            let tag = if c.tag == "ref" { self.tree.by_id(&c.plugin).map_or("bsdf", |t| t.tag.as_str()) } else { c.tag.as_str() };
+            let tag = if c.tag == "ref" {
+                self.tree.by_id(&c.plugin).map_or("bsdf", |t| t.tag.as_str())
+            } else {
+                c.tag.as_str()
+            };
             match tag {
                 "bsdf" if material.is_none() => material = Some(self.material_of(c)?),
                 "bsdf" => return Err(SceneError::at(&c.location, "a shape can have only one bsdf")),
@@ -239,7 +356,9 @@ impl Builder<'_> {
                 self.add_mesh(mesh)
             }
             "obj" | "ply" => {
-                let file = e.string("filename")?.ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"filename\"", e.describe())))?;
+                let file = e
+                    .string("filename")?
+                    .ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"filename\"", e.describe())))?;
                 let path = self.dir.join(file);
                 let mut mesh = if e.plugin == "obj" { load_obj(&path)? } else { load_ply(&path)? };
                 let face_normals = e.boolean_or("face_normals", false)?;
@@ -256,19 +375,34 @@ impl Builder<'_> {
                 let center = e.vector("center")?.unwrap_or(Vec3::ZERO);
                 let radius = e.float_or("radius", 1.0)?;
                 if !(radius > 0.0) {
-                    return Err(SceneError::at(e.location_of("radius"), format!("sphere radius must be positive, found {radius}")));
+                    return Err(SceneError::at(
+                        e.location_of("radius"),
+                        format!("sphere radius must be positive, found {radius}"),
+                    ));
                 }
-                let scale = to_world.uniform_scale(1e-4).ok_or_else(|| SceneError::at(e.location_of("to_world"), "a sphere's to_world must not scale non-uniformly"))?;
+                let scale = to_world.uniform_scale(1e-4).ok_or_else(|| {
+                    SceneError::at(e.location_of("to_world"), "a sphere's to_world must not scale non-uniformly")
+                })?;
                 ShapeGeometry::Sphere { center: to_world.point(center), radius: radius * scale }
             }
             "disk" => ShapeGeometry::Disk { to_world, normal: to_world.normal(Vec3::Z).normalize() },
-            other => return Err(SceneError::at(&e.location, format!("unsupported shape \"{other}\" (supported: rectangle, cube, disk, sphere, obj, ply)"))),
+            other => {
+                return Err(SceneError::at(
+                    &e.location,
+                    format!("unsupported shape \"{other}\" (supported: rectangle, cube, disk, sphere, obj, ply)"),
+                ));
+            }
         };
         e.check_all_used()?;
         let area = match &geometry {
-            ShapeGeometry::Mesh(m) => { let m = &self.meshes[*m as usize]; (0..m.triangles.len()).map(|i| m.triangle_area(i)).sum() }
+            ShapeGeometry::Mesh(m) => {
+                let m = &self.meshes[*m as usize];
+                (0..m.triangles.len()).map(|i| m.triangle_area(i)).sum()
+            }
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
-            ShapeGeometry::Disk { to_world, .. } => PI * to_world.vector(Vec3::X).cross(to_world.vector(Vec3::Y)).length(),
+            ShapeGeometry::Disk { to_world, .. } => {
+                PI * to_world.vector(Vec3::X).cross(to_world.vector(Vec3::Y)).length()
+            }
         };
         if !(area > 0.0) || !area.is_finite() {
             return Err(SceneError::at(&e.location, format!("{} has no surface area", e.describe())));
@@ -294,7 +428,10 @@ impl Builder<'_> {
         };
         let mut shape = Shape { geometry, material, light, flip_normals, area, area_cdf: vec![], id: e.id.clone() };
         if light.is_some() {
-            let mesh = match &shape.geometry { ShapeGeometry::Mesh(m) => Some(&self.meshes[*m as usize]), _ => None };
+            let mesh = match &shape.geometry {
+                ShapeGeometry::Mesh(m) => Some(&self.meshes[*m as usize]),
+                _ => None,
+            };
             shape.prepare_area_sampling(mesh);
         }
         self.shapes.push(shape);
@@ -306,4 +443,3 @@ impl Builder<'_> {
         ShapeGeometry::Mesh(self.meshes.len() as u32 - 1)
     }
 }
-

@@ -9,11 +9,29 @@ use crate::math::Rgb;
 
 /// Named indices of refraction (Mitsuba's `ior.h` table).
 const NAMED_IORS: &[(&str, f32)] = &[
-    ("vacuum", 1.0), ("helium", 1.000036), ("hydrogen", 1.000132), ("air", 1.000277), ("carbon dioxide", 1.00045),
-    ("water", 1.3330), ("acetone", 1.36), ("ethanol", 1.361), ("carbon tetrachloride", 1.461), ("glycerol", 1.4729),
-    ("benzene", 1.501), ("silicone oil", 1.52045), ("bromine", 1.661), ("water ice", 1.31), ("fused quartz", 1.458),
-    ("pyrex", 1.470), ("acrylic glass", 1.49), ("polypropylene", 1.49), ("bk7", 1.5046), ("sodium chloride", 1.544),
-    ("amber", 1.55), ("pet", 1.5750), ("diamond", 2.419),
+    ("vacuum", 1.0),
+    ("helium", 1.000036),
+    ("hydrogen", 1.000132),
+    ("air", 1.000277),
+    ("carbon dioxide", 1.00045),
+    ("water", 1.3330),
+    ("acetone", 1.36),
+    ("ethanol", 1.361),
+    ("carbon tetrachloride", 1.461),
+    ("glycerol", 1.4729),
+    ("benzene", 1.501),
+    ("silicone oil", 1.52045),
+    ("bromine", 1.661),
+    ("water ice", 1.31),
+    ("fused quartz", 1.458),
+    ("pyrex", 1.470),
+    ("acrylic glass", 1.49),
+    ("polypropylene", 1.49),
+    ("bk7", 1.5046),
+    ("sodium chloride", 1.544),
+    ("amber", 1.55),
+    ("pet", 1.5750),
+    ("diamond", 2.419),
 ];
 
 /// Named conductors as Mitsuba's `*_rgb` variants resolve them (mitsuba-conventions.md §5.5).
@@ -29,43 +47,76 @@ const NAMED_CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
 fn ior(e: &Element, name: &str, default: &str) -> Result<f32, SceneError> {
     if let Ok(Some(v)) = e.float(name) {
         if v <= 0.0 {
-            return Err(SceneError::at(e.location_of(name), format!("\"{name}\" of {} must be positive", e.describe())));
+            return Err(SceneError::at(
+                e.location_of(name),
+                format!("\"{name}\" of {} must be positive", e.describe()),
+            ));
         }
         return Ok(v);
     }
     let s = e.string(name)?.unwrap_or(default);
     NAMED_IORS.iter().find(|(n, _)| n.eq_ignore_ascii_case(s)).map(|(_, v)| *v).ok_or_else(|| {
         let names: Vec<&str> = NAMED_IORS.iter().map(|(n, _)| *n).collect();
-        SceneError::at(e.location_of(name), format!("unknown index of refraction \"{s}\" for \"{name}\" (known: {})", names.join(", ")))
+        SceneError::at(
+            e.location_of(name),
+            format!("unknown index of refraction \"{s}\" for \"{name}\" (known: {})", names.join(", ")),
+        )
     })
 }
 
 fn reflectance(e: &Element, name: &str, default: f32) -> Result<Rgb, SceneError> {
     let v = e.rgb(name)?.unwrap_or(Rgb::splat(default));
     if v.min_element() < 0.0 || v.max_element() > 1.0 {
-        return Err(SceneError::at(e.location_of(name), format!("\"{name}\" of {} must lie in [0, 1], found {v}", e.describe())));
+        return Err(SceneError::at(
+            e.location_of(name),
+            format!("\"{name}\" of {} must lie in [0, 1], found {v}", e.describe()),
+        ));
     }
     Ok(v)
 }
 
 fn positive(e: &Element, name: &str, v: f32) -> Result<f32, SceneError> {
-    if v > 0.0 { Ok(v) } else { Err(SceneError::at(e.location_of(name), format!("\"{name}\" of {} must be positive, found {v}", e.describe()))) }
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err(SceneError::at(e.location_of(name), format!("\"{name}\" of {} must be positive, found {v}", e.describe())))
+    }
 }
 
 fn microfacet(e: &Element, allow_anisotropic: bool) -> Result<Microfacet, SceneError> {
     let kind = match e.string("distribution")?.unwrap_or("beckmann") {
         "beckmann" => MicrofacetKind::Beckmann,
         "ggx" => MicrofacetKind::Ggx,
-        other => return Err(SceneError::at(e.location_of("distribution"), format!("unknown microfacet distribution \"{other}\" (beckmann or ggx)"))),
+        other => {
+            return Err(SceneError::at(
+                e.location_of("distribution"),
+                format!("unknown microfacet distribution \"{other}\" (beckmann or ggx)"),
+            ));
+        }
     };
     let alpha = e.float("alpha")?;
     let (au, av) = (e.float("alpha_u")?, e.float("alpha_v")?);
     let (au, av) = match (alpha, au, av) {
-        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => return Err(SceneError::at(e.location_of("alpha"), "give either \"alpha\" or \"alpha_u\"/\"alpha_v\", not both")),
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return Err(SceneError::at(
+                e.location_of("alpha"),
+                "give either \"alpha\" or \"alpha_u\"/\"alpha_v\", not both",
+            ));
+        }
         (_, Some(u), Some(v)) if allow_anisotropic => (u, v),
-        (_, Some(_), Some(_)) => return Err(SceneError::at(e.location_of("alpha_u"), format!("{} does not support anisotropic roughness", e.describe()))),
-        (_, Some(_), None) | (_, None, Some(_)) => return Err(SceneError::at(e.location_of("alpha_u"), "\"alpha_u\" and \"alpha_v\" must be given together")),
-        (a, None, None) => { let a = a.unwrap_or(0.1); (a, a) }
+        (_, Some(_), Some(_)) => {
+            return Err(SceneError::at(
+                e.location_of("alpha_u"),
+                format!("{} does not support anisotropic roughness", e.describe()),
+            ));
+        }
+        (_, Some(_), None) | (_, None, Some(_)) => {
+            return Err(SceneError::at(e.location_of("alpha_u"), "\"alpha_u\" and \"alpha_v\" must be given together"));
+        }
+        (a, None, None) => {
+            let a = a.unwrap_or(0.1);
+            (a, a)
+        }
     };
     let sample_visible = e.boolean_or("sample_visible", true)?;
     Ok(Microfacet::new(kind, positive(e, "alpha", au)?, positive(e, "alpha", av)?, sample_visible))
@@ -75,11 +126,20 @@ fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
     let material = e.string("material")?;
     let (eta, k) = (e.rgb("eta")?, e.rgb("k")?);
     match (material, eta, k) {
-        (Some(m), None, None) => NAMED_CONDUCTORS.iter().find(|(n, _, _)| *n == m).map(|(_, eta, k)| (Rgb::from(*eta), Rgb::from(*k))).ok_or_else(|| {
-            let names: Vec<&str> = NAMED_CONDUCTORS.iter().map(|(n, _, _)| *n).collect();
-            SceneError::at(e.location_of("material"), format!("unknown conductor material \"{m}\" (supported: {})", names.join(", ")))
-        }),
-        (Some(_), _, _) => Err(SceneError::at(e.location_of("material"), "give either \"material\" or \"eta\"/\"k\", not both")),
+        (Some(m), None, None) => NAMED_CONDUCTORS
+            .iter()
+            .find(|(n, _, _)| *n == m)
+            .map(|(_, eta, k)| (Rgb::from(*eta), Rgb::from(*k)))
+            .ok_or_else(|| {
+                let names: Vec<&str> = NAMED_CONDUCTORS.iter().map(|(n, _, _)| *n).collect();
+                SceneError::at(
+                    e.location_of("material"),
+                    format!("unknown conductor material \"{m}\" (supported: {})", names.join(", ")),
+                )
+            }),
+        (Some(_), _, _) => {
+            Err(SceneError::at(e.location_of("material"), "give either \"material\" or \"eta\"/\"k\", not both"))
+        }
         // Mitsuba's default conductor is a perfect mirror: eta 0, k 1
         (None, eta, k) => Ok((eta.unwrap_or(Rgb::ZERO), k.unwrap_or(Rgb::ONE))),
     }
@@ -88,7 +148,14 @@ fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
 /// Builds the BSDF of a `<bsdf>` element that is not `twosided`.
 fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
     if let Some(child) = e.children.first() {
-        return Err(SceneError::at(&child.location, format!("{} cannot contain <{}> (textures and nested bsdfs other than in twosided are not supported)", e.describe(), child.tag)));
+        return Err(SceneError::at(
+            &child.location,
+            format!(
+                "{} cannot contain <{}> (textures and nested bsdfs other than in twosided are not supported)",
+                e.describe(),
+                child.tag
+            ),
+        ));
     }
     let bxdf = match e.plugin.as_str() {
         "diffuse" => Bxdf::Diffuse(Diffuse { reflectance: reflectance(e, "reflectance", 0.5)? }),
@@ -99,15 +166,30 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
         "roughconductor" => {
             let distribution = microfacet(e, true)?;
             let (eta, k) = conductor_ior(e)?;
-            Bxdf::RoughConductor(RoughConductor { distribution, eta, k, specular_reflectance: reflectance(e, "specular_reflectance", 1.0)? })
+            Bxdf::RoughConductor(RoughConductor {
+                distribution,
+                eta,
+                k,
+                specular_reflectance: reflectance(e, "specular_reflectance", 1.0)?,
+            })
         }
         "dielectric" | "thindielectric" | "roughdielectric" => {
             let eta = ior(e, "int_ior", "bk7")? / ior(e, "ext_ior", "air")?;
-            let (sr, st) = (reflectance(e, "specular_reflectance", 1.0)?, reflectance(e, "specular_transmittance", 1.0)?);
+            let (sr, st) =
+                (reflectance(e, "specular_reflectance", 1.0)?, reflectance(e, "specular_transmittance", 1.0)?);
             match e.plugin.as_str() {
-                "dielectric" => Bxdf::Dielectric(Dielectric { eta, specular_reflectance: sr, specular_transmittance: st }),
-                "thindielectric" => Bxdf::ThinDielectric(ThinDielectric { eta, specular_reflectance: sr, specular_transmittance: st }),
-                _ => Bxdf::RoughDielectric(RoughDielectric { distribution: microfacet(e, true)?, eta, specular_reflectance: sr, specular_transmittance: st }),
+                "dielectric" => {
+                    Bxdf::Dielectric(Dielectric { eta, specular_reflectance: sr, specular_transmittance: st })
+                }
+                "thindielectric" => {
+                    Bxdf::ThinDielectric(ThinDielectric { eta, specular_reflectance: sr, specular_transmittance: st })
+                }
+                _ => Bxdf::RoughDielectric(RoughDielectric {
+                    distribution: microfacet(e, true)?,
+                    eta,
+                    specular_reflectance: sr,
+                    specular_transmittance: st,
+                }),
             }
         }
         "plastic" | "roughplastic" => {
@@ -122,13 +204,23 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
                 Bxdf::Plastic(Plastic::new(eta, diffuse, specular, nonlinear))
             } else {
                 if (eta - 1.0).abs() < 1e-6 {
-                    return Err(SceneError::at(e.location_of("int_ior"), "roughplastic needs different interior and exterior indices"));
+                    return Err(SceneError::at(
+                        e.location_of("int_ior"),
+                        "roughplastic needs different interior and exterior indices",
+                    ));
                 }
                 Bxdf::RoughPlastic(RoughPlastic::new(microfacet(e, false)?, eta, diffuse, specular, nonlinear))
             }
         }
         "twosided" => return Err(SceneError::at(&e.location, "twosided cannot be nested inside another bsdf")),
-        other => return Err(SceneError::at(&e.location, format!("unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided)"))),
+        other => {
+            return Err(SceneError::at(
+                &e.location,
+                format!(
+                    "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided)"
+                ),
+            ));
+        }
     };
     e.check_all_used()?;
     Ok(bxdf)
@@ -139,9 +231,14 @@ pub(super) fn resolve<'a>(tree: &'a SceneTree, e: &'a Element, tag: &str) -> Res
     if e.tag != "ref" {
         return Ok(e);
     }
-    let target = tree.by_id(&e.plugin).ok_or_else(|| SceneError::at(&e.location, format!("reference to unknown id \"{}\"", e.plugin)))?;
+    let target = tree
+        .by_id(&e.plugin)
+        .ok_or_else(|| SceneError::at(&e.location, format!("reference to unknown id \"{}\"", e.plugin)))?;
     if target.tag != tag {
-        return Err(SceneError::at(&e.location, format!("id \"{}\" refers to a <{}>, expected a <{tag}>", e.plugin, target.tag)));
+        return Err(SceneError::at(
+            &e.location,
+            format!("id \"{}\" refers to a <{}>, expected a <{tag}>", e.plugin, target.tag),
+        ));
     }
     Ok(target)
 }
@@ -164,12 +261,19 @@ pub(super) fn build_material(tree: &SceneTree, e: &Element) -> Result<Material, 
 /// Builds an emitter. `shape` is the index of the enclosing shape for `area` emitters.
 pub(super) fn build_emitter(e: &Element, shape: Option<u32>) -> Result<(Light, f32), SceneError> {
     if let Some(child) = e.children.first() {
-        return Err(SceneError::at(&child.location, format!("{} cannot contain <{}> (textures are not supported)", e.describe(), child.tag)));
+        return Err(SceneError::at(
+            &child.location,
+            format!("{} cannot contain <{}> (textures are not supported)", e.describe(), child.tag),
+        ));
     }
     let required_rgb = |name: &str| -> Result<Rgb, SceneError> {
-        let v = e.rgb(name)?.ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"{name}\"", e.describe())))?;
+        let v =
+            e.rgb(name)?.ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"{name}\"", e.describe())))?;
         if v.min_element() < 0.0 {
-            return Err(SceneError::at(e.location_of(name), format!("\"{name}\" of {} must not be negative", e.describe())));
+            return Err(SceneError::at(
+                e.location_of(name),
+                format!("\"{name}\" of {} must not be negative", e.describe()),
+            ));
         }
         Ok(v)
     };
@@ -185,8 +289,15 @@ pub(super) fn build_emitter(e: &Element, shape: Option<u32>) -> Result<(Light, f
             Light::Point { position, intensity }
         }
         ("constant", None) => Light::Constant { radiance: required_rgb("radiance")? },
-        (kind @ ("point" | "constant"), Some(_)) => return Err(SceneError::at(&e.location, format!("a {kind} emitter cannot be attached to a shape"))),
-        (other, _) => return Err(SceneError::at(&e.location, format!("unsupported emitter \"{other}\" (supported: area, point, constant)"))),
+        (kind @ ("point" | "constant"), Some(_)) => {
+            return Err(SceneError::at(&e.location, format!("a {kind} emitter cannot be attached to a shape")));
+        }
+        (other, _) => {
+            return Err(SceneError::at(
+                &e.location,
+                format!("unsupported emitter \"{other}\" (supported: area, point, constant)"),
+            ));
+        }
     };
     let weight = e.float_or("sampling_weight", 1.0)?;
     if weight < 0.0 {

@@ -77,7 +77,8 @@ impl Scene {
 
     /// Loads a scene with `$name` parameters overriding the file's `<default>`s.
     pub fn load_with(path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read scene: {e}")))?;
+        let text =
+            std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read scene: {e}")))?;
         Self::from_xml(&text, path, defines)
     }
 
@@ -89,14 +90,37 @@ impl Scene {
 
     /// Finishes a scene from its parts: builds the BVH, the light distribution and bounds.
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn assemble(path: &Path, shapes: Vec<Shape>, meshes: Vec<Mesh>, materials: Vec<Material>, lights: Vec<Light>, light_weights: Vec<f32>, camera: PerspectiveCamera, spp: u32, seed: u64, integrator: IntegratorSettings) -> Scene {
+    pub(crate) fn assemble(
+        path: &Path,
+        shapes: Vec<Shape>,
+        meshes: Vec<Mesh>,
+        materials: Vec<Material>,
+        lights: Vec<Light>,
+        light_weights: Vec<f32>,
+        camera: PerspectiveCamera,
+        spp: u32,
+        seed: u64,
+        integrator: IntegratorSettings,
+    ) -> Scene {
         let accel = Accel::build(&shapes, &meshes);
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
         for s in &shapes {
             match &s.geometry {
-                ShapeGeometry::Mesh(m) => meshes[*m as usize].positions.iter().for_each(|p| { lo = lo.min(*p); hi = hi.max(*p); }),
-                ShapeGeometry::Sphere { center, radius } => { lo = lo.min(*center - *radius); hi = hi.max(*center + *radius); }
-                ShapeGeometry::Disk { to_world, .. } => for (x, y) in [(-1.0, -1.0), (1.0, 1.0), (-1.0, 1.0), (1.0, -1.0)] { let p = to_world.point(Vec3::new(x, y, 0.0)); lo = lo.min(p); hi = hi.max(p); },
+                ShapeGeometry::Mesh(m) => meshes[*m as usize].positions.iter().for_each(|p| {
+                    lo = lo.min(*p);
+                    hi = hi.max(*p);
+                }),
+                ShapeGeometry::Sphere { center, radius } => {
+                    lo = lo.min(*center - *radius);
+                    hi = hi.max(*center + *radius);
+                }
+                ShapeGeometry::Disk { to_world, .. } => {
+                    for (x, y) in [(-1.0, -1.0), (1.0, 1.0), (-1.0, 1.0), (1.0, -1.0)] {
+                        let p = to_world.point(Vec3::new(x, y, 0.0));
+                        lo = lo.min(p);
+                        hi = hi.max(p);
+                    }
+                }
             }
         }
         // the camera is inside the scene as far as environment emission is concerned
@@ -104,14 +128,35 @@ impl Scene {
         hi = hi.max(camera.origin);
         let bounds_center = 0.5 * (lo + hi);
         let bounds_radius = (0.5 * (hi - lo).length()).max(1e-3) * 1.01;
-        let infinite_lights = lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
-        Scene { path: path.to_path_buf(), shapes, meshes, materials, lights, infinite_lights, light_sampler: LightSampler::new(&light_weights), camera, spp, seed, integrator, bounds_center, bounds_radius, accel }
+        let infinite_lights =
+            lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
+        Scene {
+            path: path.to_path_buf(),
+            shapes,
+            meshes,
+            materials,
+            lights,
+            infinite_lights,
+            light_sampler: LightSampler::new(&light_weights),
+            camera,
+            spp,
+            seed,
+            integrator,
+            bounds_center,
+            bounds_radius,
+            accel,
+        }
     }
 
     /// What lights need to know about the scene.
     #[inline]
     pub fn light_context(&self) -> LightContext<'_> {
-        LightContext { shapes: &self.shapes, meshes: &self.meshes, center: self.bounds_center, radius: self.bounds_radius }
+        LightContext {
+            shapes: &self.shapes,
+            meshes: &self.meshes,
+            center: self.bounds_center,
+            radius: self.bounds_radius,
+        }
     }
 
     /// Total number of triangles.
@@ -141,7 +186,9 @@ impl Scene {
                 let ns = match &mesh.normals {
                     Some(ns) => {
                         let [i0, i1, i2] = mesh.triangles[hit.index as usize];
-                        (ns[i0 as usize] * b0 + ns[i1 as usize] * b1 + ns[i2 as usize] * b2).try_normalize().unwrap_or(ng)
+                        (ns[i0 as usize] * b0 + ns[i1 as usize] * b1 + ns[i2 as usize] * b2)
+                            .try_normalize()
+                            .unwrap_or(ng)
                     }
                     None => ng,
                 };
@@ -157,6 +204,14 @@ impl Scene {
         if n_geo == Vec3::ZERO {
             return None;
         }
-        Some(SurfaceInteraction { p, t: hit.t, n_geo: n_geo * flip, frame: Frame::from_normal(n_shading * flip), wo: -ray.d, shape: hit.shape, prim: hit.index })
+        Some(SurfaceInteraction {
+            p,
+            t: hit.t,
+            n_geo: n_geo * flip,
+            frame: Frame::from_normal(n_shading * flip),
+            wo: -ray.d,
+            shape: hit.shape,
+            prim: hit.index,
+        })
     }
 }

@@ -44,7 +44,12 @@ impl Mesh {
     /// Mitsuba's `rectangle`: [-1,1]² in z = 0 facing +z, two triangles.
     pub fn rectangle() -> Mesh {
         Mesh {
-            positions: vec![Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(-1.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.0)],
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+            ],
             normals: None,
             triangles: vec![[1, 2, 0], [1, 3, 2]],
         }

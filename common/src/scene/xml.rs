@@ -77,7 +77,21 @@ pub struct Element {
     pub location: Location,
 }
 
-const OBJECT_TAGS: &[&str] = &["shape", "bsdf", "emitter", "sensor", "film", "sampler", "rfilter", "integrator", "texture", "medium", "phase", "volume", "spectrum_object"];
+const OBJECT_TAGS: &[&str] = &[
+    "shape",
+    "bsdf",
+    "emitter",
+    "sensor",
+    "film",
+    "sampler",
+    "rfilter",
+    "integrator",
+    "texture",
+    "medium",
+    "phase",
+    "volume",
+    "spectrum_object",
+];
 
 impl Element {
     /// A short description for messages, e.g. `bsdf "diffuse"`.
@@ -92,7 +106,16 @@ impl Element {
     }
 
     fn type_error(&self, p: &Property, expected: &str) -> SceneError {
-        SceneError::at(&p.location, format!("parameter \"{}\" of {} must be {}, found {}", p.name, self.describe(), expected, p.value.type_name()))
+        SceneError::at(
+            &p.location,
+            format!(
+                "parameter \"{}\" of {} must be {}, found {}",
+                p.name,
+                self.describe(),
+                expected,
+                p.value.type_name()
+            ),
+        )
     }
 
     /// A float parameter (integers are accepted).
@@ -188,7 +211,9 @@ impl Element {
     /// Fails on the first property no plugin code asked for: unknown parameters are errors.
     pub fn check_all_used(&self) -> Result<(), SceneError> {
         match self.properties.iter().find(|p| !p.used.get()) {
-            Some(p) => Err(SceneError::at(&p.location, format!("unknown parameter \"{}\" of {}", p.name, self.describe()))),
+            Some(p) => {
+                Err(SceneError::at(&p.location, format!("unknown parameter \"{}\" of {}", p.name, self.describe())))
+            }
             None => Ok(()),
         }
     }
@@ -225,7 +250,10 @@ pub fn parse(text: &str, file: &Path, defines: &HashMap<String, String>) -> Resu
     let root = doc.root_element();
     let loc = parser.loc(root);
     if root.tag_name().name() != "scene" {
-        return Err(SceneError::at(&loc, format!("the root element must be <scene>, found <{}>", root.tag_name().name())));
+        return Err(SceneError::at(
+            &loc,
+            format!("the root element must be <scene>, found <{}>", root.tag_name().name()),
+        ));
     }
     match root.attribute("version") {
         Some(v) if v.starts_with("3.") || v.starts_with("2.") => {}
@@ -243,8 +271,18 @@ pub fn parse(text: &str, file: &Path, defines: &HashMap<String, String>) -> Resu
         match node.tag_name().name() {
             "default" => {}
             tag if OBJECT_TAGS.contains(&tag) || tag == "ref" => elements.push(parser.element(node)?),
-            "include" | "alias" | "path" => return Err(SceneError::at(&parser.loc(node), format!("<{}> is not supported", node.tag_name().name()))),
-            other => return Err(SceneError::at(&parser.loc(node), format!("unexpected <{other}> at the top level of <scene>"))),
+            "include" | "alias" | "path" => {
+                return Err(SceneError::at(
+                    &parser.loc(node),
+                    format!("<{}> is not supported", node.tag_name().name()),
+                ));
+            }
+            other => {
+                return Err(SceneError::at(
+                    &parser.loc(node),
+                    format!("unexpected <{other}> at the top level of <scene>"),
+                ));
+            }
         }
     }
     let mut seen: HashMap<&str, &Location> = HashMap::new();
@@ -266,7 +304,12 @@ impl<'a> Parser<'a> {
 
     /// An attribute with `$name` parameters substituted.
     fn attr(&self, node: roxmltree::Node, name: &str) -> Result<String, SceneError> {
-        let raw = node.attribute(name).ok_or_else(|| SceneError::at(&self.loc(node), format!("<{}> is missing the \"{}\" attribute", node.tag_name().name(), name)))?;
+        let raw = node.attribute(name).ok_or_else(|| {
+            SceneError::at(
+                &self.loc(node),
+                format!("<{}> is missing the \"{}\" attribute", node.tag_name().name(), name),
+            )
+        })?;
         self.substitute(node, raw)
     }
 
@@ -285,7 +328,14 @@ impl<'a> Parser<'a> {
             let after = &rest[i + 1..];
             let len = after.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(after.len());
             let name = &after[..len];
-            let value = self.params.get(name).ok_or_else(|| SceneError::at(&self.loc(node), format!("undefined parameter \"${name}\" (declare it with <default name=\"{name}\" value=\"...\"/>)")))?;
+            let value = self.params.get(name).ok_or_else(|| {
+                SceneError::at(
+                    &self.loc(node),
+                    format!(
+                        "undefined parameter \"${name}\" (declare it with <default name=\"{name}\" value=\"...\"/>)"
+                    ),
+                )
+            })?;
             out.push_str(value);
             rest = &after[len..];
         }
@@ -298,10 +348,26 @@ impl<'a> Parser<'a> {
         let location = self.loc(node);
         if tag == "ref" {
             let id = self.attr(node, "id")?;
-            return Ok(Element { tag, plugin: id, id: None, name: self.opt_attr(node, "name")?, properties: vec![], children: vec![], location });
+            return Ok(Element {
+                tag,
+                plugin: id,
+                id: None,
+                name: self.opt_attr(node, "name")?,
+                properties: vec![],
+                children: vec![],
+                location,
+            });
         }
         let plugin = self.attr(node, "type")?;
-        let mut element = Element { tag, plugin, id: self.opt_attr(node, "id")?, name: self.opt_attr(node, "name")?, properties: vec![], children: vec![], location };
+        let mut element = Element {
+            tag,
+            plugin,
+            id: self.opt_attr(node, "id")?,
+            name: self.opt_attr(node, "name")?,
+            properties: vec![],
+            children: vec![],
+            location,
+        };
         for child in node.children().filter(|n| n.is_element()) {
             let ctag = child.tag_name().name();
             if OBJECT_TAGS.contains(&ctag) || ctag == "ref" {
@@ -309,7 +375,15 @@ impl<'a> Parser<'a> {
             } else {
                 let property = self.property(child)?;
                 if let Some(prev) = element.properties.iter().find(|p| p.name == property.name) {
-                    return Err(SceneError::at(&property.location, format!("parameter \"{}\" of {} is given twice (first at {})", property.name, element.describe(), prev.location)));
+                    return Err(SceneError::at(
+                        &property.location,
+                        format!(
+                            "parameter \"{}\" of {} is given twice (first at {})",
+                            property.name,
+                            element.describe(),
+                            prev.location
+                        ),
+                    ));
                 }
                 element.properties.push(property);
             }
@@ -324,13 +398,20 @@ impl<'a> Parser<'a> {
         let value = match tag {
             "integer" => {
                 let s = self.attr(node, "value")?;
-                Value::Integer(s.trim().parse::<i64>().map_err(|_| SceneError::at(&location, format!("\"{s}\" is not an integer (parameter \"{name}\")")))?)
+                Value::Integer(s.trim().parse::<i64>().map_err(|_| {
+                    SceneError::at(&location, format!("\"{s}\" is not an integer (parameter \"{name}\")"))
+                })?)
             }
             "float" => Value::Float(self.number(&location, &name, &self.attr(node, "value")?)?),
             "boolean" => match self.attr(node, "value")?.trim() {
                 "true" => Value::Boolean(true),
                 "false" => Value::Boolean(false),
-                s => return Err(SceneError::at(&location, format!("\"{s}\" is not a boolean (parameter \"{name}\"; use true or false)"))),
+                s => {
+                    return Err(SceneError::at(
+                        &location,
+                        format!("\"{s}\" is not a boolean (parameter \"{name}\"; use true or false)"),
+                    ));
+                }
             },
             "string" => Value::String(self.attr(node, "value")?),
             "rgb" => {
@@ -338,13 +419,23 @@ impl<'a> Parser<'a> {
                 match v.as_slice() {
                     [g] => Value::Rgb(Vec3::splat(*g as f32)),
                     [r, g, b] => Value::Rgb(Vec3::new(*r as f32, *g as f32, *b as f32)),
-                    _ => return Err(SceneError::at(&location, format!("<rgb> \"{name}\" needs 1 or 3 values, found {}", v.len()))),
+                    _ => {
+                        return Err(SceneError::at(
+                            &location,
+                            format!("<rgb> \"{name}\" needs 1 or 3 values, found {}", v.len()),
+                        ));
+                    }
                 }
             }
             "spectrum" => {
                 let s = self.attr(node, "value")?;
                 if s.contains(':') {
-                    return Err(SceneError::at(&location, format!("spectrum \"{name}\": wavelength-value pairs are not supported in rgb rendering; give a single value or use <rgb>")));
+                    return Err(SceneError::at(
+                        &location,
+                        format!(
+                            "spectrum \"{name}\": wavelength-value pairs are not supported in rgb rendering; give a single value or use <rgb>"
+                        ),
+                    ));
                 }
                 match self.numbers(&location, &name, &s)?.as_slice() {
                     [g] => Value::Rgb(Vec3::splat(*g as f32)),
@@ -359,7 +450,10 @@ impl<'a> Parser<'a> {
     }
 
     fn number(&self, location: &Location, name: &str, s: &str) -> Result<f64, SceneError> {
-        let v: f64 = s.trim().parse().map_err(|_| SceneError::at(location, format!("\"{s}\" is not a number (parameter \"{name}\")")))?;
+        let v: f64 = s
+            .trim()
+            .parse()
+            .map_err(|_| SceneError::at(location, format!("\"{s}\" is not a number (parameter \"{name}\")")))?;
         if !v.is_finite() {
             return Err(SceneError::at(location, format!("\"{s}\" is not a finite number (parameter \"{name}\")")));
         }
@@ -367,7 +461,10 @@ impl<'a> Parser<'a> {
     }
 
     fn numbers(&self, location: &Location, name: &str, s: &str) -> Result<Vec<f64>, SceneError> {
-        s.split(|c: char| c == ',' || c.is_whitespace()).filter(|t| !t.is_empty()).map(|t| self.number(location, name, t)).collect()
+        s.split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|t| !t.is_empty())
+            .map(|t| self.number(location, name, t))
+            .collect()
     }
 
     /// `value="x, y, z"` or separate `x`, `y`, `z` attributes (missing ones default to `default`).
@@ -381,7 +478,10 @@ impl<'a> Parser<'a> {
             return match self.numbers(location, name, &s)?.as_slice() {
                 [x, y, z] => Ok(DVec3::new(*x, *y, *z)),
                 [v] => Ok(DVec3::splat(*v)),
-                v => Err(SceneError::at(location, format!("\"value\" of <{}> needs 3 values, found {}", node.tag_name().name(), v.len()))),
+                v => Err(SceneError::at(
+                    location,
+                    format!("\"value\" of <{}> needs 3 values, found {}", node.tag_name().name(), v.len()),
+                )),
             };
         }
         let mut out = DVec3::splat(default);
@@ -393,11 +493,20 @@ impl<'a> Parser<'a> {
         Ok(out)
     }
 
-    fn dvec3_attr(&self, node: roxmltree::Node, location: &Location, name: &str, attr: &str) -> Result<Option<DVec3>, SceneError> {
+    fn dvec3_attr(
+        &self,
+        node: roxmltree::Node,
+        location: &Location,
+        name: &str,
+        attr: &str,
+    ) -> Result<Option<DVec3>, SceneError> {
         let Some(s) = self.opt_attr(node, attr)? else { return Ok(None) };
         match self.numbers(location, name, &s)?.as_slice() {
             [x, y, z] => Ok(Some(DVec3::new(*x, *y, *z))),
-            v => Err(SceneError::at(location, format!("\"{attr}\" of <{}> needs 3 values, found {}", node.tag_name().name(), v.len()))),
+            v => Err(SceneError::at(
+                location,
+                format!("\"{attr}\" of <{}> needs 3 values, found {}", node.tag_name().name(), v.len()),
+            )),
         }
     }
 
@@ -441,14 +550,20 @@ impl<'a> Parser<'a> {
                     Transform::from_matrix(m)
                 }
                 "lookat" => {
-                    let origin = self.dvec3_attr(child, &loc, tag, "origin")?.ok_or_else(|| SceneError::at(&loc, "<lookat> is missing \"origin\""))?;
-                    let target = self.dvec3_attr(child, &loc, tag, "target")?.ok_or_else(|| SceneError::at(&loc, "<lookat> is missing \"target\""))?;
+                    let origin = self
+                        .dvec3_attr(child, &loc, tag, "origin")?
+                        .ok_or_else(|| SceneError::at(&loc, "<lookat> is missing \"origin\""))?;
+                    let target = self
+                        .dvec3_attr(child, &loc, tag, "target")?
+                        .ok_or_else(|| SceneError::at(&loc, "<lookat> is missing \"target\""))?;
                     let up = self.dvec3_attr(child, &loc, tag, "up")?.unwrap_or(DVec3::Y);
                     Transform::look_at(origin, target, up)
                 }
                 other => return Err(SceneError::at(&loc, format!("unknown transform operation <{other}>"))),
             };
-            let step = step.ok_or_else(|| SceneError::at(&loc, format!("<{tag}> gives a degenerate (non-invertible) transform")))?;
+            let step = step.ok_or_else(|| {
+                SceneError::at(&loc, format!("<{tag}> gives a degenerate (non-invertible) transform"))
+            })?;
             acc = step.after(&acc);
         }
         Ok(acc)

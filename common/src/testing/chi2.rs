@@ -37,7 +37,13 @@ impl Chi2Result {
 
 /// Runs the test. `sample(u)` maps a sample index to an optional direction (None for failed or
 /// delta samples); `pdf(w)` is the solid-angle density of directions.
-pub fn chi2_test(n_samples: usize, res_cos: usize, res_phi: usize, mut sample: impl FnMut(usize) -> Option<Vec3>, pdf: impl Fn(Vec3) -> f32) -> Chi2Result {
+pub fn chi2_test(
+    n_samples: usize,
+    res_cos: usize,
+    res_phi: usize,
+    mut sample: impl FnMut(usize) -> Option<Vec3>,
+    pdf: impl Fn(Vec3) -> f32,
+) -> Chi2Result {
     let cells = res_cos * res_phi;
     let cell_of = |w: Vec3| -> usize {
         let c = ((w.z as f64 + 1.0) * 0.5 * res_cos as f64).floor().clamp(0.0, res_cos as f64 - 1.0) as usize;
@@ -98,7 +104,8 @@ pub fn chi2_test(n_samples: usize, res_cos: usize, res_phi: usize, mut sample: i
     let mut outside = 0.0;
     for c in 0..res_cos {
         for p in 0..res_phi {
-            let far = (c.saturating_sub(1)..=(c + 1).min(res_cos - 1)).all(|cc| [res_phi - 1, 0, 1].iter().all(|dp| empty(cc, (p + dp) % res_phi)));
+            let far = (c.saturating_sub(1)..=(c + 1).min(res_cos - 1))
+                .all(|cc| [res_phi - 1, 0, 1].iter().all(|dp| empty(cc, (p + dp) % res_phi)));
             if far {
                 outside += observed[c * res_phi + p];
             }
@@ -134,12 +141,29 @@ pub fn chi2_test(n_samples: usize, res_cos: usize, res_phi: usize, mut sample: i
     }
     let dof = bins.saturating_sub(1).max(1);
     let p_value = gamma_q(dof as f64 / 2.0, statistic / 2.0);
-    Chi2Result { statistic, dof, p_value, pdf_integral, sample_fraction: produced as f64 / n_samples as f64, sample_outside_support }
+    Chi2Result {
+        statistic,
+        dof,
+        p_value,
+        pdf_integral,
+        sample_fraction: produced as f64 / n_samples as f64,
+        sample_outside_support,
+    }
 }
 
 /// Natural log of the gamma function (Lanczos approximation, g = 7, n = 9).
 pub fn ln_gamma(x: f64) -> f64 {
-    const C: [f64; 9] = [0.999_999_999_999_809_9, 676.520_368_121_885_1, -1_259.139_216_722_402_8, 771.323_428_777_653_1, -176.615_029_162_140_6, 12.507_343_278_686_905, -0.138_571_095_265_720_12, 9.984_369_578_019_572e-6, 1.505_632_735_149_311_6e-7];
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
     if x < 0.5 {
         return (PI / (PI * x).sin()).ln() - ln_gamma(1.0 - x);
     }
@@ -216,7 +240,10 @@ mod tests {
     fn chi2_detects_a_wrong_pdf() {
         use crate::math::warp;
         use crate::sampler::Sampler;
-        let draw = |i: usize| { let mut s = Sampler::for_pixel(3, i as u32, 0); Some(warp::square_to_cosine_hemisphere(s.next_2d())) };
+        let draw = |i: usize| {
+            let mut s = Sampler::for_pixel(3, i as u32, 0);
+            Some(warp::square_to_cosine_hemisphere(s.next_2d()))
+        };
         let right = chi2_test(200_000, 16, 32, draw, warp::cosine_hemisphere_pdf);
         assert!(right.passes(0.01), "{right:?}");
         // uniform-hemisphere pdf for cosine samples must fail

@@ -61,7 +61,9 @@ pub fn gather(light: &[PathVertex], camera: &[PathVertex], join: &Join, infinite
     }
     p.next_event0 = join.next_event0;
     // a point light (no surface) cannot be hit by a camera path
-    p.emitter_hittable = light.first().is_none_or(|v| !(matches!(v.kind, super::vertex::VertexKind::Light { .. }) && v.n_geo == glam::Vec3::ZERO));
+    p.emitter_hittable = light
+        .first()
+        .is_none_or(|v| !(matches!(v.kind, super::vertex::VertexKind::Light { .. }) && v.n_geo == glam::Vec3::ZERO));
     p.emitter_splattable = !infinite_light;
     p
 }

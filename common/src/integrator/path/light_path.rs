@@ -14,7 +14,13 @@ use glam::Vec3;
 /// (survival min(max throughput relative to emission · η², 0.95), as camera paths use).
 /// Returns the number of vertices appended (0 when the scene has no light or the emission
 /// sample failed).
-pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, rr_depth: u32, out: &mut Vec<PathVertex>) -> usize {
+pub fn trace_light_path(
+    scene: &Scene,
+    sampler: &mut Sampler,
+    max_edges: u32,
+    rr_depth: u32,
+    out: &mut Vec<PathVertex>,
+) -> usize {
     let start = out.len();
     let Some((li, pmf, _)) = scene.light_sampler.sample(sampler.next_1d()) else { return 0 };
     let light = &scene.lights[li];
@@ -60,7 +66,11 @@ pub fn trace_light_path(scene: &Scene, sampler: &mut Sampler, max_edges: u32, rr
         let Some(hit) = scene.intersect(&ray) else { break };
         let shape = &scene.shapes[hit.shape as usize];
         let depth = (out.len() - start) as u32;
-        let pdf_fwd = if prev_infinite { pdf_dir * hit.n_geo.dot(ray.d).abs() } else { solid_angle_to_area(pdf_dir, prev_p, hit.p, hit.n_geo) };
+        let pdf_fwd = if prev_infinite {
+            pdf_dir * hit.n_geo.dot(ray.d).abs()
+        } else {
+            solid_angle_to_area(pdf_dir, prev_p, hit.p, hit.n_geo)
+        };
         let mut v = PathVertex {
             p: hit.p,
             n_geo: hit.n_geo,

@@ -52,7 +52,15 @@ impl PathPdfs {
     /// Empty arrays for a path of `len` vertices.
     pub fn new(len: usize) -> Self {
         assert!(len >= 2 && len <= MAX_VERTICES, "invariant: path length {len} within 2..={MAX_VERTICES}");
-        PathPdfs { len, from_light: [0.0; MAX_VERTICES], from_camera: [0.0; MAX_VERTICES], delta: [false; MAX_VERTICES], next_event0: 0.0, emitter_hittable: true, emitter_splattable: true }
+        PathPdfs {
+            len,
+            from_light: [0.0; MAX_VERTICES],
+            from_camera: [0.0; MAX_VERTICES],
+            delta: [false; MAX_VERTICES],
+            next_event0: 0.0,
+            emitter_hittable: true,
+            emitter_splattable: true,
+        }
     }
 }
 
@@ -88,7 +96,8 @@ pub struct SampleCounts {
 
 impl SampleCounts {
     /// Unidirectional path tracing: emitter hits and next-event estimation.
-    pub const PATH_TRACING: SampleCounts = SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.0, light_trace: 0.0, merge: None };
+    pub const PATH_TRACING: SampleCounts =
+        SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.0, light_trace: 0.0, merge: None };
 }
 
 /// A sampling technique of a full path.
@@ -159,13 +168,21 @@ pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 
     out[n] = if p.emitter_hittable && can_connect(p, 0) { counts.hit } else { 0.0 };
     n += 1;
     // s = 1: next-event estimation uses its own density for vertex 0
-    out[n] = if p.next_event0 > 0.0 && can_connect(p, 1) && k >= 2 { counts.next_event * p.next_event0 / remap0(p.from_camera[0]) } else { 0.0 };
+    out[n] = if p.next_event0 > 0.0 && can_connect(p, 1) && k >= 2 {
+        counts.next_event * p.next_event0 / remap0(p.from_camera[0])
+    } else {
+        0.0
+    };
     n += 1;
     for s in 2..k {
         out[n] = if can_connect(p, s) { counts.connect * ratio[s] } else { 0.0 };
         n += 1;
     }
-    out[n] = if k >= 1 && can_connect(p, k) && (k >= 2 || p.emitter_splattable) { counts.light_trace * ratio[k] } else { 0.0 };
+    out[n] = if k >= 1 && can_connect(p, k) && (k >= 2 || p.emitter_splattable) {
+        counts.light_trace * ratio[k]
+    } else {
+        0.0
+    };
     n += 1;
     if let Some(m) = &counts.merge {
         for i in 1..k.saturating_sub(1) {

@@ -13,9 +13,9 @@ use super::mis::{self, SampleCounts, Technique};
 use super::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use crate::bsdf::{Material, TransportMode};
 use crate::geometry::{Ray, offset_ray_origin};
+use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::light::Light;
 use crate::math::{Rgb, SHADOW_EPSILON};
-use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
@@ -30,7 +30,15 @@ pub struct Report<'a, O: SampleObserver> {
 
 impl<O: SampleObserver> Report<'_, O> {
     #[inline(always)]
-    fn emit(&self, technique: Technique, pixel: u32, value: Rgb, weight: f32, pdfs: &super::mis::PathPdfs, counts: &SampleCounts) {
+    fn emit(
+        &self,
+        technique: Technique,
+        pixel: u32,
+        value: Rgb,
+        weight: f32,
+        pdfs: &super::mis::PathPdfs,
+        counts: &SampleCounts,
+    ) {
         if value != Rgb::ZERO {
             self.observer.on_sample(&SampleRecord { technique, pixel, value, weight, pdfs, counts });
         }
@@ -56,7 +64,9 @@ fn material_of<'a>(scene: &'a Scene, v: &PathVertex) -> Option<&'a Material> {
 
 /// Whether the segment between two vertices is unblocked.
 pub fn visible(scene: &Scene, a: &PathVertex, b: &PathVertex) -> bool {
-    let offset = |v: &PathVertex, d: Vec3| if v.n_geo == Vec3::ZERO || v.kind == VertexKind::Camera { v.p } else { offset_ray_origin(v.p, v.n_geo, d) };
+    let offset = |v: &PathVertex, d: Vec3| {
+        if v.n_geo == Vec3::ZERO || v.kind == VertexKind::Camera { v.p } else { offset_ray_origin(v.p, v.n_geo, d) }
+    };
     let d = b.p - a.p;
     let o = offset(a, d);
     let target = offset(b, -d);
@@ -100,13 +110,21 @@ fn emission_densities(scene: &Scene, li: u32, y: &PathVertex, to: &PathVertex) -
 /// The camera subpath ends on an emitter (or escaped to an infinite light, with `camera`'s
 /// last vertex being the virtual light vertex) emitting `emitted` towards it: the weighted
 /// contribution of the hit technique.
-pub fn emitter_hit<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], li: u32, emitted: Rgb, counts: &SampleCounts, report: &Report<O>) -> Rgb {
+pub fn emitter_hit<O: SampleObserver>(
+    scene: &Scene,
+    camera: &[PathVertex],
+    li: u32,
+    emitted: Rgb,
+    counts: &SampleCounts,
+    report: &Report<O>,
+) -> Rgb {
     let t = camera.len();
     let end = &camera[t - 1];
     let prev = &camera[t - 2];
     let (pos, next) = emission_densities(scene, li, end, prev);
     let light_vertex = PathVertex { kind: VertexKind::Light { light: li }, ..*end };
-    let next_event0 = if prev.kind == VertexKind::Camera { 0.0 } else { next_event_density(scene, &light_vertex, prev) };
+    let next_event0 =
+        if prev.kind == VertexKind::Camera { 0.0 } else { next_event_density(scene, &light_vertex, prev) };
     let join = Join { camera_end_from_light: pos, camera_next_from_light: next, next_event0, ..Join::default() };
     let pdfs = gather(&[], camera, &join, is_infinite(scene, li));
     let weight = mis::weight(&pdfs, counts, Technique::EmitterHit);
@@ -117,7 +135,14 @@ pub fn emitter_hit<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], li: 
 
 /// Next-event estimation from the camera subpath's last vertex with uniform numbers `u_light`
 /// and `u_pos`.
-pub fn next_event<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], u_light: f32, u_pos: Vec2, counts: &SampleCounts, report: &Report<O>) -> Option<Weighted> {
+pub fn next_event<O: SampleObserver>(
+    scene: &Scene,
+    camera: &[PathVertex],
+    u_light: f32,
+    u_pos: Vec2,
+    counts: &SampleCounts,
+    report: &Report<O>,
+) -> Option<Weighted> {
     let z = camera.last()?;
     let material = material_of(scene, z)?;
     let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
@@ -146,14 +171,24 @@ pub fn next_event<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], u_lig
         delta: false,
         depth: 0,
     };
-    let unoccluded = if infinite { !scene.occluded(&Ray::new(offset_ray_origin(z.p, z.n_geo, ds.wi), ds.wi)) } else { visible(scene, z, &y0) };
+    let unoccluded = if infinite {
+        !scene.occluded(&Ray::new(offset_ray_origin(z.p, z.n_geo, ds.wi), ds.wi))
+    } else {
+        visible(scene, z, &y0)
+    };
     if !unoccluded {
         return None;
     }
     let (pos, next) = emission_densities(scene, li as u32, &y0, z);
     let light_vertex = PathVertex { pdf_fwd: pos, ..y0 };
     let prev = &camera[camera.len() - 2];
-    let next_event0 = if light.is_delta() { pmf } else if infinite { pmf * ds.pdf } else { pmf * solid_angle_to_area(ds.pdf, z.p, ds.p, ds.n) };
+    let next_event0 = if light.is_delta() {
+        pmf
+    } else if infinite {
+        pmf * ds.pdf
+    } else {
+        pmf * solid_angle_to_area(ds.pdf, z.p, ds.p, ds.n)
+    };
     let join = Join {
         camera_end_from_light: next,
         camera_next_from_light: density_at_vertex(material.pdf(wi, wo), z.p, prev, false),
@@ -171,7 +206,14 @@ pub fn next_event<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], u_lig
 
 /// Connects the camera subpath's last vertex to the light subpath `light` (whose last vertex
 /// is a surface vertex). `scale` is 1 / (effective connection count), c·N/|cache|.
-pub fn connect<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], light: &[PathVertex], scale: f32, counts: &SampleCounts, report: &Report<O>) -> Option<Weighted> {
+pub fn connect<O: SampleObserver>(
+    scene: &Scene,
+    camera: &[PathVertex],
+    light: &[PathVertex],
+    scale: f32,
+    counts: &SampleCounts,
+    report: &Report<O>,
+) -> Option<Weighted> {
     let (z, y) = (camera.last()?, light.last()?);
     let (mz, my) = (material_of(scene, z)?, material_of(scene, y)?);
     let d = y.p - z.p;
@@ -199,7 +241,12 @@ pub fn connect<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], light: &
         camera_end_from_light: solid_angle_to_area(my.pdf(y_wo, y_wi), y.p, z.p, z.n_geo),
         camera_next_from_light: density_at_vertex(mz.pdf(z_wi, z_wo), z.p, &camera[t - 2], false),
         light_end_from_camera: solid_angle_to_area(mz.pdf(z_wo, z_wi), z.p, y.p, y.n_geo),
-        light_next_from_camera: density_at_vertex(my.pdf(y_wi, y_wo), y.p, &light[s - 2], s == 2 && path_on_infinite_light(scene, light)),
+        light_next_from_camera: density_at_vertex(
+            my.pdf(y_wi, y_wo),
+            y.p,
+            &light[s - 2],
+            s == 2 && path_on_infinite_light(scene, light),
+        ),
         next_event0: light[1].pdf_next_event,
         light_end_sampled: false,
     };
@@ -212,7 +259,13 @@ pub fn connect<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], light: &
 
 /// Light tracing: connects the light subpath's last vertex to the camera. Returns the weighted
 /// contribution, multiplied by `scale` (P/N), and the raster position.
-pub fn light_trace<O: SampleObserver>(scene: &Scene, light: &[PathVertex], counts: &SampleCounts, scale: f32, observer: &O) -> Option<(Weighted, Vec2)> {
+pub fn light_trace<O: SampleObserver>(
+    scene: &Scene,
+    light: &[PathVertex],
+    counts: &SampleCounts,
+    scale: f32,
+    observer: &O,
+) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
     let (raw, raster) = crate::integrator::lt::connect_to_camera(scene, y)?;
     let cam = &scene.camera;

@@ -14,12 +14,12 @@ mod photon_map;
 pub use photon_map::PhotonMap;
 
 use super::bidir::LightCache;
+use super::observer::{SampleObserver, SampleRecord};
 use super::path::gather::{Join, gather};
 use super::path::light_path::next_event_density;
 use super::path::mis::{self, SampleCounts, Technique};
-use super::path::vertex::{PathVertex, VertexKind, density_at_vertex};
-use super::observer::{SampleObserver, SampleRecord};
 use super::path::techniques::Report;
+use super::path::vertex::{PathVertex, VertexKind, density_at_vertex};
 use crate::bsdf::TransportMode;
 use crate::math::{PI, Rgb};
 use crate::scene::Scene;
@@ -84,7 +84,17 @@ pub fn path_radius(d1: f32, radius_max: f32) -> f32 {
 /// Merges the camera subpath's last vertex with the photons within `radius`, which happens
 /// with probability `chi`: the sum of the MIS-weighted contributions, including the 1/χ.
 #[allow(clippy::too_many_arguments)]
-pub fn merge<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], cache: &LightCache, photons: &PhotonMap, radius: f32, chi: f32, counts: &SampleCounts, max_edges: u32, report: &Report<O>) -> Rgb {
+pub fn merge<O: SampleObserver>(
+    scene: &Scene,
+    camera: &[PathVertex],
+    cache: &LightCache,
+    photons: &PhotonMap,
+    radius: f32,
+    chi: f32,
+    counts: &SampleCounts,
+    max_edges: u32,
+    report: &Report<O>,
+) -> Rgb {
     // never at the primary vertex: camera = [pinhole, primary, ..., z]
     if camera.len() < 3 {
         return Rgb::ZERO;
@@ -110,7 +120,8 @@ pub fn merge<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], cache: &Li
         }
         let light = cache.subpath(index as usize);
         let s = light.len() - 1; // the photon itself is replaced by z
-        let infinite = matches!(light[0].kind, VertexKind::Light { light } if scene.lights[light as usize].is_infinite());
+        let infinite =
+            matches!(light[0].kind, VertexKind::Light { light } if scene.lights[light as usize].is_infinite());
         let join = Join {
             camera_end_from_light: y.pdf_fwd,
             camera_next_from_light: density_at_vertex(mz.pdf(wi, z_wo), z.p, &camera[t - 2], false),
@@ -129,7 +140,14 @@ pub fn merge<O: SampleObserver>(scene: &Scene, camera: &[PathVertex], cache: &Li
         let correction = wi.z.abs() / z.n_geo.dot(y.wo).abs();
         let value = z.beta * f * y.beta * (correction * kernel * weight / (n_paths * chi));
         if value != Rgb::ZERO {
-            report.observer.on_sample(&SampleRecord { technique: Technique::Merge(s), pixel: report.pixel, value, weight, pdfs: &pdfs, counts });
+            report.observer.on_sample(&SampleRecord {
+                technique: Technique::Merge(s),
+                pixel: report.pixel,
+                value,
+                weight,
+                pdfs: &pdfs,
+                counts,
+            });
         }
         total += value;
     });

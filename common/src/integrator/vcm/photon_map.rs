@@ -21,7 +21,9 @@ pub struct PhotonMap {
 #[inline]
 fn bucket_of(cell: [i32; 3], mask: usize) -> usize {
     // Teschner et al. 2003 spatial hash
-    let h = (cell[0] as u32).wrapping_mul(73_856_093) ^ (cell[1] as u32).wrapping_mul(19_349_663) ^ (cell[2] as u32).wrapping_mul(83_492_791);
+    let h = (cell[0] as u32).wrapping_mul(73_856_093)
+        ^ (cell[1] as u32).wrapping_mul(19_349_663)
+        ^ (cell[2] as u32).wrapping_mul(83_492_791);
     h as usize & mask
 }
 
@@ -32,8 +34,16 @@ impl PhotonMap {
         let cell = (2.0 * max_radius).max(1e-12);
         let origin = candidates.iter().fold(Vec3::splat(f32::MAX), |m, &i| m.min(vertices[i as usize].p));
         let buckets = (2 * candidates.len()).max(16).next_power_of_two();
-        let mut map = PhotonMap { origin, inv_cell: 1.0 / cell, mask: buckets - 1, starts: vec![0; buckets + 1], photons: vec![0; candidates.len()], positions: vec![Vec3::ZERO; candidates.len()] };
-        let keys: Vec<usize> = candidates.iter().map(|&i| bucket_of(map.cell_of(vertices[i as usize].p), map.mask)).collect();
+        let mut map = PhotonMap {
+            origin,
+            inv_cell: 1.0 / cell,
+            mask: buckets - 1,
+            starts: vec![0; buckets + 1],
+            photons: vec![0; candidates.len()],
+            positions: vec![Vec3::ZERO; candidates.len()],
+        };
+        let keys: Vec<usize> =
+            candidates.iter().map(|&i| bucket_of(map.cell_of(vertices[i as usize].p), map.mask)).collect();
         for &b in &keys {
             map.starts[b + 1] += 1;
         }
@@ -83,7 +93,10 @@ impl PhotonMap {
         let mut seen = [usize::MAX; 8];
         let r2 = radius * radius;
         for k in 0..8 {
-            let b = bucket_of([lo[0] + (k & 1) as i32, lo[1] + ((k >> 1) & 1) as i32, lo[2] + ((k >> 2) & 1) as i32], self.mask);
+            let b = bucket_of(
+                [lo[0] + (k & 1) as i32, lo[1] + ((k >> 1) & 1) as i32, lo[2] + ((k >> 2) & 1) as i32],
+                self.mask,
+            );
             // cells can collide in one bucket: visit each bucket once
             if seen[..k].contains(&b) {
                 continue;
@@ -107,12 +120,29 @@ mod tests {
     use crate::sampler::Sampler;
 
     fn vertex(p: Vec3) -> PathVertex {
-        PathVertex { p, n_geo: Vec3::Z, n_shading: Vec3::Z, wo: Vec3::Z, beta: Vec3::ONE, pdf_fwd: 1.0, pdf_rev: 0.0, pdf_next_event: 0.0, kind: VertexKind::Surface { material: 0 }, delta: false, depth: 1 }
+        PathVertex {
+            p,
+            n_geo: Vec3::Z,
+            n_shading: Vec3::Z,
+            wo: Vec3::Z,
+            beta: Vec3::ONE,
+            pdf_fwd: 1.0,
+            pdf_rev: 0.0,
+            pdf_next_event: 0.0,
+            kind: VertexKind::Surface { material: 0 },
+            delta: false,
+            depth: 1,
+        }
     }
 
     #[test]
     fn queries_find_exactly_the_photons_within_the_radius() {
-        let vertices: Vec<PathVertex> = (0..5000).map(|i| { let mut s = Sampler::for_pixel(1, i, 0); vertex(s.next_2d().extend(s.next_1d()) * 2.0 - 1.0) }).collect();
+        let vertices: Vec<PathVertex> = (0..5000)
+            .map(|i| {
+                let mut s = Sampler::for_pixel(1, i, 0);
+                vertex(s.next_2d().extend(s.next_1d()) * 2.0 - 1.0)
+            })
+            .collect();
         let all: Vec<u32> = (0..vertices.len() as u32).collect();
         let map = PhotonMap::build(&vertices, &all, 0.1);
         for q in 0..200 {
@@ -121,7 +151,8 @@ mod tests {
             let r = 0.02 + 0.08 * s.next_1d();
             let mut found = vec![];
             map.query(p, r, |i, _| found.push(i));
-            let mut expected: Vec<u32> = all.iter().copied().filter(|&i| (vertices[i as usize].p - p).length() <= r).collect();
+            let mut expected: Vec<u32> =
+                all.iter().copied().filter(|&i| (vertices[i as usize].p - p).length() <= r).collect();
             found.sort();
             expected.sort();
             assert_eq!(found, expected, "query {q}");

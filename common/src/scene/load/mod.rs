@@ -13,7 +13,15 @@ use std::collections::HashMap;
 /// texture coordinates do not show.
 pub fn compute_smooth_normals(mesh: &mut Mesh) {
     let mut canonical: HashMap<[u32; 3], usize> = HashMap::new();
-    let ids: Vec<usize> = mesh.positions.iter().map(|p| { let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]; let n = canonical.len(); *canonical.entry(key).or_insert(n) }).collect();
+    let ids: Vec<usize> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            let n = canonical.len();
+            *canonical.entry(key).or_insert(n)
+        })
+        .collect();
     let mut acc = vec![Vec3::ZERO; canonical.len()];
     for tri in &mesh.triangles {
         let p = tri.map(|i| mesh.positions[i as usize]);

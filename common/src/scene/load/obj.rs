@@ -12,9 +12,16 @@ use std::path::Path;
 pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
     validate(&text, path)?;
-    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true, ..Default::default() };
-    let (models, _materials) = tobj::load_obj_buf(&mut text.as_bytes(), &opts, |_| Err(tobj::LoadError::GenericFailure))
-        .map_err(|e| SceneError::file(path, format!("invalid obj: {e}")))?;
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    };
+    let (models, _materials) =
+        tobj::load_obj_buf(&mut text.as_bytes(), &opts, |_| Err(tobj::LoadError::GenericFailure))
+            .map_err(|e| SceneError::file(path, format!("invalid obj: {e}")))?;
     let mut mesh = Mesh::default();
     let mut all_have_normals = true;
     let mut normals = Vec::new();
@@ -50,10 +57,15 @@ fn validate(text: &str, path: &Path) -> Result<(), SceneError> {
                 let values: Vec<&str> = tokens.collect();
                 let needed = if key == "vt" { 1 } else { 3 };
                 if values.len() < needed {
-                    return Err(SceneError::at(&loc(), format!("\"{key}\" needs {needed} numbers, found {}", values.len())));
+                    return Err(SceneError::at(
+                        &loc(),
+                        format!("\"{key}\" needs {needed} numbers, found {}", values.len()),
+                    ));
                 }
                 for v in values.iter().take(if key == "vt" { 3 } else { 3 }) {
-                    let x: f32 = v.parse().map_err(|_| SceneError::at(&loc(), format!("\"{v}\" is not a number in \"{key}\"")))?;
+                    let x: f32 = v
+                        .parse()
+                        .map_err(|_| SceneError::at(&loc(), format!("\"{v}\" is not a number in \"{key}\"")))?;
                     if !x.is_finite() {
                         return Err(SceneError::at(&loc(), format!("non-finite value \"{v}\" in \"{key}\"")));
                     }
@@ -67,18 +79,26 @@ fn validate(text: &str, path: &Path) -> Result<(), SceneError> {
             "f" => {
                 let corners: Vec<&str> = tokens.collect();
                 if corners.len() < 3 {
-                    return Err(SceneError::at(&loc(), format!("a face needs at least 3 vertices, found {}", corners.len())));
+                    return Err(SceneError::at(
+                        &loc(),
+                        format!("a face needs at least 3 vertices, found {}", corners.len()),
+                    ));
                 }
                 for c in corners {
                     for (k, part) in c.split('/').enumerate() {
                         if part.is_empty() {
                             continue;
                         }
-                        let idx: i64 = part.parse().map_err(|_| SceneError::at(&loc(), format!("\"{c}\" is not a valid face vertex")))?;
+                        let idx: i64 = part
+                            .parse()
+                            .map_err(|_| SceneError::at(&loc(), format!("\"{c}\" is not a valid face vertex")))?;
                         let count = [nv, nvt, nvn][k.min(2)];
                         let resolved = if idx < 0 { count + idx + 1 } else { idx };
                         if resolved < 1 || resolved > count {
-                            return Err(SceneError::at(&loc(), format!("face index {idx} is out of range (only {count} defined so far)")));
+                            return Err(SceneError::at(
+                                &loc(),
+                                format!("face index {idx} is out of range (only {count} defined so far)"),
+                            ));
                         }
                     }
                 }

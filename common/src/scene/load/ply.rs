@@ -38,9 +38,15 @@ fn list(p: &Property) -> Option<Vec<i64>> {
 /// ply-rs-bw reports ASCII errors as "Line N: …": lift N into the location.
 fn parse_error(path: &Path, message: &str) -> SceneError {
     let message = message.replace('\n', " ").trim().to_string();
-    let line = message.strip_prefix("Line ").and_then(|rest| rest.split(':').next()).and_then(|n| n.trim().parse::<u32>().ok());
+    let line = message
+        .strip_prefix("Line ")
+        .and_then(|rest| rest.split(':').next())
+        .and_then(|n| n.trim().parse::<u32>().ok());
     match line {
-        Some(line) => SceneError::at(&Location::new(path, line, 1), format!("invalid ply: {}", message.split_once(": ").map_or(message.as_str(), |(_, m)| m))),
+        Some(line) => SceneError::at(
+            &Location::new(path, line, 1),
+            format!("invalid ply: {}", message.split_once(": ").map_or(message.as_str(), |(_, m)| m)),
+        ),
         None => SceneError::file(path, format!("invalid ply: {message}")),
     }
 }
@@ -48,20 +54,29 @@ fn parse_error(path: &Path, message: &str) -> SceneError {
 /// Loads a PLY file.
 pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
-    let ply = Parser::<DefaultElement>::new().read_ply(&mut bytes.as_slice()).map_err(|e| parse_error(path, &e.to_string()))?;
+    let ply = Parser::<DefaultElement>::new()
+        .read_ply(&mut bytes.as_slice())
+        .map_err(|e| parse_error(path, &e.to_string()))?;
     let ascii = ply.header.encoding == ply_rs_bw::ply::Encoding::Ascii;
     // for ASCII files, element k of the first element list sits on line header_lines + k + 1
-    let header_lines = bytes.split(|&b| b == b'\n').position(|l| l.starts_with(b"end_header")).map_or(0, |i| i + 1) as u32;
-    let vertex_loc = |k: usize| if ascii { Location::new(path, header_lines + k as u32 + 1, 1) } else { Location::new(path, 0, 0) };
+    let header_lines =
+        bytes.split(|&b| b == b'\n').position(|l| l.starts_with(b"end_header")).map_or(0, |i| i + 1) as u32;
+    let vertex_loc =
+        |k: usize| if ascii { Location::new(path, header_lines + k as u32 + 1, 1) } else { Location::new(path, 0, 0) };
     let vertices = ply.payload.get("vertex").ok_or_else(|| SceneError::file(path, "no \"vertex\" element"))?;
     let faces = ply.payload.get("face").ok_or_else(|| SceneError::file(path, "no \"face\" element"))?;
     let mut mesh = Mesh::default();
-    let has_normals = vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
+    let has_normals =
+        vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
     let mut normals = Vec::with_capacity(if has_normals { vertices.len() } else { 0 });
     for (k, v) in vertices.iter().enumerate() {
         let get = |name: &str| -> Result<f32, SceneError> {
-            let p = v.get(name).ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex {k} has no property \"{name}\"")))?;
-            let x = scalar(p).ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex property \"{name}\" must be a number")))? as f32;
+            let p = v
+                .get(name)
+                .ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex {k} has no property \"{name}\"")))?;
+            let x = scalar(p)
+                .ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex property \"{name}\" must be a number")))?
+                as f32;
             if !x.is_finite() {
                 return Err(SceneError::at(&vertex_loc(k), format!("vertex {k} has a non-finite \"{name}\"")));
             }
@@ -74,8 +89,16 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     }
     let n = mesh.positions.len() as i64;
     for (k, f) in faces.iter().enumerate() {
-        let loc = if ascii { Location::new(path, header_lines + vertices.len() as u32 + k as u32 + 1, 1) } else { Location::new(path, 0, 0) };
-        let idx = f.get("vertex_indices").or_else(|| f.get("vertex_index")).and_then(list).ok_or_else(|| SceneError::at(&loc, format!("face {k} has no vertex_indices list")))?;
+        let loc = if ascii {
+            Location::new(path, header_lines + vertices.len() as u32 + k as u32 + 1, 1)
+        } else {
+            Location::new(path, 0, 0)
+        };
+        let idx = f
+            .get("vertex_indices")
+            .or_else(|| f.get("vertex_index"))
+            .and_then(list)
+            .ok_or_else(|| SceneError::at(&loc, format!("face {k} has no vertex_indices list")))?;
         if idx.len() < 3 {
             return Err(SceneError::at(&loc, format!("face {k} has {} vertices (at least 3 needed)", idx.len())));
         }

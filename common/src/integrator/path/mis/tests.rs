@@ -52,7 +52,13 @@ fn counts_variants() -> Vec<SampleCounts> {
                 next_event: 1.0,
                 connect: c * n / cache,
                 light_trace: n,
-                merge: Some(MergeCounts { area: 1e-4, count: n * chi, correlation_aware, correlation_area: 1e-2, light_paths: n }),
+                merge: Some(MergeCounts {
+                    area: 1e-4,
+                    count: n * chi,
+                    correlation_aware,
+                    correlation_area: 1e-2,
+                    light_paths: n,
+                }),
             });
         }
         // BDPT: no merges
@@ -106,8 +112,22 @@ fn weights_equal_brute_force_balance_heuristic_without_deltas() {
             let p = random_path(seed, len, false);
             let k = len - 1;
             let (n_lt, n_conn) = (5000.0f64, 0.37f64);
-            let counts = SampleCounts { hit: 1.0, next_event: 1.0, connect: n_conn as f32, light_trace: n_lt as f32, merge: None };
-            let n_of = |s: usize| if s <= 1 { 1.0 } else if s == k { n_lt } else { n_conn };
+            let counts = SampleCounts {
+                hit: 1.0,
+                next_event: 1.0,
+                connect: n_conn as f32,
+                light_trace: n_lt as f32,
+                merge: None,
+            };
+            let n_of = |s: usize| {
+                if s <= 1 {
+                    1.0
+                } else if s == k {
+                    n_lt
+                } else {
+                    n_conn
+                }
+            };
             let total: f64 = (0..=k).map(|s| n_of(s) * brute_force_pdf(&p, s)).sum();
             for s in 0..=k {
                 let t = match s {
@@ -139,10 +159,19 @@ fn unit_counts_give_classic_balance_weights() {
 #[test]
 fn merge_weight_uses_density_times_area_times_count() {
     let p = random_path(3, 6, false);
-    let m = MergeCounts { area: 2e-3, count: 1000.0, correlation_aware: false, correlation_area: 0.0, light_paths: 1000.0 };
+    let m =
+        MergeCounts { area: 2e-3, count: 1000.0, correlation_aware: false, correlation_area: 0.0, light_paths: 1000.0 };
     let counts = SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.5, light_trace: 1000.0, merge: Some(m) };
     let k = 5;
-    let n_of = |s: usize| if s <= 1 { 1.0 } else if s == k { 1000.0 } else { 0.5 };
+    let n_of = |s: usize| {
+        if s <= 1 {
+            1.0
+        } else if s == k {
+            1000.0
+        } else {
+            0.5
+        }
+    };
     let mut total: f64 = (0..=k).map(|s| n_of(s) * brute_force_pdf(&p, s)).sum();
     let mut merges = vec![];
     for i in 1..k - 1 {
