@@ -69,11 +69,7 @@ pub fn render(
         .map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
     let (w, h) = (scene.camera.width, scene.camera.height);
     // image-level integrators render the full frame, one iteration per tile, parallel inside
-    let tiles = if integrator.full_frame() {
-        vec![Rect { x0: 0, y0: 0, x1: w, y1: h }]
-    } else {
-        Rect::tiles(w, h, opts.tile_size)
-    };
+    let tiles = if integrator.full_frame() { vec![Rect::full(w, h)] } else { Rect::tiles(w, h, opts.tile_size) };
     let max_pass = if integrator.full_frame() { 1 } else { u32::MAX };
     let mut film = Film::new(w, h);
     let start = Instant::now();

@@ -159,7 +159,7 @@ fn equal_time(args: &BenchArgs, path: &std::path::Path, seconds: f64) -> anyhow:
 /// Photon-map build and query rates for `n` photons spread through a unit cube, queried at
 /// `n` points with a radius that finds about 10 photons each.
 fn photon_map_rates(n: u32) {
-    use tessera_common::integrator::path::vertex::{PathVertex, VertexKind};
+    use tessera_common::integrator::path::vertex::PathVertex;
     use tessera_common::integrator::vcm::PhotonMap;
     use tessera_common::sampler::Sampler;
     let point = |seed: u64, i: u32| {
@@ -167,21 +167,7 @@ fn photon_map_rates(n: u32) {
         let u = s.next_2d();
         glam::Vec3::new(u.x, u.y, s.next_1d())
     };
-    let vertices: Vec<PathVertex> = (0..n)
-        .map(|i| PathVertex {
-            p: point(1, i),
-            n_geo: glam::Vec3::Z,
-            n_shading: glam::Vec3::Z,
-            wo: glam::Vec3::Z,
-            beta: glam::Vec3::ONE,
-            pdf_fwd: 1.0,
-            pdf_rev: 0.0,
-            pdf_next_event: 0.0,
-            kind: VertexKind::Surface { material: 0 },
-            delta: false,
-            depth: 1,
-        })
-        .collect();
+    let vertices: Vec<PathVertex> = (0..n).map(|i| PathVertex::surface_at(point(1, i))).collect();
     let all: Vec<u32> = (0..n).collect();
     let radius = (10.0 / (n as f32 * 4.0 / 3.0 * std::f32::consts::PI)).cbrt();
     let t = std::time::Instant::now();

@@ -60,17 +60,22 @@ pub struct RgbImage {
     pub pixels: Vec<[f32; 3]>,
 }
 
-/// Reads R, G, B from the part named `beauty` if there is one, else the first part (the rule
-/// of `exrcompare.py`). Channels may be plain or prefixed with `beauty.`.
-pub fn read_rgb(path: &Path) -> std::result::Result<RgbImage, ExrError> {
-    let image = read()
+/// Reads every part, channel and attribute of an EXR file.
+fn read_all(path: &Path) -> std::result::Result<Image<Layers<AnyChannels<FlatSamples>>>, ExrError> {
+    read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .all_layers()
         .all_attributes()
         .from_file(path)
-        .map_err(|e| err(path, e))?;
+        .map_err(|e| err(path, e))
+}
+
+/// Reads R, G, B from the part named `beauty` if there is one, else the first part (the rule
+/// of `exrcompare.py`). Channels may be plain or prefixed with `beauty.`.
+pub fn read_rgb(path: &Path) -> std::result::Result<RgbImage, ExrError> {
+    let image = read_all(path)?;
     let layer = image
         .layer_data
         .iter()
@@ -105,14 +110,7 @@ pub fn read_rgb(path: &Path) -> std::result::Result<RgbImage, ExrError> {
 
 /// Reads the `sample_count.Y` channel of a Tessera EXR.
 pub fn read_sample_counts(path: &Path) -> std::result::Result<Vec<u32>, ExrError> {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .all_layers()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| err(path, e))?;
+    let image = read_all(path)?;
     let layer = image.layer_data.first().ok_or_else(|| err(path, "no image part"))?;
     let ch = layer
         .channel_data

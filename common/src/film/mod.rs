@@ -23,6 +23,11 @@ pub struct Rect {
 }
 
 impl Rect {
+    /// The whole `width × height` frame.
+    pub fn full(width: u32, height: u32) -> Rect {
+        Rect { x0: 0, y0: 0, x1: width, y1: height }
+    }
+
     /// Number of pixels.
     pub fn area(&self) -> usize {
         ((self.x1 - self.x0) * (self.y1 - self.y0)) as usize

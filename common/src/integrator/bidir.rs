@@ -351,10 +351,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
 
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
         let (w, h) = (scene.camera.width, scene.camera.height);
-        assert!(
-            tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h,
-            "invariant: bdpt renders full-frame tiles"
-        );
+        assert_eq!(tile.rect, crate::film::Rect::full(w, h), "invariant: bdpt renders full-frame tiles");
         let n = light_path_count(self.light_paths_per_pixel, w * h);
         for iteration in tile.samples.clone() {
             if self.settings.max_depth == 0 {

@@ -128,10 +128,7 @@ impl Integrator for LightTracer {
 
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
         let (w, h) = (scene.camera.width, scene.camera.height);
-        assert!(
-            tile.rect.x0 == 0 && tile.rect.y0 == 0 && tile.rect.x1 == w && tile.rect.y1 == h,
-            "invariant: light tracing renders full-frame tiles"
-        );
+        assert_eq!(tile.rect, crate::film::Rect::full(w, h), "invariant: light tracing renders full-frame tiles");
         if self.settings.max_depth == 0 {
             accum.count_iterations(tile.samples.len() as u32);
             return;

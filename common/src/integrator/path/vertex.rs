@@ -52,6 +52,23 @@ pub struct PathVertex {
 }
 
 impl PathVertex {
+    /// A surface vertex at `p` facing +z with unit throughput (photon-map tests and benchmarks).
+    pub fn surface_at(p: Vec3) -> Self {
+        PathVertex {
+            p,
+            n_geo: Vec3::Z,
+            n_shading: Vec3::Z,
+            wo: Vec3::Z,
+            beta: Rgb::ONE,
+            pdf_fwd: 1.0,
+            pdf_rev: 0.0,
+            pdf_next_event: 0.0,
+            kind: VertexKind::Surface { material: 0 },
+            delta: false,
+            depth: 1,
+        }
+    }
+
     /// The shading frame.
     #[inline]
     pub fn frame(&self) -> Frame {

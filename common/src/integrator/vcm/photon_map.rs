@@ -116,23 +116,10 @@ impl PhotonMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrator::path::vertex::VertexKind;
     use crate::sampler::Sampler;
 
     fn vertex(p: Vec3) -> PathVertex {
-        PathVertex {
-            p,
-            n_geo: Vec3::Z,
-            n_shading: Vec3::Z,
-            wo: Vec3::Z,
-            beta: Vec3::ONE,
-            pdf_fwd: 1.0,
-            pdf_rev: 0.0,
-            pdf_next_event: 0.0,
-            kind: VertexKind::Surface { material: 0 },
-            delta: false,
-            depth: 1,
-        }
+        PathVertex::surface_at(p)
     }
 
     #[test]
