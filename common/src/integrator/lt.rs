@@ -69,16 +69,7 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, glam::Ve
     if value == Rgb::ZERO {
         return None;
     }
-    let shadow = match v.kind {
-        VertexKind::Light { .. } if v.n_geo == glam::Vec3::ZERO => {
-            crate::geometry::Ray { o: v.p, d: cs.wi, tmax: cs.dist * (1.0 - crate::math::SHADOW_EPSILON) }
-        }
-        _ => {
-            let o = crate::geometry::offset_ray_origin(v.p, v.n_geo, cs.wi);
-            crate::geometry::Ray { o, d: cs.wi, tmax: (cam.origin - o).length() * (1.0 - crate::math::SHADOW_EPSILON) }
-        }
-    };
-    if scene.occluded(&shadow) {
+    if !super::path::techniques::visible(scene, v, &super::path::techniques::camera_vertex(scene)) {
         return None;
     }
     Some((value * cs.weight, cs.raster))
