@@ -21,7 +21,7 @@
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
 use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
-use super::observer::{NoObserver, SampleObserver};
+use super::observer::{IterationStart, NoObserver, PathCounters, SampleObserver};
 use super::path::light_path::trace_light_path;
 use super::path::mis::{MergeCounts, SampleCounts};
 use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
@@ -174,7 +174,7 @@ impl<O: SampleObserver> Bidir<O> {
                     };
                     let pixel = raster.y as u32 * width + raster.x as u32;
                     let counts = self.counts(it, pixel, (light[light.len() - 1].p - scene.camera.origin).length());
-                    if let Some((w, raster)) = light_trace(scene, light, &counts, scale, &self.observer) {
+                    if let Some((w, raster)) = light_trace(scene, light, &counts, scale, &self.observer, i as u32) {
                         out.push((raster.y as u32 * width + raster.x as u32, w.value));
                     }
                 }
@@ -183,8 +183,8 @@ impl<O: SampleObserver> Bidir<O> {
             .collect()
     }
 
-    /// One camera path through pixel (x, y): the sum of its weighted contributions.
-    #[allow(clippy::too_many_arguments)]
+    /// One camera path through pixel (x, y): the sum of its weighted contributions. Its work
+    /// is added to `counters`.
     #[allow(clippy::too_many_arguments)]
     fn camera_path(
         &self,
@@ -195,6 +195,7 @@ impl<O: SampleObserver> Bidir<O> {
         seed: u64,
         iteration: u32,
         verts: &mut Vec<PathVertex>,
+        counters: &mut PathCounters,
     ) -> Rgb {
         let cam = &scene.camera;
         let cache = &it.cache;
@@ -257,6 +258,7 @@ impl<O: SampleObserver> Bidir<O> {
                 depth,
             };
             verts.push(v);
+            counters.camera_vertices += 1;
             if depth == 1 {
                 let d1 = (hit.p - cam.origin).length();
                 counts = self.counts(it, pixel, d1);
@@ -304,7 +306,10 @@ impl<O: SampleObserver> Bidir<O> {
                 let u = sampler.next_1d();
                 let chi = m.mask.at(pixel);
                 if depth >= 2 && chi > 0.0 && u < chi && material.has_smooth_lobe() {
-                    total += merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
+                    let (value, found) = merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
+                    total += value;
+                    counters.merge_queries += 1;
+                    counters.photons_found += found as u64;
                 }
             }
             // ---- continue the camera path ----
@@ -358,6 +363,9 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 for i in 0..(w * h) as usize {
                     accum.add(i, Rgb::ZERO);
                 }
+                let start = IterationStart { iteration, ..IterationStart::default() };
+                self.observer.on_iteration_start(&start);
+                self.observer.on_iteration_end(&start, &PathCounters::default());
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
@@ -371,19 +379,37 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             );
             let radius_max = merge_radius_max(scene);
             let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
+            let start = IterationStart {
+                iteration,
+                light_paths: n,
+                light_vertices: cache.vertices.len() as u64,
+                selectable_vertices: cache.selectable.len() as u64,
+            };
             let it = Iteration { cache, photons, radius_max };
+            self.observer.on_iteration_start(&start);
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
-            let rows: Vec<Vec<Rgb>> = (0..h)
+            let rows: Vec<(Vec<Rgb>, PathCounters)> = (0..h)
                 .into_par_iter()
                 .map_init(Vec::new, |verts, y| {
-                    (0..w).map(|x| self.camera_path(scene, &it, x, y, tile.seed, iteration, verts)).collect()
+                    let mut counters = PathCounters::default();
+                    let row = (0..w)
+                        .map(|x| {
+                            let value = self.camera_path(scene, &it, x, y, tile.seed, iteration, verts, &mut counters);
+                            self.observer.on_camera_path_end(y * w + x);
+                            value
+                        })
+                        .collect();
+                    (row, counters)
                 })
                 .collect();
-            for (y, row) in rows.iter().enumerate() {
+            let mut counters = PathCounters::default();
+            for (y, (row, row_counters)) in rows.iter().enumerate() {
                 for (x, value) in row.iter().enumerate() {
                     accum.add(y * w as usize + x, *value);
                 }
+                counters += *row_counters;
             }
+            self.observer.on_iteration_end(&start, &counters);
             for chunk in &splats {
                 for (pixel, value) in chunk {
                     accum.add_splat(*pixel as usize, *value);

@@ -1,8 +1,8 @@
 //! Sample hooks: every sample of the bidirectional integrators can be reported to an observer
 //! with its technique, pixel, MIS-weighted contribution, and the gathered path densities and
-//! sample counts a proxy-weight evaluation needs (emis-spec §3). The integrators are generic
-//! over the observer; with [`NoObserver`] every call inlines to nothing, so unobserved
-//! rendering pays nothing.
+//! sample counts a proxy-weight evaluation needs (emis-spec §3), plus per-iteration path
+//! statistics for the cost model (§2). The integrators are generic over the observer; with
+//! [`NoObserver`] every call inlines to nothing, so unobserved rendering pays nothing.
 
 use super::path::mis::{PathPdfs, SampleCounts, Technique};
 use crate::math::Rgb;
@@ -14,21 +14,88 @@ pub struct SampleRecord<'a> {
     pub technique: Technique,
     /// The pixel the contribution lands in (the splat pixel for light tracing).
     pub pixel: u32,
-    /// The MIS-weighted contribution added to the pixel (including 1/χ for merges and P/N
-    /// for light tracing).
+    /// The MIS-weighted contribution added to the pixel (including 1/χ and the kernel for
+    /// merges, and P/N for light tracing).
     pub value: Rgb,
     /// The MIS weight that was applied.
     pub weight: f32,
+    /// The merge kernel value included in `value` (1 for every other technique).
+    pub kernel: f32,
+    /// For light tracing, the index of the light vertex in the iteration's cache (unique per
+    /// sample, so that observers can order splats deterministically); 0 otherwise.
+    pub sequence: u32,
     /// The full path's densities from both ends.
     pub pdfs: &'a PathPdfs,
     /// The sample counts of the strategy that produced the sample.
     pub counts: &'a SampleCounts,
 }
 
-/// Receives every sample. Called concurrently from render threads.
+/// What an iteration's light subpaths look like, known before its camera paths start.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct IterationStart {
+    /// The iteration index.
+    pub iteration: u32,
+    /// Light paths traced (N).
+    pub light_paths: u32,
+    /// Vertices stored, the emitter vertices included.
+    pub light_vertices: u64,
+    /// Vertices connections may choose (depth ≥ 1).
+    pub selectable_vertices: u64,
+}
+
+/// Work counted over one iteration, for the cost model (emis-spec §2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PathCounters {
+    /// Surface vertices of all camera paths.
+    pub camera_vertices: u64,
+    /// Merge queries that ran (passed the χ test).
+    pub merge_queries: u64,
+    /// Photons found within the radius by those queries.
+    pub photons_found: u64,
+}
+
+impl std::ops::AddAssign for PathCounters {
+    fn add_assign(&mut self, o: Self) {
+        self.camera_vertices += o.camera_vertices;
+        self.merge_queries += o.merge_queries;
+        self.photons_found += o.photons_found;
+    }
+}
+
+/// Receives every sample. Called concurrently from render threads: during an iteration's
+/// light-tracing phase from any thread for any pixel; during its camera phase, all samples of
+/// one camera path come from one thread, in order, followed by `on_camera_path_end`.
 pub trait SampleObserver: Send + Sync {
     /// Called once per non-zero sample.
     fn on_sample(&self, record: &SampleRecord);
+    /// Called before an iteration's light tracing, once its light subpaths are traced.
+    #[inline(always)]
+    fn on_iteration_start(&self, _start: &IterationStart) {}
+    /// Called on the camera path's thread after its last sample.
+    #[inline(always)]
+    fn on_camera_path_end(&self, _pixel: u32) {}
+    /// Called once all of the iteration's samples were reported.
+    #[inline(always)]
+    fn on_iteration_end(&self, _start: &IterationStart, _counters: &PathCounters) {}
+}
+
+impl<T: SampleObserver> SampleObserver for &T {
+    #[inline(always)]
+    fn on_sample(&self, record: &SampleRecord) {
+        (**self).on_sample(record)
+    }
+    #[inline(always)]
+    fn on_iteration_start(&self, start: &IterationStart) {
+        (**self).on_iteration_start(start)
+    }
+    #[inline(always)]
+    fn on_camera_path_end(&self, pixel: u32) {
+        (**self).on_camera_path_end(pixel)
+    }
+    #[inline(always)]
+    fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
+        (**self).on_iteration_end(start, counters)
+    }
 }
 
 /// The observer that observes nothing.

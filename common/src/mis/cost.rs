@@ -57,6 +57,70 @@ impl Default for PathStatistics {
     }
 }
 
+/// Path statistics summed over iterations (and over workers: every field adds up).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StatisticsSums {
+    /// Iterations summed.
+    pub iterations: u64,
+    /// Σ camera-path surface vertices.
+    pub camera_vertices: u64,
+    /// Σ light paths traced.
+    pub light_paths: u64,
+    /// Σ light vertices stored, emitter vertices included.
+    pub light_vertices: u64,
+    /// Σ merge queries that ran.
+    pub merge_queries: u64,
+    /// Σ over iterations of photons found / N of that iteration.
+    pub photons_per_path: f64,
+}
+
+impl StatisticsSums {
+    /// Adds one iteration with `light_paths` light paths storing `light_vertices` vertices.
+    pub fn add_iteration(
+        &mut self,
+        light_paths: u32,
+        light_vertices: u64,
+        counters: &crate::integrator::observer::PathCounters,
+    ) {
+        self.iterations += 1;
+        self.camera_vertices += counters.camera_vertices;
+        self.light_paths += light_paths as u64;
+        self.light_vertices += light_vertices;
+        self.merge_queries += counters.merge_queries;
+        if light_paths > 0 {
+            self.photons_per_path += counters.photons_found as f64 / light_paths as f64;
+        }
+    }
+
+    /// Adds another worker's sums.
+    pub fn merge(&mut self, o: &StatisticsSums) {
+        self.iterations += o.iterations;
+        self.camera_vertices += o.camera_vertices;
+        self.light_paths += o.light_paths;
+        self.light_vertices += o.light_vertices;
+        self.merge_queries += o.merge_queries;
+        self.photons_per_path += o.photons_per_path;
+    }
+
+    /// The means for `pixels` pixels, with the reference's fallbacks: L̄c = 5 without
+    /// statistics, L̄l = L̄c without light paths, φ = 1e-7 without merges.
+    pub fn statistics(&self, pixels: u32) -> PathStatistics {
+        let camera_vertices = if self.iterations > 0 && self.camera_vertices > 0 {
+            self.camera_vertices as f64 / (self.iterations as f64 * pixels as f64)
+        } else {
+            5.0
+        };
+        let light_vertices =
+            if self.light_paths > 0 { self.light_vertices as f64 / self.light_paths as f64 } else { camera_vertices };
+        let phi = if self.merge_queries > 0 && self.photons_per_path > 0.0 {
+            self.photons_per_path / self.merge_queries as f64
+        } else {
+            1e-7
+        };
+        PathStatistics { camera_vertices, light_vertices, photons_per_query_per_path: phi }
+    }
+}
+
 /// Cost of one pixel under `candidate` with merge probability `chi`, for `pixels` pixels;
 /// `map_built` says whether the photon map is built at all this iteration.
 pub fn pixel_cost(
@@ -84,6 +148,32 @@ pub fn pixel_cost(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn statistics_are_means_with_fallbacks() {
+        use crate::integrator::observer::PathCounters;
+        let mut s = StatisticsSums::default();
+        assert_eq!(s.statistics(100), PathStatistics::default());
+        // two iterations of 100 pixels: 350 and 250 camera vertices; 50 and 100 light paths
+        // storing 150 and 250 vertices; 10 queries finding 40 photons, then 30 finding 60
+        s.add_iteration(50, 150, &PathCounters { camera_vertices: 350, merge_queries: 10, photons_found: 40 });
+        s.add_iteration(100, 250, &PathCounters { camera_vertices: 250, merge_queries: 30, photons_found: 60 });
+        let st = s.statistics(100);
+        assert!((st.camera_vertices - 3.0).abs() < 1e-12);
+        assert!((st.light_vertices - 400.0 / 150.0).abs() < 1e-12);
+        assert!((st.photons_per_query_per_path - (40.0 / 50.0 + 60.0 / 100.0) / 40.0).abs() < 1e-12);
+        // a path-tracing pilot: no light paths, no merges
+        let mut pt = StatisticsSums::default();
+        pt.add_iteration(0, 0, &PathCounters { camera_vertices: 420, ..Default::default() });
+        let st = pt.statistics(100);
+        assert_eq!((st.camera_vertices, st.light_vertices, st.photons_per_query_per_path), (4.2, 4.2, 1e-7));
+        // merging sums equals summing everything
+        let mut a = StatisticsSums::default();
+        a.merge(&s);
+        a.merge(&pt);
+        assert_eq!(a.iterations, 3);
+        assert_eq!(a.camera_vertices, 1020);
+    }
 
     #[test]
     fn hand_computed_value() {

@@ -19,6 +19,8 @@
 //! products (pbrt's `remap0`); techniques whose connection touches a delta vertex cannot sample
 //! the path and are left out.
 
+use crate::mis::delta::ProxyWeights;
+
 /// Capacity of the stack arrays: the longest path (in vertices) the bidirectional
 /// integrators build.
 pub const MAX_VERTICES: usize = 64;
@@ -219,6 +221,32 @@ pub fn weight(p: &PathPdfs, counts: &SampleCounts, t: Technique) -> f32 {
     let own = d[technique_index(p, t)];
     let total: f32 = d[..n].iter().sum();
     if own > 0.0 && total.is_finite() && total > 0.0 { (own / total).min(1.0) } else { 0.0 }
+}
+
+/// The balance weights of the proxy strategy `proxy` (emis-spec §3.2), aggregated by technique
+/// group: hits and next-event estimation together, light tracing, all connections, all merges,
+/// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
+/// technique of the proxy can sample counts as path tracing's (the reference's convention).
+pub fn proxy_weights(p: &PathPdfs, proxy: &SampleCounts) -> ProxyWeights {
+    let mut d = [0.0f32; 2 * MAX_VERTICES];
+    let n = technique_densities(p, proxy, &mut d);
+    let total: f64 = d[..n].iter().map(|&v| v as f64).sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return ProxyWeights { pt: 1.0, lt: 0.0, con: 0.0, vm: 0.0, vm_correlated: 0.0 };
+    }
+    let k = p.len - 1;
+    let lt_index = k.max(2);
+    let share = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>() / total;
+    let (mut vm, mut vm_correlated) = (0.0, 0.0);
+    if let Some(m) = &proxy.merge {
+        for (j, &density) in d[lt_index + 1..n].iter().enumerate() {
+            let w = density as f64 / total;
+            let c = if m.correlation_aware { correlation_factor(p, j + 1, m) as f64 } else { 1.0 };
+            vm += w;
+            vm_correlated += c * w;
+        }
+    }
+    ProxyWeights { pt: share(0..2), lt: share(lt_index..lt_index + 1), con: share(2..lt_index), vm, vm_correlated }
 }
 
 /// Weight of an emitter hit by the camera path.

@@ -38,9 +38,19 @@ impl<O: SampleObserver> Report<'_, O> {
         weight: f32,
         pdfs: &super::mis::PathPdfs,
         counts: &SampleCounts,
+        sequence: u32,
     ) {
         if value != Rgb::ZERO {
-            self.observer.on_sample(&SampleRecord { technique, pixel, value, weight, pdfs, counts });
+            self.observer.on_sample(&SampleRecord {
+                technique,
+                pixel,
+                value,
+                weight,
+                kernel: 1.0,
+                sequence,
+                pdfs,
+                counts,
+            });
         }
     }
 }
@@ -129,7 +139,7 @@ pub fn emitter_hit<O: SampleObserver>(
     let pdfs = gather(&[], camera, &join, is_infinite(scene, li));
     let weight = mis::weight(&pdfs, counts, Technique::EmitterHit);
     let value = camera[t - 1].beta * emitted * weight;
-    report.emit(Technique::EmitterHit, report.pixel, value, weight, &pdfs, counts);
+    report.emit(Technique::EmitterHit, report.pixel, value, weight, &pdfs, counts, 0);
     value
 }
 
@@ -200,7 +210,7 @@ pub fn next_event<O: SampleObserver>(
     let pdfs = gather(std::slice::from_ref(&light_vertex), camera, &join, infinite);
     let weight = mis::weight(&pdfs, counts, Technique::NextEvent);
     let value = z.beta * f * ds.radiance * (wi.z.abs() * weight / (pmf * ds.pdf));
-    report.emit(Technique::NextEvent, report.pixel, value, weight, &pdfs, counts);
+    report.emit(Technique::NextEvent, report.pixel, value, weight, &pdfs, counts, 0);
     Some(Weighted { value, weight })
 }
 
@@ -253,18 +263,20 @@ pub fn connect<O: SampleObserver>(
     let pdfs = gather(light, camera, &join, path_on_infinite_light(scene, light));
     let weight = mis::weight(&pdfs, counts, Technique::Connect(s));
     let value = z.beta * f_cam * f_light * y.beta * (g * weight * scale);
-    report.emit(Technique::Connect(s), report.pixel, value, weight, &pdfs, counts);
+    report.emit(Technique::Connect(s), report.pixel, value, weight, &pdfs, counts, 0);
     Some(Weighted { value, weight })
 }
 
 /// Light tracing: connects the light subpath's last vertex to the camera. Returns the weighted
-/// contribution, multiplied by `scale` (P/N), and the raster position.
+/// contribution, multiplied by `scale` (P/N), and the raster position. `sequence` identifies
+/// the sample to observers (the light vertex's cache index).
 pub fn light_trace<O: SampleObserver>(
     scene: &Scene,
     light: &[PathVertex],
     counts: &SampleCounts,
     scale: f32,
     observer: &O,
+    sequence: u32,
 ) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
     let (raw, raster) = crate::integrator::lt::connect_to_camera(scene, y)?;
@@ -293,7 +305,7 @@ pub fn light_trace<O: SampleObserver>(
     let weight = mis::weight(&pdfs, counts, Technique::LightTrace);
     let value = raw * (weight * scale);
     let pixel = raster.y as u32 * cam.width + raster.x as u32;
-    Report { observer, pixel }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts);
+    Report { observer, pixel }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts, sequence);
     Some((Weighted { value, weight }, raster))
 }
 

@@ -82,7 +82,8 @@ pub fn path_radius(d1: f32, radius_max: f32) -> f32 {
 }
 
 /// Merges the camera subpath's last vertex with the photons within `radius`, which happens
-/// with probability `chi`: the sum of the MIS-weighted contributions, including the 1/χ.
+/// with probability `chi`: the sum of the MIS-weighted contributions, including the 1/χ, and
+/// the number of photons found within the radius.
 #[allow(clippy::too_many_arguments)]
 pub fn merge<O: SampleObserver>(
     scene: &Scene,
@@ -94,13 +95,13 @@ pub fn merge<O: SampleObserver>(
     counts: &SampleCounts,
     max_edges: u32,
     report: &Report<O>,
-) -> Rgb {
+) -> (Rgb, u32) {
     // never at the primary vertex: camera = [pinhole, primary, ..., z]
     if camera.len() < 3 {
-        return Rgb::ZERO;
+        return (Rgb::ZERO, 0);
     }
-    let Some(z) = camera.last() else { return Rgb::ZERO };
-    let VertexKind::Surface { material } = z.kind else { return Rgb::ZERO };
+    let Some(z) = camera.last() else { return (Rgb::ZERO, 0) };
+    let VertexKind::Surface { material } = z.kind else { return (Rgb::ZERO, 0) };
     let mz = &scene.materials[material as usize];
     let frame = z.frame();
     let z_wo = frame.to_local(z.wo);
@@ -108,7 +109,9 @@ pub fn merge<O: SampleObserver>(
     let n_paths = cache.paths as f32;
     let r2 = radius * radius;
     let mut total = Rgb::ZERO;
+    let mut found = 0u32;
     photons.query(z.p, radius, |index, d2| {
+        found += 1;
         let y = &cache.vertices[index as usize];
         if z.depth + y.depth > max_edges || z.n_geo.dot(y.wo).abs() < 1e-4 {
             return;
@@ -145,11 +148,13 @@ pub fn merge<O: SampleObserver>(
                 pixel: report.pixel,
                 value,
                 weight,
+                kernel,
+                sequence: 0,
                 pdfs: &pdfs,
                 counts,
             });
         }
         total += value;
     });
-    total
+    (total, found)
 }
