@@ -5,7 +5,7 @@ mod common;
 
 use common::{render_bdpt, render_lt, render_pt, render_vcm, scene_path};
 use tessera_common::film::Film;
-use tessera_common::film::exr::write_exr;
+use tessera_common::film::exr::{ExrExtras, write_exr};
 use tessera_common::scene::Scene;
 
 fn exr_bytes(scene: &Scene, seed: u64, threads: usize) -> Vec<u8> {
@@ -15,7 +15,14 @@ fn exr_bytes(scene: &Scene, seed: u64, threads: usize) -> Vec<u8> {
 fn exr_of(film: &Film) -> Vec<u8> {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("out.exr");
-    write_exr(&path, film.width, film.height, &film.average(), Some(&film.count), &[]).expect("write");
+    write_exr(
+        &path,
+        film.width,
+        film.height,
+        &film.average(),
+        &ExrExtras { counts: Some(&film.count), ..Default::default() },
+    )
+    .expect("write");
     std::fs::read(&path).expect("read")
 }
 

@@ -5,11 +5,11 @@
 //! are what to compare on a shared, noisy machine.
 
 use crate::cli::IntegratorKind;
-use crate::local::{make_integrator, scene_name};
+use crate::local::{make_renderer, scene_name};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 use std::process::Command;
-use tessera_common::render::{Budget, RenderOptions, render};
+use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
 
 /// Arguments of `tessera bench`.
@@ -69,13 +69,13 @@ struct Timing {
 }
 
 fn time_tessera(args: &BenchArgs, scene: &Scene) -> anyhow::Result<Timing> {
-    let integrator = make_integrator(args.integrator, scene, &crate::local::IntegratorOptions::default())?;
+    let renderer = make_renderer(args.integrator, scene, &crate::local::IntegratorOptions::default())?;
     let opts =
         RenderOptions { budget: Budget::Samples(args.spp), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
     let mut best: Option<(f64, f64)> = None;
     for run in 0..=args.repeats {
         let c0 = cpu_seconds();
-        let out = render(scene, integrator.as_ref(), &opts, &|_, _| {})?;
+        let (out, _) = renderer.render(scene, &opts, &|_, _| {})?;
         let (wall, cpu) = (out.elapsed.as_secs_f64(), cpu_seconds() - c0);
         if run > 0 && best.is_none_or(|(w, _)| wall < w) {
             best = Some((wall, cpu));
@@ -142,16 +142,16 @@ fn equal_time(args: &BenchArgs, path: &std::path::Path, seconds: f64) -> anyhow:
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
     for &kind in &args.integrators {
-        let integrator = make_integrator(kind, &scene, &crate::local::IntegratorOptions::default())?;
+        let renderer = make_renderer(kind, &scene, &crate::local::IntegratorOptions::default())?;
         let opts = RenderOptions {
             budget: Budget::Time(std::time::Duration::from_secs_f64(seconds)),
             seed: 1,
             threads: args.threads.unwrap_or(0),
             tile_size: 32,
         };
-        let out = render(&scene, integrator.as_ref(), &opts, &|_, _| {})?;
+        let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
         let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
-        rows.push((integrator.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
+        rows.push((renderer.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
     }
     Ok(rows)
 }

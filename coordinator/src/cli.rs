@@ -26,6 +26,32 @@ pub enum IntegratorKind {
     /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but
     /// the first (fixed radius, so slightly biased).
     Vcm,
+    /// Efficiency-aware MIS on bdpt: a bdpt pilot (ν = 1, c = 1) estimates every candidate's
+    /// second moment; after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are
+    /// chosen and used from then on.
+    EmisBdpt,
+    /// Efficiency-aware MIS on vcm: a vcm pilot (ν = 1, c = 1, merging everywhere) picks ν, c and
+    /// a per-pixel merge mask; writes the mask, the relative moment, a strategy PNG and a JSON
+    /// report of every update beside the image.
+    EmisVcm,
+}
+
+/// Count ratio of merge candidates in the EMIS correction factor (decision 3a).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MergeRatioArg {
+    /// χ·ν: merges scale with the light paths, as in the MIS weights.
+    Principled,
+    /// χ: the reference implementation.
+    Reference,
+}
+
+/// How merge samples enter the EMIS moments (decision 3b).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MergeKernelArg {
+    /// (contribution × kernel)².
+    Squared,
+    /// contribution² × kernel: the reference implementation.
+    Reference,
 }
 
 /// An on/off switch.
@@ -85,6 +111,15 @@ pub struct RenderArgs {
     /// Correlation-aware MIS weights for merges (vcm).
     #[arg(long, value_enum, default_value = "on")]
     pub correlation_aware: Switch,
+    /// emis-*: optimise after these many iterations (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
+    pub emis_updates: Vec<u32>,
+    /// emis-*: count ratio of merge candidates in the correction factor.
+    #[arg(long, value_enum, default_value = "principled")]
+    pub merge_ratio: MergeRatioArg,
+    /// emis-*: merge moments with the kernel squared or (as the reference) once.
+    #[arg(long, value_enum, default_value = "squared")]
+    pub merge_kernel: MergeKernelArg,
     /// Set a scene parameter ($name), overriding its <default>: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,

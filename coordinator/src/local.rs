@@ -1,15 +1,18 @@
 //! `tessera render`: renders a scene on this machine with no setup, writing an EXR (beauty RGB
 //! plus per-pixel sample counts) and an sRGB PNG preview beside it.
 
-use crate::cli::{IntegratorKind, RenderArgs, Switch};
+use crate::cli::{IntegratorKind, MergeKernelArg, MergeRatioArg, RenderArgs, Switch};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use tessera_common::film::{exr::write_exr, png::write_png};
+use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
+use tessera_common::film::png::write_png;
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, EmisState, render_emis};
 use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
 use tessera_common::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
+use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
 use tessera_common::render::{Budget, RenderOptions, RenderOutput, render};
 use tessera_common::scene::Scene;
 
@@ -43,7 +46,7 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
 }
 
 /// The integrator parameters of the command line.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct IntegratorOptions {
     /// `--max-depth`.
     pub max_depth: Option<i64>,
@@ -55,6 +58,12 @@ pub struct IntegratorOptions {
     pub merge: bool,
     /// `--correlation-aware`.
     pub correlation_aware: bool,
+    /// `--emis-updates`.
+    pub emis_updates: Vec<u32>,
+    /// `--merge-ratio`.
+    pub merge_ratio: MergeRatio,
+    /// `--merge-kernel`.
+    pub merge_kernel: MergeKernel,
 }
 
 impl IntegratorOptions {
@@ -66,6 +75,15 @@ impl IntegratorOptions {
             connections: args.connections,
             merge: args.merge == Switch::On,
             correlation_aware: args.correlation_aware == Switch::On,
+            emis_updates: args.emis_updates.clone(),
+            merge_ratio: match args.merge_ratio {
+                MergeRatioArg::Principled => MergeRatio::Principled,
+                MergeRatioArg::Reference => MergeRatio::Reference,
+            },
+            merge_kernel: match args.merge_kernel {
+                MergeKernelArg::Squared => MergeKernel::Squared,
+                MergeKernelArg::Reference => MergeKernel::Reference,
+            },
         }
     }
 }
@@ -78,16 +96,49 @@ impl Default for IntegratorOptions {
             connections: 1,
             merge: true,
             correlation_aware: true,
+            emis_updates: vec![1, 4, 16, 64],
+            merge_ratio: MomentSettings::default().merge_ratio,
+            merge_kernel: MomentSettings::default().merge_kernel,
         }
     }
 }
 
-/// Builds the integrator the arguments ask for.
-pub fn make_integrator(
-    kind: IntegratorKind,
-    scene: &Scene,
-    o: &IntegratorOptions,
-) -> anyhow::Result<Box<dyn Integrator>> {
+/// What renders: a tile integrator, or efficiency-aware MIS with its update loop.
+pub enum Renderer {
+    /// `pt`, `lt`, `bdpt`, `vcm`.
+    Tiles(Box<dyn Integrator>),
+    /// `emis-bdpt`, `emis-vcm`.
+    Emis(EmisConfig, PathSettings),
+}
+
+impl Renderer {
+    /// The integrator's name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Renderer::Tiles(i) => i.name(),
+            Renderer::Emis(c, _) => c.name(),
+        }
+    }
+
+    /// Renders `scene`; for EMIS also returns the final state (decisions and reports).
+    pub fn render(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> anyhow::Result<(RenderOutput, Option<EmisState>)> {
+        Ok(match self {
+            Renderer::Tiles(i) => (render(scene, i.as_ref(), opts, progress)?, None),
+            Renderer::Emis(config, settings) => {
+                let out = render_emis(scene, *settings, config, opts, progress)?;
+                (out.render, Some(out.state))
+            }
+        })
+    }
+}
+
+/// Builds the renderer the arguments ask for.
+pub fn make_renderer(kind: IntegratorKind, scene: &Scene, o: &IntegratorOptions) -> anyhow::Result<Renderer> {
     if !(o.light_paths_per_pixel >= 0.0 && o.light_paths_per_pixel.is_finite())
         || (kind == IntegratorKind::Lt && o.light_paths_per_pixel == 0.0)
     {
@@ -104,14 +155,31 @@ pub fn make_integrator(
     };
     let settings = PathSettings::from_scene(scene, max_depth);
     let (nu, c) = (o.light_paths_per_pixel, o.connections);
+    let emis = |method| {
+        if o.emis_updates.windows(2).any(|w| w[0] >= w[1]) || o.emis_updates.first() == Some(&0) {
+            bail!("--emis-updates must be increasing iteration counts above 0, got {:?}", o.emis_updates);
+        }
+        let mut config = EmisConfig::new(method);
+        config.updates = o.emis_updates.clone();
+        config.correlation_aware = o.correlation_aware;
+        config.moments = MomentSettings { merge_ratio: o.merge_ratio, merge_kernel: o.merge_kernel };
+        Ok(Renderer::Emis(config, settings))
+    };
     Ok(match kind {
-        IntegratorKind::Pt => Box::new(PathTracer { settings }),
-        IntegratorKind::Lt => Box::new(LightTracer { settings, light_paths_per_pixel: nu }),
-        IntegratorKind::Bdpt => Box::new(Bidir::bdpt(settings, nu, c)),
+        IntegratorKind::Pt => Renderer::Tiles(Box::new(PathTracer { settings })),
+        IntegratorKind::Lt => Renderer::Tiles(Box::new(LightTracer { settings, light_paths_per_pixel: nu })),
+        IntegratorKind::Bdpt => Renderer::Tiles(Box::new(Bidir::bdpt(settings, nu, c))),
         IntegratorKind::Vcm => {
             let mask = MergeMask::Constant(if o.merge { 1.0 } else { 0.0 });
-            Box::new(Bidir::vcm(settings, nu, c, MergeConfig { mask, correlation_aware: o.correlation_aware }))
+            Renderer::Tiles(Box::new(Bidir::vcm(
+                settings,
+                nu,
+                c,
+                MergeConfig { mask, correlation_aware: o.correlation_aware },
+            )))
         }
+        IntegratorKind::EmisBdpt => emis(EmisMethod::Bdpt)?,
+        IntegratorKind::EmisVcm => emis(EmisMethod::Vcm)?,
     })
 }
 
@@ -130,7 +198,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--threads must be at least 1");
     }
     let scene = Scene::load_with(&args.scene, &defines)?;
-    let integrator = make_integrator(args.integrator, &scene, &IntegratorOptions::from_args(args))?;
+    let renderer = make_renderer(args.integrator, &scene, &IntegratorOptions::from_args(args))?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
@@ -147,12 +215,12 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let out = render(&scene, integrator.as_ref(), &opts, &|done, total| {
+    let (out, emis) = renderer.render(&scene, &opts, &|done, total| {
         bar.set_length(total);
         bar.set_position(done);
     })?;
     bar.finish_and_clear();
-    write_outputs(&output, &scene, integrator.name(), &opts, &out)?;
+    write_outputs(&output, &scene, renderer.name(), &opts, &out, emis.as_ref())?;
     let samples = out.film.total_samples();
     let secs = out.elapsed.as_secs_f64();
     if out.film.non_finite > 0 {
@@ -160,7 +228,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     }
     println!(
         "{}: {} spp ({} samples) in {:.2} s, {:.0} samples/s, peak memory {:.0} MB -> {}",
-        integrator.name(),
+        renderer.name(),
         out.spp,
         samples,
         secs,
@@ -179,28 +247,77 @@ pub fn peak_rss_bytes() -> u64 {
     usage.ru_maxrss.max(0) as u64 * 1024
 }
 
-/// Writes the EXR and the PNG preview beside it.
+/// Writes the EXR and the PNG preview beside it; for EMIS also the merge-mask and
+/// relative-moment layers, ν and c as attributes, a strategy PNG and the JSON report.
 pub fn write_outputs(
     output: &Path,
     scene: &Scene,
     integrator: &str,
     opts: &RenderOptions,
     out: &RenderOutput,
+    emis: Option<&EmisState>,
 ) -> anyhow::Result<()> {
     let rgb = out.film.average();
-    let attributes = vec![
-        ("tessera/integrator".to_string(), integrator.to_string()),
-        ("tessera/spp".to_string(), out.spp.to_string()),
-        ("tessera/seed".to_string(), opts.seed.to_string()),
-        ("tessera/scene".to_string(), scene.path.display().to_string()),
-        ("tessera/render_seconds".to_string(), format!("{:.3}", out.elapsed.as_secs_f64())),
-    ];
+    let text = |k: &str, v: String| (format!("tessera/{k}"), Attribute::Text(v));
+    let mut extras = ExrExtras {
+        counts: Some(&out.film.count),
+        layers: Vec::new(),
+        attributes: vec![
+            text("integrator", integrator.to_string()),
+            text("spp", out.spp.to_string()),
+            text("seed", opts.seed.to_string()),
+            text("scene", scene.path.display().to_string()),
+            text("render_seconds", format!("{:.3}", out.elapsed.as_secs_f64())),
+        ],
+    };
+    let mask = emis.map(|e| e.merge_mask());
+    let relative = emis.and_then(|e| e.relative_moment.as_ref());
+    if let Some(e) = emis {
+        extras.attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
+        extras.attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
+        extras.attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
+    }
+    if let Some(mask) = &mask {
+        extras.layers.push(("merge_mask", mask));
+    }
+    if let Some(relative) = relative {
+        extras.layers.push(("relative_moment", &relative.data));
+    }
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    write_exr(output, out.film.width, out.film.height, &rgb, Some(&out.film.count), &attributes)?;
+    write_exr(output, out.film.width, out.film.height, &rgb, &extras)?;
     let png = output.with_extension("png");
     write_png(&png, out.film.width, out.film.height, &rgb)
         .with_context(|| format!("cannot write {}", png.display()))?;
+    if let (Some(e), Some(mask)) = (emis, &mask) {
+        let strategy = output.with_extension("strategy.png");
+        write_png(&strategy, out.film.width, out.film.height, &strategy_map(&rgb, mask))
+            .with_context(|| format!("cannot write {}", strategy.display()))?;
+        let report = output.with_extension("emis.json");
+        let json = serde_json::json!({
+            "integrator": integrator,
+            "iterations": out.spp,
+            "final": { "nu": e.strategy.nu, "connections": e.strategy.connections },
+            "candidates": e.candidates,
+            "updates": e.reports,
+        });
+        std::fs::write(&report, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("cannot write {}", report.display()))?;
+    }
     Ok(())
+}
+
+/// The strategy as a picture: the image's luminance in grey, tinted orange by the merge
+/// probability χ (ν and c are image-wide and in the EXR attributes and the report).
+fn strategy_map(rgb: &[[f32; 3]], mask: &[f32]) -> Vec<[f32; 3]> {
+    const ORANGE: [f32; 3] = [1.0, 0.35, 0.0];
+    rgb.iter()
+        .zip(mask)
+        .map(|(c, &chi)| {
+            let grey = (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]).clamp(0.0, 1.0) * 0.6 + 0.05;
+            let t = 0.7 * chi.clamp(0.0, 1.0);
+            [0, 1, 2].map(|k| grey * (1.0 - t) + ORANGE[k] * t)
+        })
+        .collect()
 }

@@ -23,30 +23,86 @@ fn err(path: &Path, e: impl std::fmt::Display) -> ExrError {
     ExrError::Io { path: path.display().to_string(), message: e.to_string() }
 }
 
-/// Writes the beauty image and per-pixel sample counts.
+/// An EXR attribute value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Attribute {
+    /// Text.
+    Text(String),
+    /// A 32-bit float.
+    Float(f32),
+    /// A 32-bit integer.
+    Int(i32),
+}
+
+/// What one EXR file holds besides the beauty image.
+#[derive(Clone, Debug, Default)]
+pub struct ExrExtras<'a> {
+    /// Per-pixel sample counts (`sample_count.Y`, u32).
+    pub counts: Option<&'a [u32]>,
+    /// Further single-channel f32 layers, written as `NAME.Y`.
+    pub layers: Vec<(&'a str, &'a [f32])>,
+    /// Header attributes.
+    pub attributes: Vec<(String, Attribute)>,
+}
+
+/// Writes the beauty image, per-pixel sample counts, extra layers and attributes.
 pub fn write_exr(
     path: &Path,
     width: u32,
     height: u32,
     rgb: &[[f32; 3]],
-    counts: Option<&[u32]>,
-    attributes: &[(String, String)],
+    extras: &ExrExtras,
 ) -> std::result::Result<(), ExrError> {
     let (w, h) = (width as usize, height as usize);
     let mut channels = smallvec::SmallVec::<[AnyChannel<FlatSamples>; 4]>::new();
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
         channels.push(AnyChannel::new(*name, FlatSamples::F32(rgb.iter().map(|p| p[c]).collect())));
     }
-    if let Some(counts) = counts {
+    if let Some(counts) = extras.counts {
         channels.push(AnyChannel::new("sample_count.Y", FlatSamples::U32(counts.to_vec())));
+    }
+    for (name, data) in &extras.layers {
+        if data.len() != w * h {
+            return Err(err(path, format!("layer {name} has {} values for {w}x{h} pixels", data.len())));
+        }
+        channels.push(AnyChannel::new(format!("{name}.Y").as_str(), FlatSamples::F32(data.to_vec())));
     }
     let layer =
         Layer::new(Vec2(w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
     let mut attrs = ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(w, h)));
-    for (k, v) in attributes {
-        attrs.other.insert(Text::from(k.as_str()), AttributeValue::Text(Text::from(v.as_str())));
+    for (k, v) in &extras.attributes {
+        let value = match v {
+            Attribute::Text(t) => AttributeValue::Text(Text::from(t.as_str())),
+            Attribute::Float(f) => AttributeValue::F32(*f),
+            Attribute::Int(i) => AttributeValue::I32(*i),
+        };
+        attrs.other.insert(Text::from(k.as_str()), value);
     }
     Image::empty(attrs).with_layer(layer).write().to_file(path).map_err(|e| err(path, e))
+}
+
+/// Reads one single-channel f32 layer (`NAME.Y`) of a Tessera EXR.
+pub fn read_layer(path: &Path, name: &str) -> std::result::Result<Vec<f32>, ExrError> {
+    let image = read_all(path)?;
+    let layer = image.layer_data.first().ok_or_else(|| err(path, "no layer"))?;
+    let wanted = format!("{name}.Y");
+    let channel = layer
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name == Text::from(wanted.as_str()))
+        .ok_or_else(|| err(path, format!("no channel {wanted}")))?;
+    Ok(channel.sample_data.values_as_f32().collect())
+}
+
+/// Reads a numeric header attribute written by [`write_exr`].
+pub fn read_attribute(path: &Path, name: &str) -> std::result::Result<Option<f64>, ExrError> {
+    let image = read_all(path)?;
+    Ok(image.attributes.other.get(&Text::from(name)).and_then(|v| match v {
+        AttributeValue::F32(f) => Some(*f as f64),
+        AttributeValue::I32(i) => Some(*i as f64),
+        _ => None,
+    }))
 }
 
 /// An RGB image read from an EXR file.

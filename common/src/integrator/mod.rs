@@ -5,6 +5,8 @@
 //! sums wherever and however it is rendered.
 
 pub mod bidir;
+pub mod emis;
+pub mod guides;
 pub mod lt;
 pub mod observer;
 pub mod path;

@@ -29,34 +29,43 @@ impl Image {
         Image { width, height, data }
     }
 
-    #[inline]
-    fn neighbours(&self, x: usize, y: usize) -> impl Iterator<Item = f32> + '_ {
-        let (x0, x1) = (x.saturating_sub(1), (x + 1).min(self.width - 1));
-        let (y0, y1) = (y.saturating_sub(1), (y + 1).min(self.height - 1));
-        (y0..=y1).flat_map(move |yy| (x0..=x1).map(move |xx| self.data[yy * self.width + xx]))
-    }
-
-    fn pass(&self, f: impl Fn(&Image, usize, usize) -> f32) -> Image {
-        let mut out = Image::filled(self.width, self.height, 0.0);
-        for y in 0..self.height {
-            for x in 0..self.width {
-                out.data[y * self.width + x] = f(self, x, y);
+    /// A separable 3-tap pass: `combine(a, b, c, taps)` along rows, then along columns, where
+    /// out-of-image taps are `None` (exact for the mean with border renormalisation, whose
+    /// divisor factorises into row taps × column taps, and for the maximum).
+    fn separable(&self, combine: impl Fn(f32, Option<f32>, Option<f32>) -> f32 + Sync) -> Image {
+        use rayon::prelude::*;
+        let (w, h) = (self.width, self.height);
+        let mut rows = vec![0.0f32; w * h];
+        rows.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, out)| {
+            let row = &self.data[y * w..(y + 1) * w];
+            for x in 0..w {
+                let left = x.checked_sub(1).map(|i| row[i]);
+                let right = row.get(x + 1).copied();
+                out[x] = combine(row[x], left, right);
             }
-        }
-        out
+        });
+        let mut out = vec![0.0f32; w * h];
+        out.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, out)| {
+            for x in 0..w {
+                let up = y.checked_sub(1).map(|i| rows[i * w + x]);
+                let down = (y + 1 < h).then(|| rows[(y + 1) * w + x]);
+                out[x] = combine(rows[y * w + x], up, down);
+            }
+        });
+        Image { width: w, height: h, data: out }
     }
 
     /// One 3×3 box pass with border renormalisation.
     pub fn box3(&self) -> Image {
-        self.pass(|img, x, y| {
-            let (sum, n) = img.neighbours(x, y).fold((0.0f64, 0u32), |(s, n), v| (s + v as f64, n + 1));
-            (sum / n as f64) as f32
+        self.separable(|c, a, b| {
+            let n = 1.0 + a.is_some() as u32 as f32 + b.is_some() as u32 as f32;
+            (c + a.unwrap_or(0.0) + b.unwrap_or(0.0)) / n
         })
     }
 
     /// One 3×3 max pass (out-of-image taps are −∞, i.e. ignored).
     pub fn dilate3(&self) -> Image {
-        self.pass(|img, x, y| img.neighbours(x, y).fold(f32::NEG_INFINITY, f32::max))
+        self.separable(|c, a, b| c.max(a.unwrap_or(f32::NEG_INFINITY)).max(b.unwrap_or(f32::NEG_INFINITY)))
     }
 
     /// `radius` successive box passes.

@@ -7,6 +7,7 @@
 pub mod candidate;
 pub mod cost;
 pub mod delta;
+pub mod denoise;
 pub mod estimator;
 pub mod filter;
 pub mod moments;

@@ -13,6 +13,7 @@ use super::candidate::Candidate;
 use super::cost::{CostConstants, PathStatistics, pixel_cost};
 use super::filter::Image;
 use super::moments::MomentBuffer;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Filter radii (decision 6).
@@ -74,6 +75,8 @@ pub struct Decision {
     pub merge_mask: Image,
     /// Scores of every image-level candidate.
     pub scores: Vec<ImageLevelScore>,
+    /// Per pixel, the filtered relative moment M_j / (Ī_j² + 1e-4) of the chosen strategy.
+    pub relative_moment: Image,
 }
 
 /// Runs the optimisation.
@@ -84,6 +87,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let k = input.candidates.len();
     // ---- filtered moments, one image per candidate ----
     let filtered: Vec<Image> = (0..k)
+        .into_par_iter()
         .map(|c| {
             Image::from_data(w, h, (0..pixels).map(|p| m.moment(p, c) as f32).collect())
                 .box_blur(input.filters.moment_box)
@@ -93,66 +97,96 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels)
     };
     // ---- pixel level: the merge bit of the best full candidate ----
-    let mut merge_bits = Image::filled(w, h, 0.0);
-    for p in 0..w * h {
-        let mut best = (f64::INFINITY, None);
-        for (c, cand) in input.candidates.iter().enumerate() {
-            let v = filtered[c].data[p] as f64 * cost(cand, if cand.merge { 1.0 } else { 0.0 });
-            if v < best.0 {
-                best = (v, Some(c));
+    let costs: Vec<f64> = input.candidates.iter().map(|c| cost(c, if c.merge { 1.0 } else { 0.0 })).collect();
+    let bits: Vec<f32> = (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let mut best = (f64::INFINITY, None);
+            for (c, cost) in costs.iter().enumerate() {
+                let v = filtered[c].data[p] as f64 * cost;
+                if v < best.0 {
+                    best = (v, Some(c));
+                }
             }
-        }
-        if let (v, Some(c)) = best {
-            if v > 0.0 && input.candidates[c].merge {
-                merge_bits.data[p] = 1.0;
+            match best {
+                (v, Some(c)) if v > 0.0 && input.candidates[c].merge => 1.0,
+                _ => 0.0,
             }
-        }
-    }
+        })
+        .collect();
+    let merge_bits = Image::from_data(w, h, bits);
     let merge_mask = merge_bits.dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box);
     // ---- image level ----
     let thresholds: Vec<f32> =
-        filtered.iter().map(|img| img.histogram_quantile(input.filters.outlier_quantile)).collect();
+        filtered.par_iter().map(|img| img.histogram_quantile(input.filters.outlier_quantile)).collect();
     let mut groups: Vec<(f32, u32)> = Vec::new();
     for c in input.candidates {
         if !groups.contains(&(c.nu, c.connections)) {
             groups.push((c.nu, c.connections));
         }
     }
-    let find = |nu: f32, conn: u32, merge: bool| {
+    let position = |nu: f32, conn: u32, merge: bool| {
         input
             .candidates
             .iter()
             .position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()))
     };
-    let mut scores = Vec::new();
-    for &(nu, conn) in &groups {
-        let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
-        for p in 0..w * h {
-            let chi = merge_mask.data[p] as f64;
-            let merge = chi > 0.1;
-            // a group without the merge variant this pixel needs falls back to its other one
-            let Some(c) = find(nu, conn, merge).or_else(|| find(nu, conn, !merge)) else { continue };
-            total_cost += cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
-            let i = input.image.data[p] as f64;
-            if i == 0.0 {
-                continue;
+    // per group, the candidate used where the pixel merges and where it does not; a group
+    // without the variant a pixel needs falls back to its other one
+    let variants: Vec<[Option<usize>; 2]> = groups
+        .iter()
+        .map(|&(nu, conn)| {
+            let (off, on) = (position(nu, conn, false), position(nu, conn, true));
+            [off.or(on), on.or(off)]
+        })
+        .collect();
+    let find = |group: usize, merge: bool| variants[group][merge as usize];
+    let scores: Vec<ImageLevelScore> = groups
+        .par_iter()
+        .enumerate()
+        .map(|(g, &(nu, conn))| {
+            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+            for p in 0..w * h {
+                let chi = merge_mask.data[p] as f64;
+                let merge = chi > 0.1;
+                let Some(c) = find(g, merge) else { continue };
+                total_cost +=
+                    cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
+                let i = input.image.data[p] as f64;
+                if i == 0.0 {
+                    continue;
+                }
+                let mut moment = filtered[c].data[p];
+                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
+                // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
+                if moment > thresholds[c] && moment.is_finite() {
+                    moment = 0.0;
+                }
+                rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
             }
-            let mut moment = filtered[c].data[p];
-            // outliers are zeroed, but an infinite moment (the candidate cannot sample this
-            // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
-            if moment > thresholds[c] && moment.is_finite() {
-                moment = 0.0;
-            }
-            rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
-        }
-        scores.push(ImageLevelScore { nu, connections: conn, relative_moment: rel, cost: total_cost });
-    }
+            ImageLevelScore { nu, connections: conn, relative_moment: rel, cost: total_cost }
+        })
+        .collect();
     let best = scores
         .iter()
         .filter(|s| s.relative_moment.is_finite())
         .min_by(|a, b| (a.relative_moment * a.cost).total_cmp(&(b.relative_moment * b.cost)));
     let (nu, connections) = best.map_or((0.0, 0), |s| (s.nu, s.connections));
-    Decision { nu, connections, merge_mask, scores }
+    let chosen = groups.iter().position(|&g| g == (nu, connections));
+    let relative_moment = Image::from_data(
+        w,
+        h,
+        (0..w * h)
+            .map(|p| {
+                let merge = merge_mask.data[p] > 0.1;
+                let i = input.image.data[p] as f64;
+                chosen
+                    .and_then(|g| find(g, merge))
+                    .map_or(0.0, |c| (filtered[c].data[p] as f64 / (i * i + 1e-4)) as f32)
+            })
+            .collect(),
+    );
+    Decision { nu, connections, merge_mask, scores, relative_moment }
 }
 
 #[cfg(test)]

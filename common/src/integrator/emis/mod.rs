@@ -1,0 +1,234 @@
+//! The integrators `emis-bdpt` and `emis-vcm`: efficiency-aware MIS (Grittmann et al. 2022;
+//! `shared/docs/emis-spec.md`) on the bidirectional engine.
+//!
+//! A pilot renders with a fixed strategy (decision 5: `emis-vcm` VCM with N = P, c = 1, χ = 1
+//! and correlation-aware weights; `emis-bdpt` BDPT with N = P, c = 1) while a
+//! [`MomentEstimator`] records every candidate's second moment per pixel. After iterations 1,
+//! 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from the
+//! merged moments, the denoised image and the path statistics; rendering continues with that
+//! strategy (moments still collected, each sample with the counts it was drawn with) until the
+//! last update, then without moments. Every iteration, pilot included, stays in the image with
+//! equal weight.
+//!
+//! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
+//! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
+//! merges what workers return and runs the update at each barrier. [`render_emis`] is the
+//! local loop over both.
+
+mod state;
+
+pub use state::{EmisState, UpdateReport};
+
+use super::guides::GuideBuffer;
+use super::vcm::{MergeConfig, MergeMask};
+use super::{Bidir, Integrator, PathSettings, TileRequest};
+use crate::film::{Film, Rect, TileAccum};
+use crate::mis::candidate::CandidateConfig;
+use crate::mis::cost::{CostConstants, StatisticsSums};
+use crate::mis::denoise::DenoiseSettings;
+use crate::mis::estimator::{MomentEstimator, MomentSettings};
+use crate::mis::moments::MomentBuffer;
+use crate::mis::optimize::FilterSettings;
+use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
+use crate::scene::Scene;
+use std::ops::Range;
+use std::time::Instant;
+
+/// Which bidirectional method the candidates come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EmisMethod {
+    /// BDPT candidates (no merging): 26.
+    Bdpt,
+    /// VCM candidates (merging per pixel): 51.
+    Vcm,
+}
+
+/// Everything `emis-*` can be configured with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmisConfig {
+    /// BDPT or VCM.
+    pub method: EmisMethod,
+    /// The candidate set (decision 1).
+    pub candidates: CandidateConfig,
+    /// Optimise after these many iterations (decision 5).
+    pub updates: Vec<u32>,
+    /// Correlation-aware merge weights (pilot and final).
+    pub correlation_aware: bool,
+    /// The estimator's switches (decision 3).
+    pub moments: MomentSettings,
+    /// Cost heuristic constants (decision 8).
+    pub constants: CostConstants,
+    /// Filter radii (decision 6).
+    pub filters: FilterSettings,
+    /// The denoiser (decision 7).
+    pub denoise: DenoiseSettings,
+}
+
+impl EmisConfig {
+    /// The defaults of `method`.
+    pub fn new(method: EmisMethod) -> Self {
+        EmisConfig {
+            method,
+            candidates: match method {
+                EmisMethod::Bdpt => CandidateConfig::bdpt(),
+                EmisMethod::Vcm => CandidateConfig::vcm(),
+            },
+            updates: vec![1, 4, 16, 64],
+            correlation_aware: true,
+            moments: MomentSettings::default(),
+            constants: CostConstants::default(),
+            filters: FilterSettings::default(),
+            denoise: DenoiseSettings::default(),
+        }
+    }
+
+    /// The integrator's name.
+    pub fn name(&self) -> &'static str {
+        match self.method {
+            EmisMethod::Bdpt => "emis-bdpt",
+            EmisMethod::Vcm => "emis-vcm",
+        }
+    }
+}
+
+/// The counts one pass renders with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Strategy {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Per-pixel merge probability (`None`: no merging, BDPT).
+    pub merge: Option<MergeMask>,
+}
+
+impl Strategy {
+    /// The pilot strategy of decision 5.
+    pub fn pilot(method: EmisMethod) -> Self {
+        Strategy {
+            nu: 1.0,
+            connections: 1,
+            merge: match method {
+                EmisMethod::Bdpt => None,
+                EmisMethod::Vcm => Some(MergeMask::Constant(1.0)),
+            },
+        }
+    }
+
+    fn integrator(&self, settings: PathSettings, correlation_aware: bool) -> Bidir {
+        match &self.merge {
+            None => Bidir::bdpt(settings, self.nu, self.connections),
+            Some(mask) => {
+                Bidir::vcm(settings, self.nu, self.connections, MergeConfig { mask: mask.clone(), correlation_aware })
+            }
+        }
+    }
+}
+
+/// What a pilot range returns besides the image: all mergeable by addition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PilotData {
+    /// Moment sums of every candidate.
+    pub moments: MomentBuffer,
+    /// Path statistics.
+    pub statistics: StatisticsSums,
+    /// Denoiser guides.
+    pub guides: GuideBuffer,
+}
+
+/// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments,
+/// statistics and guides of those iterations. Deterministic for any thread count.
+pub fn render_iterations(
+    scene: &Scene,
+    settings: PathSettings,
+    config: &EmisConfig,
+    strategy: &Strategy,
+    seed: u64,
+    iterations: Range<u32>,
+    collect: bool,
+) -> (TileAccum, Option<PilotData>) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let rect = Rect::full(w, h);
+    let mut accum = TileAccum::new(rect);
+    let request = TileRequest { rect, samples: iterations.clone(), seed };
+    let integrator = strategy.integrator(settings, config.correlation_aware);
+    if !collect {
+        integrator.render_tile(scene, &request, &mut accum);
+        return (accum, None);
+    }
+    let candidates = config.candidates.candidates();
+    let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
+    integrator.with_observer(&estimator).render_tile(scene, &request, &mut accum);
+    let (moments, statistics) = estimator.snapshot();
+    let guides = GuideBuffer::render(scene, seed, iterations);
+    (accum, Some(PilotData { moments, statistics, guides }))
+}
+
+/// A finished `emis-*` render.
+pub struct EmisOutput {
+    /// Image, time and iterations.
+    pub render: RenderOutput,
+    /// Moments, decisions and reports.
+    pub state: EmisState,
+}
+
+/// Renders `scene` locally with `emis-*`: iterations one at a time on the caller's pool
+/// (`opts.threads`), updates at the configured barriers. `progress(done, total)` counts
+/// pixel-iterations.
+pub fn render_emis(
+    scene: &Scene,
+    settings: PathSettings,
+    config: &EmisConfig,
+    opts: &RenderOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<EmisOutput, RenderError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .build()
+        .map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let pixels = w as u64 * h as u64;
+    let mut state = EmisState::new(config.clone(), w, h);
+    let mut film = Film::new(w, h);
+    let start = Instant::now();
+    let mut done = 0u32;
+    loop {
+        let more = match opts.budget {
+            Budget::Samples(n) => done < n,
+            Budget::Time(t) => {
+                done == 0
+                    || start.elapsed().as_secs_f64() + start.elapsed().as_secs_f64() / done as f64 <= t.as_secs_f64()
+            }
+        };
+        if !more {
+            break;
+        }
+        let collect = state.collecting();
+        let (accum, pilot) = pool.install(|| {
+            render_iterations(scene, settings, config, &state.strategy, opts.seed, done..done + 1, collect)
+        });
+        film.merge_tile(&accum);
+        if let Some(p) = pilot {
+            state.absorb(&p).expect("invariant: a local pilot has the state's shape");
+        }
+        done += 1;
+        let total = match opts.budget {
+            Budget::Samples(n) => n as u64,
+            Budget::Time(t) => {
+                ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u64).max(done as u64)
+            }
+        };
+        progress(done as u64 * pixels, total * pixels);
+        // an update is only worth it if iterations remain to use it
+        let remaining = match opts.budget {
+            Budget::Samples(n) => done < n,
+            Budget::Time(t) => start.elapsed() < t,
+        };
+        if state.update_due(done) && remaining {
+            pool.install(|| state.update(&film.average(), done));
+        } else if state.update_due(done) {
+            state.stop_collecting();
+        }
+    }
+    Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done }, state })
+}
