@@ -65,3 +65,29 @@ pub fn render_with(scene: &Scene, integrator: &dyn Integrator, spp: u32, seed: u
     let opts = RenderOptions { budget: Budget::Samples(spp), seed, threads, tile_size: 32 };
     render(scene, integrator, &opts, &|_, _| {}).expect("render").film
 }
+
+/// Renders `scene` locally with `emis-bdpt` or `emis-vcm` (default configuration) for
+/// `iterations` iterations; returns the film and the final state.
+pub fn render_emis_state(
+    scene: &Scene,
+    method: tessera_common::integrator::emis::EmisMethod,
+    iterations: u32,
+    seed: u64,
+    threads: usize,
+) -> (Film, tessera_common::integrator::emis::EmisState) {
+    use tessera_common::integrator::emis::{EmisConfig, render_emis};
+    let opts = RenderOptions { budget: Budget::Samples(iterations), seed, threads, tile_size: 32 };
+    let out = render_emis(scene, PathSettings::from_scene(scene, None), &EmisConfig::new(method), &opts, &|_, _| {})
+        .expect("render");
+    (out.render.film, out.state)
+}
+
+/// `emis-bdpt` for `iterations` iterations.
+pub fn render_emis_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_emis_state(scene, tessera_common::integrator::emis::EmisMethod::Bdpt, iterations, seed, threads).0
+}
+
+/// `emis-vcm` for `iterations` iterations.
+pub fn render_emis_vcm(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
+    render_emis_state(scene, tessera_common::integrator::emis::EmisMethod::Vcm, iterations, seed, threads).0
+}

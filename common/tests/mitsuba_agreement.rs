@@ -26,7 +26,10 @@
 
 mod common;
 
-use common::{render_bdpt, render_bdpt_with, render_lt, render_pt, render_vcm, render_vcm_with, scene_path};
+use common::{
+    render_bdpt, render_bdpt_with, render_emis_bdpt, render_emis_vcm, render_lt, render_pt, render_vcm,
+    render_vcm_with, scene_path,
+};
 use glam::Vec2;
 use tessera_common::film::Film;
 use tessera_common::film::compare::compare;
@@ -273,5 +276,43 @@ mod merging {
         }
         check_scene_with("caustic-glass", None, partial_merging, 16, 0.02, 1.5);
         check_scene_with("caustic-glass", None, classic_weights, 16, 0.02, 1.5);
+    }
+}
+
+/// `emis-bdpt` and `emis-vcm` at 16 iterations (updates after 1 and 4, so most iterations use
+/// the optimised strategy) agree with the references like `bdpt` and `vcm` do.
+mod efficiency_aware {
+    use super::*;
+
+    mod bdpt {
+        use super::*;
+
+        fn check(name: &str) {
+            check_scene_with(name, None, render_emis_bdpt, 16, MAX_BIAS, MAX_RATIO);
+        }
+
+        scene_tests!(cornell_box => "cornell-box", veach_mis => "veach-mis", caustic_glass => "caustic-glass", indirect_room => "indirect-room", glossy_interreflection => "glossy-interreflection");
+
+        #[test]
+        fn env_lit() {
+            let scene = Scene::load(&scene_path("env-lit")).expect("scene loads");
+            check_scene_with("env-lit", Some(env_lit_cube(&scene)), render_emis_bdpt, 16, MAX_BIAS, MAX_RATIO);
+        }
+    }
+
+    mod vcm {
+        use super::*;
+
+        fn check(name: &str) {
+            check_scene_with(name, None, render_emis_vcm, 16, 0.02, 1.5);
+        }
+
+        scene_tests!(cornell_box => "cornell-box", veach_mis => "veach-mis", caustic_glass => "caustic-glass", indirect_room => "indirect-room", glossy_interreflection => "glossy-interreflection");
+
+        #[test]
+        fn env_lit() {
+            let scene = Scene::load(&scene_path("env-lit")).expect("scene loads");
+            check_scene_with("env-lit", Some(env_lit_cube(&scene)), render_emis_vcm, 16, 0.02, 1.5);
+        }
     }
 }
