@@ -42,12 +42,27 @@ pub struct BenchArgs {
     #[arg(long)]
     pub json: bool,
     /// Equal-time mode: render each scene with each of `--integrators` for this many seconds
-    /// and report relMSE against the scene's reference.exr and the speed-up over pt.
-    #[arg(long)]
-    pub equal_time: Option<f64>,
+    /// (comma-separated durations run one after another) and report relMSE against the
+    /// scene's reference.exr, speed-ups and the EMIS targets.
+    #[arg(long, value_delimiter = ',')]
+    pub equal_time: Vec<f64>,
     /// Integrators compared in equal-time mode.
-    #[arg(long, value_delimiter = ',', default_value = "pt,lt,bdpt,vcm")]
+    #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
     pub integrators: Vec<IntegratorKind>,
+    /// Equal-time mode: also draw the speed-ups as a PNG bar chart (one file per duration,
+    /// NAME-20s.png ...).
+    #[arg(long)]
+    pub chart: Option<PathBuf>,
+    /// Measure EMIS overheads: moment accumulation, optimiser and denoiser time, memory.
+    #[arg(long)]
+    pub emis_overheads: bool,
+    /// Ground-truth mode (decision 3): render every candidate of a reduced set for this many
+    /// iterations and compare variance-based with moment-based choices.
+    #[arg(long)]
+    pub ground_truth: Option<u32>,
+    /// Pilot iterations of the ground-truth mode.
+    #[arg(long, default_value_t = 4)]
+    pub ground_truth_pilot: u32,
     /// Measure photon-map build and query rates for this many photons instead.
     #[arg(long)]
     pub photon_map: Option<u32>,
@@ -136,26 +151,6 @@ fn default_scenes() -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Equal-time comparison of integrators on one scene: (name, relMSE, samples/s) per integrator.
-fn equal_time(args: &BenchArgs, path: &std::path::Path, seconds: f64) -> anyhow::Result<Vec<(String, f64, f64)>> {
-    let scene = Scene::load(path)?;
-    let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
-    let mut rows = Vec::new();
-    for &kind in &args.integrators {
-        let renderer = make_renderer(kind, &scene, &crate::local::IntegratorOptions::default())?;
-        let opts = RenderOptions {
-            budget: Budget::Time(std::time::Duration::from_secs_f64(seconds)),
-            seed: 1,
-            threads: args.threads.unwrap_or(0),
-            tile_size: 32,
-        };
-        let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
-        let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
-        rows.push((renderer.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
-    }
-    Ok(rows)
-}
-
 /// Photon-map build and query rates for `n` photons spread through a unit cube, queried at
 /// `n` points with a radius that finds about 10 photons each.
 fn photon_map_rates(n: u32) {
@@ -196,23 +191,14 @@ pub fn bench_command(args: &BenchArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let scenes = if args.scenes.is_empty() { default_scenes()? } else { args.scenes.clone() };
-    if let Some(seconds) = args.equal_time {
-        println!(
-            "equal time {seconds} s: relMSE vs reference (top 0.1 % dropped); speed-up = relMSE(pt) / relMSE; samples/s"
-        );
-        for path in &scenes {
-            let rows = equal_time(args, path, seconds)?;
-            let pt = rows.iter().find(|r| r.0 == "pt").map(|r| r.1);
-            let cells: Vec<String> = rows
-                .iter()
-                .map(|(n, e, sps)| match pt {
-                    Some(p) => format!("{n} {e:.5} ({:.2}x, {:.0} S/s)", p / e, sps),
-                    None => format!("{n} {e:.5} ({:.0} S/s)", sps),
-                })
-                .collect();
-            println!("{:<24} {}", scene_name(path), cells.join("  "));
-        }
-        return Ok(());
+    if !args.equal_time.is_empty() {
+        return crate::bench_emis::equal_time(args, &scenes, &args.equal_time);
+    }
+    if let Some(k) = args.ground_truth {
+        return crate::ground_truth::ground_truth(args, &scenes, k);
+    }
+    if args.emis_overheads {
+        return crate::bench_emis::overheads(args, &scenes);
     }
     if !args.json {
         let mut header = format!("{:<24} {:>14} {:>14}", "scene", "tessera S/s", "S/cpu-s");

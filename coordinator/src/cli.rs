@@ -36,6 +36,20 @@ pub enum IntegratorKind {
     EmisVcm,
 }
 
+impl IntegratorKind {
+    /// The name on the command line.
+    pub fn name(&self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "pt",
+            IntegratorKind::Lt => "lt",
+            IntegratorKind::Bdpt => "bdpt",
+            IntegratorKind::Vcm => "vcm",
+            IntegratorKind::EmisBdpt => "emis-bdpt",
+            IntegratorKind::EmisVcm => "emis-vcm",
+        }
+    }
+}
+
 /// Count ratio of merge candidates in the EMIS correction factor (decision 3a).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum MergeRatioArg {

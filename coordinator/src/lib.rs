@@ -2,6 +2,9 @@
 //! the farm's coordinator service will live here too).
 
 pub mod bench;
+pub mod bench_emis;
+pub mod chart;
 pub mod cli;
+pub mod ground_truth;
 pub mod local;
 pub mod telemetry;

@@ -79,7 +79,7 @@ pub trait SampleObserver: Send + Sync {
     fn on_iteration_end(&self, _start: &IterationStart, _counters: &PathCounters) {}
 }
 
-impl<T: SampleObserver> SampleObserver for &T {
+impl<T: SampleObserver + ?Sized> SampleObserver for &T {
     #[inline(always)]
     fn on_sample(&self, record: &SampleRecord) {
         (**self).on_sample(record)
@@ -95,6 +95,23 @@ impl<T: SampleObserver> SampleObserver for &T {
     #[inline(always)]
     fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
         (**self).on_iteration_end(start, counters)
+    }
+}
+
+/// Several observers of the same kind watching one render (e.g. moment estimators with
+/// different settings).
+impl<T: SampleObserver> SampleObserver for [T] {
+    fn on_sample(&self, record: &SampleRecord) {
+        self.iter().for_each(|o| o.on_sample(record))
+    }
+    fn on_iteration_start(&self, start: &IterationStart) {
+        self.iter().for_each(|o| o.on_iteration_start(start))
+    }
+    fn on_camera_path_end(&self, pixel: u32) {
+        self.iter().for_each(|o| o.on_camera_path_end(pixel))
+    }
+    fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
+        self.iter().for_each(|o| o.on_iteration_end(start, counters))
     }
 }
 

@@ -18,7 +18,7 @@ pub struct DenoiseSettings {
     /// À-trous levels (steps 1, 2, 4, …).
     pub levels: u32,
     /// Exponent of the normal weight.
-    pub normal_power: f32,
+    pub normal_power: i32,
     /// Albedo difference scale.
     pub albedo_sigma: f32,
     /// Depth-gradient scale.
@@ -29,7 +29,7 @@ pub struct DenoiseSettings {
 
 impl Default for DenoiseSettings {
     fn default() -> Self {
-        DenoiseSettings { levels: 5, normal_power: 64.0, albedo_sigma: 0.2, depth_sigma: 1.0, final_box: 3 }
+        DenoiseSettings { levels: 5, normal_power: 64, albedo_sigma: 0.2, depth_sigma: 1.0, final_box: 3 }
     }
 }
 
@@ -132,7 +132,7 @@ fn filter_pixel(
                 let da = (ap[0] - aq[0]).abs() + (ap[1] - aq[1]).abs() + (ap[2] - aq[2]).abs();
                 let offset = (((i as i64 - 2).pow(2) + (j as i64 - 2).pow(2)) as f32).sqrt() * step as f32;
                 let dz = (zp - g.depth[q]).abs() / (s.depth_sigma * gradient[p] * offset + 1e-4 * zp.max(1e-3));
-                dot.powf(s.normal_power) * (-da / s.albedo_sigma).exp() * (-dz).exp()
+                if dot <= 0.0 { 0.0 } else { dot.powi(s.normal_power) * (-(da / s.albedo_sigma + dz)).exp() }
             };
             let k = kx * ky * w;
             if k > 0.0 {

@@ -79,20 +79,50 @@ pub struct Decision {
     pub relative_moment: Image,
 }
 
+/// Every candidate's per-iteration moments as one image each, transposed from the buffer's
+/// pixel-major layout block by block (reading each candidate with a stride would touch every
+/// cache line of the buffer once per candidate).
+fn moment_planes(m: &MomentBuffer) -> Vec<Image> {
+    let (w, h, k) = (m.width as usize, m.height as usize, m.candidates);
+    let scale = if m.iterations == 0 { 0.0 } else { 1.0 / m.iterations as f32 };
+    const BLOCK: usize = 4096;
+    let blocks: Vec<Vec<f32>> = m
+        .sums
+        .par_chunks(BLOCK * k.max(1))
+        .map(|s| {
+            let n = s.len() / k.max(1);
+            let mut out = vec![0.0f32; s.len()];
+            for p in 0..n {
+                for c in 0..k {
+                    // +∞ flags stay infinite; 0 iterations give 0 for finite sums
+                    let v = s[p * k + c];
+                    out[c * n + p] = if v.is_finite() { v * scale } else { v };
+                }
+            }
+            out
+        })
+        .collect();
+    (0..k)
+        .into_par_iter()
+        .map(|c| {
+            let mut data = Vec::with_capacity(w * h);
+            for b in &blocks {
+                let n = b.len() / k;
+                data.extend_from_slice(&b[c * n..(c + 1) * n]);
+            }
+            Image::from_data(w, h, data)
+        })
+        .collect()
+}
+
 /// Runs the optimisation.
 pub fn optimize(input: &OptimizerInput) -> Decision {
     let m = input.moments;
     let (w, h) = (m.width as usize, m.height as usize);
     let pixels = (w * h) as u32;
-    let k = input.candidates.len();
     // ---- filtered moments, one image per candidate ----
-    let filtered: Vec<Image> = (0..k)
-        .into_par_iter()
-        .map(|c| {
-            Image::from_data(w, h, (0..pixels).map(|p| m.moment(p, c) as f32).collect())
-                .box_blur(input.filters.moment_box)
-        })
-        .collect();
+    let filtered: Vec<Image> =
+        moment_planes(m).into_par_iter().map(|plane| plane.box_blur(input.filters.moment_box)).collect();
     let cost = |cand: &Candidate, chi: f64| {
         pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels)
     };

@@ -115,7 +115,8 @@ impl Strategy {
         }
     }
 
-    fn integrator(&self, settings: PathSettings, correlation_aware: bool) -> Bidir {
+    /// The bidirectional integrator rendering with this strategy.
+    pub fn integrator(&self, settings: PathSettings, correlation_aware: bool) -> Bidir {
         match &self.merge {
             None => Bidir::bdpt(settings, self.nu, self.connections),
             Some(mask) => {

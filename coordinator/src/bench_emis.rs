@@ -1,0 +1,237 @@
+//! EMIS benchmarks of `tessera bench`:
+//!
+//! * `--equal-time 20,60`: every scene rendered by every integrator of `--integrators` for the
+//!   same wall time, relMSE against the reference (top 0.1 % of pixel errors dropped), speed-ups
+//!   (relMSE_B / relMSE_A), the targets (geometric mean of emis-vcm over vcm and of
+//!   emis-bdpt over bdpt, emis-vcm against the better of pt and vcm), and a PNG bar chart;
+//! * `--emis-overheads`: moment accumulation as a fraction of pilot iteration time (pilot
+//!   iterations with and without the estimator, interleaved), optimiser and denoiser time at
+//!   256² and 1920×1080 on synthetic inputs, and the memory of the moment buffers.
+
+use crate::bench::BenchArgs;
+use crate::chart::{Group, write_bar_chart};
+use crate::local::{IntegratorOptions, make_renderer, scene_name};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
+use tessera_common::integrator::guides::GuideBuffer;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::mis::cost::PathStatistics;
+use tessera_common::mis::denoise::{Guides, denoised_intensity};
+use tessera_common::mis::estimator::MomentEstimator;
+use tessera_common::mis::filter::Image;
+use tessera_common::mis::moments::MomentBuffer;
+use tessera_common::mis::optimize::{OptimizerInput, optimize};
+use tessera_common::render::{Budget, RenderOptions};
+use tessera_common::sampler::Sampler;
+use tessera_common::scene::Scene;
+
+/// One scene's equal-time results: (integrator, relMSE, samples/s).
+type Row = Vec<(String, f64, f64)>;
+
+fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Result<Row> {
+    let scene = Scene::load(path)?;
+    let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+    let mut rows = Vec::new();
+    for &kind in &args.integrators {
+        let renderer = make_renderer(kind, &scene, &IntegratorOptions::default())?;
+        let opts = RenderOptions {
+            budget: Budget::Time(Duration::from_secs_f64(seconds)),
+            seed: 1,
+            threads: args.threads.unwrap_or(0),
+            tile_size: 32,
+        };
+        let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
+        let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
+        rows.push((renderer.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
+    }
+    Ok(rows)
+}
+
+fn geometric_mean(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x.ln()).sum::<f64>() / v.len().max(1) as f64).exp()
+}
+
+/// Runs the equal-time comparison for every duration.
+pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> anyhow::Result<()> {
+    for &seconds in durations {
+        println!("\n## equal time {seconds} s ({} threads)\n", args.threads.map_or("all".into(), |t| t.to_string()));
+        println!(
+            "relMSE against the reference (top 0.1 % dropped), speed-up over pt = relMSE(pt) / relMSE, samples/s\n"
+        );
+        let names: Vec<String> = args.integrators.iter().map(|k| k.name().to_string()).collect();
+        println!("| scene | {} |", names.join(" | "));
+        println!("|---|{}", "---|".repeat(names.len()));
+        let mut table = Vec::new();
+        for path in scenes {
+            let rows = equal_time_scene(args, path, seconds)?;
+            let pt = rows.iter().find(|r| r.0 == "pt").map(|r| r.1);
+            let cells: Vec<String> = rows
+                .iter()
+                .map(|(_, e, sps)| match pt {
+                    Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
+                    None => format!("{e:.5} ({:.2e} S/s)", sps),
+                })
+                .collect();
+            println!("| {} | {} |", scene_name(path), cells.join(" | "));
+            table.push((scene_name(path), rows));
+        }
+        let err = |rows: &Row, n: &str| rows.iter().find(|r| r.0 == n).map(|r| r.1);
+        let ratio = |a: &str, b: &str| -> Vec<f64> {
+            table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect::<Vec<f64>>()
+        };
+        println!();
+        for (a, b, target) in [("emis-vcm", "vcm", 1.2), ("emis-bdpt", "bdpt", 1.1), ("emis-vcm", "pt", 0.0)] {
+            let r = ratio(a, b);
+            if !r.is_empty() {
+                let per_scene: Vec<String> = r.iter().map(|x| format!("{x:.2}x")).collect();
+                let verdict = if target > 0.0 {
+                    format!(" (target ≥ {target}x: {})", if geometric_mean(&r) >= target { "met" } else { "NOT met" })
+                } else {
+                    String::new()
+                };
+                println!(
+                    "speed-up of {a} over {b}: geometric mean {:.2}x{verdict}; per scene {}",
+                    geometric_mean(&r),
+                    per_scene.join(", ")
+                );
+            }
+        }
+        let worst: Vec<(String, f64)> = table
+            .iter()
+            .filter_map(|(s, r)| {
+                let best = err(r, "pt")?.min(err(r, "vcm")?);
+                Some((s.clone(), best / err(r, "emis-vcm")?))
+            })
+            .collect();
+        if !worst.is_empty() {
+            let below: Vec<&(String, f64)> = worst.iter().filter(|(_, x)| *x < 0.9).collect();
+            println!(
+                "emis-vcm against the better of pt and vcm: {} (target: never below 0.9x: {})",
+                worst.iter().map(|(s, x)| format!("{s} {x:.2}x")).collect::<Vec<_>>().join(", "),
+                if below.is_empty() { "met" } else { "NOT met" }
+            );
+        }
+        if let Some(chart) = &args.chart {
+            let file = chart.with_file_name(format!(
+                "{}-{}s.png",
+                chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time"),
+                seconds
+            ));
+            let groups: Vec<Group> = table
+                .iter()
+                .map(|(s, r)| {
+                    let pt = err(r, "pt").unwrap_or(f64::NAN);
+                    Group { label: s.clone(), values: r.iter().map(|(_, e, _)| pt / e).collect() }
+                })
+                .collect();
+            write_bar_chart(&file, &format!("speed-up over pt at equal time {seconds} s"), &names, &groups)?;
+            println!("chart: {}", file.display());
+        }
+    }
+    Ok(())
+}
+
+/// Pilot iteration time with and without moment accumulation, interleaved `repeats` times.
+fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> (f64, f64) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let config = EmisConfig::new(method);
+    let settings = PathSettings::from_scene(scene, None);
+    let strategy = Strategy::pilot(method);
+    let candidates = config.candidates.candidates();
+    let (mut plain, mut with) = (f64::INFINITY, f64::INFINITY);
+    for r in 0..repeats {
+        let request = TileRequest { rect: Rect::full(w, h), samples: r * iterations..(r + 1) * iterations, seed: 1 };
+        let integrator = strategy.integrator(settings, config.correlation_aware);
+        let t = Instant::now();
+        integrator.render_tile(scene, &request, &mut TileAccum::new(Rect::full(w, h)));
+        plain = plain.min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
+        integrator.with_observer(&estimator).render_tile(scene, &request, &mut TileAccum::new(Rect::full(w, h)));
+        let _ = estimator.snapshot();
+        let _ = GuideBuffer::render(scene, 1, request.samples.clone());
+        with = with.min(t.elapsed().as_secs_f64());
+    }
+    (plain / iterations as f64, with / iterations as f64)
+}
+
+/// One optimiser and one denoiser run on synthetic inputs of `w × h` with the VCM candidates.
+fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
+    let candidates = EmisConfig::new(EmisMethod::Vcm).candidates.candidates();
+    let mut moments = MomentBuffer::new(w, h, candidates.len());
+    for (i, v) in moments.sums.iter_mut().enumerate() {
+        *v = Sampler::for_pixel(9, i as u32, 0).next_1d() + 0.01;
+    }
+    moments.iterations = 1;
+    let n = (w * h) as usize;
+    let color: Vec<[f32; 3]> = (0..n).map(|i| [Sampler::for_pixel(3, i as u32, 0).next_1d(); 3]).collect();
+    let albedo = vec![[0.5f32; 3]; n];
+    let normal: Vec<[f32; 3]> = (0..n).map(|i| if i % 7 == 0 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, 1.0] }).collect();
+    let depth = vec![1.0f32; n];
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    let t = Instant::now();
+    let image = denoised_intensity(
+        w as usize,
+        h as usize,
+        &color,
+        &Guides { albedo: &albedo, normal: &normal, depth: &depth },
+        &config.denoise,
+    );
+    let denoise = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let decision = optimize(&OptimizerInput {
+        candidates: &candidates,
+        moments: &moments,
+        image: &Image::from_data(w as usize, h as usize, image.data),
+        statistics: PathStatistics::default(),
+        constants: config.constants,
+        filters: config.filters,
+    });
+    std::hint::black_box(decision);
+    (t.elapsed().as_secs_f64(), denoise, moments.sums.len() * 4)
+}
+
+/// Runs `--emis-overheads`.
+pub fn overheads(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<()> {
+    let threads = args.threads.unwrap_or(0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    println!(
+        "moment accumulation (51 VCM / 26 BDPT candidates, guides included), best of {} runs of 2 iterations:",
+        args.repeats.max(1)
+    );
+    println!("| scene | vcm pilot ms/it | + moments | overhead | bdpt pilot ms/it | + moments | overhead |");
+    println!("|---|---|---|---|---|---|---|");
+    for path in scenes {
+        let scene = Scene::load(path)?;
+        let (v0, v1) = pool.install(|| accumulation_overhead(&scene, EmisMethod::Vcm, 2, args.repeats.max(1)));
+        let (b0, b1) = pool.install(|| accumulation_overhead(&scene, EmisMethod::Bdpt, 2, args.repeats.max(1)));
+        println!(
+            "| {} | {:.0} | {:.0} | {:.0} % | {:.0} | {:.0} | {:.0} % |",
+            scene_name(path),
+            v0 * 1e3,
+            v1 * 1e3,
+            (v1 / v0 - 1.0) * 100.0,
+            b0 * 1e3,
+            b1 * 1e3,
+            (b1 / b0 - 1.0) * 100.0
+        );
+    }
+    println!("\noptimiser (51 candidates, synthetic moments) and denoiser, best of {} runs:", args.repeats.max(1));
+    for (w, h) in [(256u32, 256u32), (1920, 1080)] {
+        let runs: Vec<(f64, f64, usize)> =
+            (0..args.repeats.max(1)).map(|_| pool.install(|| optimizer_time(w, h))).collect();
+        let best_opt = runs.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        let best_den = runs.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+        let guides = (w * h) as usize * (3 + 3 + 1) * 4;
+        println!(
+            "{w}x{h}: optimiser {:.1} ms, denoiser {:.1} ms; moment buffer {:.1} MB (+{:.1} MB guides; the optimiser holds a filtered copy of the same size)",
+            best_opt * 1e3,
+            best_den * 1e3,
+            runs[0].2 as f64 / 1e6,
+            guides as f64 / 1e6
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,218 @@
+//! `tessera bench --ground-truth K` (emis-spec checklist §15, decision 3): do the pilot's
+//! moments choose what the true variances would choose?
+//!
+//! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--ground-truth-pilot`
+//! iterations) runs four moment estimators at once, one per setting of the two switches of
+//! decision 3. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
+//! off / everywhere, plus path tracing: 19) renders K iterations itself; its per-pixel variance
+//! is (image − reference)² × K and its per-pixel second moment is measured directly (Σ y² of
+//! its own samples). Each quantity is box-filtered (radius 3), divided by (reference² + 1e-4),
+//! outliers above the 99.9 % quantile zeroed, and averaged: an image-level relative figure per
+//! candidate, times the candidate's cost.
+//!
+//! Reported per variant: the candidate it chooses and its **regret**, the true (variance-based)
+//! work-normalised error of that choice over the best candidate's (1 = perfect), plus how well
+//! its predictions correlate with the variances over all candidates (Spearman ρ). The default
+//! switches are the ones with the lowest geometric-mean regret over the scenes.
+
+use crate::bench::BenchArgs;
+use crate::local::scene_name;
+use std::path::PathBuf;
+use tessera_common::film::{Film, Rect, TileAccum};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
+use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::mis::candidate::Candidate;
+use tessera_common::mis::cost::{CostConstants, pixel_cost};
+use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
+use tessera_common::mis::filter::Image;
+use tessera_common::mis::moments::MomentBuffer;
+use tessera_common::scene::Scene;
+
+const VARIANTS: [(MergeRatio, MergeKernel); 4] = [
+    (MergeRatio::Principled, MergeKernel::Squared),
+    (MergeRatio::Principled, MergeKernel::Reference),
+    (MergeRatio::Reference, MergeKernel::Squared),
+    (MergeRatio::Reference, MergeKernel::Reference),
+];
+
+fn reduced_candidates() -> Vec<Candidate> {
+    let mut v = Vec::new();
+    for nu in [0.25f32, 1.0, 2.0] {
+        for connections in [0u32, 1, 4] {
+            for merge in [false, true] {
+                v.push(Candidate { nu, connections, merge });
+            }
+        }
+    }
+    v.push(Candidate::PATH_TRACING);
+    v
+}
+
+/// Image-level relative figure of a per-pixel quantity: box 3, / (ref² + 1e-4), outliers
+/// above the 99.9 % quantile zeroed, mean over pixels with a non-zero reference.
+fn relative_mean(w: usize, h: usize, per_pixel: Vec<f32>, reference: &[f32]) -> f64 {
+    let filtered = Image::from_data(w, h, per_pixel).box_blur(3);
+    let rel: Vec<f32> =
+        filtered.data.iter().zip(reference).map(|(&m, &r)| if r > 0.0 { m / (r * r + 1e-4) } else { 0.0 }).collect();
+    let rel = Image::from_data(w, h, rel);
+    let threshold = rel.histogram_quantile(0.999);
+    rel.data.iter().map(|&v| if v > threshold && v.is_finite() { 0.0 } else { v as f64 }).sum::<f64>() / (w * h) as f64
+}
+
+fn moments_of(buffer: &MomentBuffer, candidate: usize) -> Vec<f32> {
+    (0..buffer.width * buffer.height).map(|p| buffer.moment(p, candidate) as f32).collect()
+}
+
+/// Spearman rank correlation (ties broken by order).
+fn spearman(a: &[f64], b: &[f64]) -> f64 {
+    let rank = |v: &[f64]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut r = vec![0.0; v.len()];
+        for (k, &i) in idx.iter().enumerate() {
+            r[i] = k as f64;
+        }
+        r
+    };
+    let (ra, rb) = (rank(a), rank(b));
+    let n = a.len() as f64;
+    let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
+    1.0 - 6.0 * d2 / (n * (n * n - 1.0))
+}
+
+fn strategy_of(c: &Candidate) -> Strategy {
+    Strategy { nu: c.nu, connections: c.connections, merge: Some(MergeMask::Constant(if c.merge { 1.0 } else { 0.0 })) }
+}
+
+/// Runs the ground-truth comparison on `scenes` with `k` iterations per candidate.
+pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Result<()> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads.unwrap_or(0)).build()?;
+    let candidates = reduced_candidates();
+    let pilot_iterations = args.ground_truth_pilot;
+    println!(
+        "ground truth: pilot {pilot_iterations} vcm iterations; {} candidates × {k} iterations each",
+        candidates.len()
+    );
+    let mut regrets = vec![Vec::new(); VARIANTS.len()];
+    let mut direct_regrets = Vec::new();
+    for path in scenes {
+        let scene = Scene::load(path)?;
+        let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+        let ref_mean: Vec<f32> = reference.pixels.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect();
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        let (wu, hu) = (w as usize, h as usize);
+        let settings = PathSettings::from_scene(&scene, None);
+        let config = EmisConfig::new(EmisMethod::Vcm);
+        let full = Rect::full(w, h);
+        // ---- the pilot, four estimators at once ----
+        let estimators: Vec<MomentEstimator> = VARIANTS
+            .iter()
+            .map(|&(merge_ratio, merge_kernel)| {
+                MomentEstimator::new(w, h, &candidates, MomentSettings { merge_ratio, merge_kernel })
+            })
+            .collect();
+        let pilot = Strategy::pilot(EmisMethod::Vcm).integrator(settings, config.correlation_aware);
+        pool.install(|| {
+            pilot.with_observer(&estimators[..]).render_tile(
+                &scene,
+                &TileRequest { rect: full, samples: 0..pilot_iterations, seed: 7 },
+                &mut TileAccum::new(full),
+            )
+        });
+        let snapshots: Vec<_> = estimators.iter().map(|e| e.snapshot()).collect();
+        let statistics = snapshots[0].1.statistics(w * h);
+        let cost = |c: &Candidate| {
+            pixel_cost(
+                &CostConstants::default(),
+                &statistics,
+                c,
+                if c.merge { 1.0 } else { 0.0 },
+                !c.is_path_tracing(),
+                w * h,
+            )
+        };
+        // ---- every candidate on its own ----
+        let mut variance = Vec::new();
+        let mut direct = Vec::new();
+        for c in &candidates {
+            let own = MomentEstimator::new(w, h, std::slice::from_ref(c), MomentSettings::default());
+            let integrator = strategy_of(c).integrator(settings, config.correlation_aware);
+            let mut accum = TileAccum::new(full);
+            pool.install(|| {
+                integrator.with_observer(&own).render_tile(
+                    &scene,
+                    &TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 },
+                    &mut accum,
+                )
+            });
+            let mut film = Film::new(w, h);
+            film.merge_tile(&accum);
+            let per_pixel: Vec<f32> = film
+                .average()
+                .iter()
+                .zip(&reference.pixels)
+                .map(|(a, r)| (0..3).map(|ch| (a[ch] - r[ch]).powi(2)).sum::<f32>() / 3.0 * k as f32)
+                .collect();
+            variance.push(relative_mean(wu, hu, per_pixel, &ref_mean) * cost(c));
+            direct.push(relative_mean(wu, hu, moments_of(&own.snapshot().0, 0), &ref_mean) * cost(c));
+        }
+        let best = variance.iter().copied().fold(f64::INFINITY, f64::min);
+        let name_of = |i: usize| {
+            let c = &candidates[i];
+            if c.is_path_tracing() {
+                "pt".to_string()
+            } else {
+                format!("nu {} c {}{}", c.nu, c.connections, if c.merge { " merge" } else { "" })
+            }
+        };
+        let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
+        let truth = argmin(&variance);
+        println!("\n### {}: variance-based choice {} ", scene_name(path), name_of(truth));
+        let predicted0: Vec<f64> = (0..candidates.len())
+            .map(|ci| relative_mean(wu, hu, moments_of(&snapshots[0].0, ci), &ref_mean) * cost(&candidates[ci]))
+            .collect();
+        println!(
+            "| candidate | cost | variance × cost | measured moment × cost | pilot-predicted (principled, squared) × cost |"
+        );
+        println!("|---|---|---|---|---|");
+        for i in 0..candidates.len() {
+            println!(
+                "| {} | {:.2} | {:.4e} | {:.4e} | {:.4e} |",
+                name_of(i),
+                cost(&candidates[i]),
+                variance[i],
+                direct[i],
+                predicted0[i]
+            );
+        }
+        let d = argmin(&direct);
+        println!(
+            "measured second moments: choose {} (regret {:.2}x, spearman {:.2})",
+            name_of(d),
+            variance[d] / best,
+            spearman(&direct, &variance)
+        );
+        direct_regrets.push(variance[d] / best);
+        for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
+            let predicted: Vec<f64> = (0..candidates.len())
+                .map(|ci| relative_mean(wu, hu, moments_of(&snapshots[vi].0, ci), &ref_mean) * cost(&candidates[ci]))
+                .collect();
+            let choice = argmin(&predicted);
+            regrets[vi].push(variance[choice] / best);
+            println!(
+                "pilot moments, ratio {ratio:?}, kernel {kernel:?}: choose {} (regret {:.2}x, spearman {:.2})",
+                name_of(choice),
+                variance[choice] / best,
+                spearman(&predicted, &variance)
+            );
+        }
+    }
+    let gm = |v: &[f64]| (v.iter().map(|x| x.ln()).sum::<f64>() / v.len().max(1) as f64).exp();
+    println!("\n### geometric-mean regret over {} scenes", scenes.len());
+    println!("measured second moments: {:.3}x", gm(&direct_regrets));
+    for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
+        println!("ratio {ratio:?}, kernel {kernel:?}: {:.3}x", gm(&regrets[vi]));
+    }
+    Ok(())
+}
