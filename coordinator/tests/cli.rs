@@ -87,3 +87,34 @@ fn time_budget_renders_at_least_one_pass() {
     let counts = tessera_common::film::exr::read_sample_counts(&out).unwrap();
     assert!(counts[0] >= 1 && counts.iter().all(|&c| c == counts[0]), "every pixel has the same sample count");
 }
+
+/// `emis-vcm` under a time budget writes the image, the EMIS layers and attributes, the
+/// strategy map and a report whose updates happened at the configured iterations.
+#[test]
+fn emis_vcm_writes_its_layers_strategy_map_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("glass.exr");
+    let run = tessera()
+        .args(["render"])
+        .arg(scene("caustic-glass"))
+        .args(["--integrator", "emis-vcm", "--time", "3", "--emis-updates", "1,2", "--threads", "2", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let mask = tessera_common::film::exr::read_layer(&out, "merge_mask").unwrap();
+    assert_eq!(mask.len(), 256 * 256);
+    assert!(mask.iter().all(|&v| (0.0..=1.0).contains(&v)));
+    let relative = tessera_common::film::exr::read_layer(&out, "relative_moment").unwrap();
+    assert!(relative.iter().all(|v| !v.is_nan()));
+    let nu = tessera_common::film::exr::read_attribute(&out, "tessera/emis_nu").unwrap().expect("ν attribute");
+    assert!([0.0, 0.25, 0.5, 0.75, 1.0, 2.0].contains(&(nu as f32)), "ν = {nu}");
+    assert!(tessera_common::film::exr::read_attribute(&out, "tessera/emis_connections").unwrap().is_some());
+    assert!(dir.path().join("glass.strategy.png").exists() && dir.path().join("glass.png").exists());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("glass.emis.json")).unwrap()).unwrap();
+    let updates = report["updates"].as_array().unwrap();
+    assert_eq!(updates.iter().map(|u| u["iteration"].as_u64().unwrap()).collect::<Vec<_>>(), vec![1, 2]);
+    assert_eq!(updates[0]["candidates"].as_array().unwrap().len(), 26, "25 (ν, c) pairs and path tracing");
+    assert_eq!(report["final"]["nu"].as_f64().unwrap() as f32, nu as f32);
+}

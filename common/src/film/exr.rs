@@ -98,7 +98,11 @@ pub fn read_layer(path: &Path, name: &str) -> std::result::Result<Vec<f32>, ExrE
 /// Reads a numeric header attribute written by [`write_exr`].
 pub fn read_attribute(path: &Path, name: &str) -> std::result::Result<Option<f64>, ExrError> {
     let image = read_all(path)?;
-    Ok(image.attributes.other.get(&Text::from(name)).and_then(|v| match v {
+    // a single-part file's custom attributes may come back as the image's or the layer's
+    let key = Text::from(name);
+    let value =
+        image.attributes.other.get(&key).or_else(|| image.layer_data.iter().find_map(|l| l.attributes.other.get(&key)));
+    Ok(value.and_then(|v| match v {
         AttributeValue::F32(f) => Some(*f as f64),
         AttributeValue::I32(i) => Some(*i as f64),
         _ => None,

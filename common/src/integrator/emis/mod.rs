@@ -7,8 +7,9 @@
 //! 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from the
 //! merged moments, the denoised image and the path statistics; rendering continues with that
 //! strategy (moments still collected, each sample with the counts it was drawn with) until the
-//! last update, then without moments. Every iteration, pilot included, stays in the image with
-//! equal weight.
+//! last update the budget can reach, then without moments. Every iteration, pilot included,
+//! stays in the image with equal weight. When path tracing wins, the remaining iterations are
+//! rendered by `pt` itself (same integral, faster estimator).
 //!
 //! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
@@ -152,6 +153,32 @@ pub fn render_iterations(
     let rect = Rect::full(w, h);
     let mut accum = TileAccum::new(rect);
     let request = TileRequest { rect, samples: iterations.clone(), seed };
+    if !collect && strategy.nu == 0.0 {
+        // path tracing won: render it with `pt` (the same integral, the fastest estimator of
+        // it), row by row in parallel and merged in order, so deterministic
+        let pt = super::PathTracer { settings };
+        let rows: Vec<TileAccum> = {
+            use rayon::prelude::*;
+            (0..h)
+                .into_par_iter()
+                .map(|y| {
+                    let rect = Rect { x0: 0, y0: y, x1: w, y1: y + 1 };
+                    let mut row = TileAccum::new(rect);
+                    pt.render_tile(scene, &TileRequest { rect, samples: iterations.clone(), seed }, &mut row);
+                    row
+                })
+                .collect()
+        };
+        for (y, row) in rows.iter().enumerate() {
+            let base = y * w as usize;
+            for x in 0..w as usize {
+                accum.sum[base + x] = row.sum[x];
+                accum.count[base + x] = row.count[x];
+            }
+            accum.non_finite += row.non_finite;
+        }
+        return (accum, None);
+    }
     let integrator = strategy.integrator(settings, config.correlation_aware);
     if !collect {
         integrator.render_tile(scene, &request, &mut accum);
@@ -220,14 +247,16 @@ pub fn render_emis(
             }
         };
         progress(done as u64 * pixels, total * pixels);
-        // an update is only worth it if iterations remain to use it
-        let remaining = match opts.budget {
-            Budget::Samples(n) => done < n,
-            Budget::Time(t) => start.elapsed() < t,
+        // an update is only worth it if iterations remain to use it, and moments are only worth
+        // collecting while another update can still come
+        let expected_total = match opts.budget {
+            Budget::Samples(n) => n,
+            Budget::Time(t) => (t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32,
         };
-        if state.update_due(done) && remaining {
+        if state.update_due(done) && done < expected_total {
             pool.install(|| state.update(&film.average(), done));
-        } else if state.update_due(done) {
+        }
+        if state.next_update().is_none_or(|u| u >= expected_total) {
             state.stop_collecting();
         }
     }

@@ -1,0 +1,84 @@
+//! Emis-spec checklist §10: the optimiser's decisions with the denoised 1-iteration pilot image
+//! as Ī are within one candidate step of the decisions made with the converged reference as Ī
+//! (ν and c each at most one step apart in their candidate lists; merge-mask coverage within
+//! 0.1 of the image).
+
+mod common;
+
+use common::scene_path;
+use tessera_common::film::exr::read_rgb;
+use tessera_common::film::{Film, Rect, TileAccum};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
+use tessera_common::integrator::guides::GuideBuffer;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::mis::denoise::{Guides, denoised_intensity};
+use tessera_common::mis::estimator::MomentEstimator;
+use tessera_common::mis::filter::Image;
+use tessera_common::mis::optimize::{Decision, OptimizerInput, optimize};
+use tessera_common::scene::Scene;
+
+fn check(name: &str) {
+    let scene = Scene::load(&scene_path(name)).expect("scene loads");
+    let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference");
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    let candidates = config.candidates.candidates();
+    let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
+    let full = Rect::full(w, h);
+    let mut accum = TileAccum::new(full);
+    Strategy::pilot(EmisMethod::Vcm)
+        .integrator(PathSettings::from_scene(&scene, None), config.correlation_aware)
+        .with_observer(&estimator)
+        .render_tile(&scene, &TileRequest { rect: full, samples: 0..1, seed: 3 }, &mut accum);
+    let mut film = Film::new(w, h);
+    film.merge_tile(&accum);
+    let (moments, statistics) = estimator.snapshot();
+    let (albedo, normal, depth) = GuideBuffer::render(&scene, 3, 0..1).means();
+    let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
+    let denoised = denoised_intensity(w as usize, h as usize, &film.average(), &guides, &config.denoise);
+    let converged =
+        Image::from_data(w as usize, h as usize, reference.pixels.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect())
+            .box_blur(config.denoise.final_box);
+    let decide = |image: &Image| -> Decision {
+        optimize(&OptimizerInput {
+            candidates: &candidates,
+            moments: &moments,
+            image,
+            statistics: statistics.statistics(w * h),
+            constants: config.constants,
+            filters: config.filters,
+        })
+    };
+    let (ours, truth) = (decide(&denoised), decide(&converged));
+    let step = |list: &[f32], v: f32| list.iter().position(|&x| x == v).map_or(-1, |i| i as i64);
+    let nu_list: Vec<f32> = std::iter::once(0.0).chain(config.candidates.nu.iter().copied()).collect();
+    let c_list: Vec<f32> = config.candidates.connections.iter().map(|&c| c as f32).collect();
+    let coverage = |d: &Decision| d.merge_mask.data.iter().filter(|&&v| v > 0.1).count() as f64 / (w * h) as f64;
+    eprintln!(
+        "{name}: denoised → ν {} c {} merging {:.3}; reference → ν {} c {} merging {:.3}",
+        ours.nu,
+        ours.connections,
+        coverage(&ours),
+        truth.nu,
+        truth.connections,
+        coverage(&truth)
+    );
+    assert!((step(&nu_list, ours.nu) - step(&nu_list, truth.nu)).abs() <= 1, "{name}: ν {} vs {}", ours.nu, truth.nu);
+    assert!(
+        (step(&c_list, ours.connections as f32) - step(&c_list, truth.connections as f32)).abs() <= 1,
+        "{name}: c {} vs {}",
+        ours.connections,
+        truth.connections
+    );
+    assert!((coverage(&ours) - coverage(&truth)).abs() <= 0.1, "{name}: merge coverage");
+}
+
+#[test]
+fn caustic_glass_decisions_match_the_reference_normalisation() {
+    check("caustic-glass");
+}
+
+#[test]
+fn indirect_room_decisions_match_the_reference_normalisation() {
+    check("indirect-room");
+}
