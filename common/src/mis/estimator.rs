@@ -18,6 +18,17 @@
 //! * [`MergeKernel`]: merge moments (contribution × kernel)² (the literal squared estimate) or
 //!   contribution² × kernel (the reference code).
 //!
+//! Evidence for the defaults (Principled, Squared): `tessera bench --ground-truth 16` (4 pilot
+//! iterations; 19 candidates × 16 iterations each; all six scenes; 2026-11-21). The regret is
+//! the variance-based work-normalised error of the candidate a variant chooses over the best
+//! candidate's. Geometric-mean regret: Principled/Squared 1.000, Reference/Squared 1.027,
+//! Principled/Reference and Reference/Reference 1.044 (the measured second moments of each
+//! candidate themselves: 1.011). Only caustic-glass separates them: Principled/Squared picks
+//! the variance-best ν = 1, c = 1 with merging (Spearman ρ 0.83 against the variances); the
+//! reference kernel picks ν = 0.25, c = 1 without merging (regret 1.29, ρ 0.29), the reference
+//! ratio ν = 0.25 with merging (regret 1.17, ρ 0.75). On the other five scenes all four agree
+//! with the variance-based choice.
+//!
 //! Determinism: camera-path samples of a pixel come from one thread, in order, so they are
 //! added to the pixel's sums directly. Light-tracing samples land in arbitrary pixels from any
 //! thread; they are queued and added at the end of the iteration in (pixel, cache index)
