@@ -55,6 +55,14 @@ pub enum RenderError {
     },
 }
 
+/// A rayon pool of `threads` threads (0 = all cores).
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, RenderError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RenderError::ThreadPool { threads, message: e.to_string() })
+}
+
 /// Renders `scene` with `integrator`. `progress(done, total)` is called after each tile, in
 /// units of pixel-samples (`total` is an estimate under a time budget).
 pub fn render(
@@ -63,10 +71,7 @@ pub fn render(
     opts: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<RenderOutput, RenderError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
+    let pool = thread_pool(opts.threads)?;
     let (w, h) = (scene.camera.width, scene.camera.height);
     // image-level integrators render the full frame, one iteration per tile, parallel inside
     let tiles = if integrator.full_frame() { vec![Rect::full(w, h)] } else { Rect::tiles(w, h, opts.tile_size) };

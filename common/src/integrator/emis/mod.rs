@@ -210,10 +210,7 @@ pub fn render_emis(
     opts: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<EmisOutput, RenderError> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| RenderError::ThreadPool { threads: opts.threads, message: e.to_string() })?;
+    let pool = crate::render::thread_pool(opts.threads)?;
     let (w, h) = (scene.camera.width, scene.camera.height);
     let pixels = w as u64 * h as u64;
     let mut state = EmisState::new(config.clone(), w, h);
@@ -240,19 +237,14 @@ pub fn render_emis(
             state.absorb(&p).expect("invariant: a local pilot has the state's shape");
         }
         done += 1;
-        let total = match opts.budget {
-            Budget::Samples(n) => n as u64,
-            Budget::Time(t) => {
-                ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u64).max(done as u64)
-            }
-        };
-        progress(done as u64 * pixels, total * pixels);
-        // an update is only worth it if iterations remain to use it, and moments are only worth
-        // collecting while another update can still come
+        // iterations the budget will allow at the rate so far
         let expected_total = match opts.budget {
             Budget::Samples(n) => n,
-            Budget::Time(t) => (t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32,
+            Budget::Time(t) => ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32).max(done),
         };
+        progress(done as u64 * pixels, expected_total as u64 * pixels);
+        // an update is only worth it if iterations remain to use it, and moments are only worth
+        // collecting while another update can still come
         if state.update_due(done) && done < expected_total {
             pool.install(|| state.update(&film.average(), done));
         }

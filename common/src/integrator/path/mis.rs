@@ -228,23 +228,30 @@ pub fn weight(p: &PathPdfs, counts: &SampleCounts, t: Technique) -> f32 {
 /// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
 /// technique of the proxy can sample counts as path tracing's (the reference's convention).
 pub fn proxy_weights(p: &PathPdfs, proxy: &SampleCounts) -> ProxyWeights {
+    // densities without the correlation-aware factor; each merge's factor is computed once
+    // below (it is a walk over the path) and used for both the density and the correlated sum
+    let plain = SampleCounts { merge: proxy.merge.map(|m| MergeCounts { correlation_aware: false, ..m }), ..*proxy };
     let mut d = [0.0f32; 2 * MAX_VERTICES];
-    let n = technique_densities(p, proxy, &mut d);
+    let n = technique_densities(p, &plain, &mut d);
+    let k = p.len - 1;
+    let lt_index = k.max(2);
+    let mut factors = [1.0f32; MAX_VERTICES];
+    if let Some(m) = proxy.merge.filter(|m| m.correlation_aware) {
+        for (j, density) in d[lt_index + 1..n].iter_mut().enumerate() {
+            factors[j] = correlation_factor(p, j + 1, &m);
+            *density *= factors[j];
+        }
+    }
     let total: f64 = d[..n].iter().map(|&v| v as f64).sum();
     if !(total > 0.0 && total.is_finite()) {
         return ProxyWeights { pt: 1.0, lt: 0.0, con: 0.0, vm: 0.0, vm_correlated: 0.0 };
     }
-    let k = p.len - 1;
-    let lt_index = k.max(2);
     let share = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>() / total;
     let (mut vm, mut vm_correlated) = (0.0, 0.0);
-    if let Some(m) = &proxy.merge {
-        for (j, &density) in d[lt_index + 1..n].iter().enumerate() {
-            let w = density as f64 / total;
-            let c = if m.correlation_aware { correlation_factor(p, j + 1, m) as f64 } else { 1.0 };
-            vm += w;
-            vm_correlated += c * w;
-        }
+    for (j, &density) in d[lt_index + 1..n].iter().enumerate() {
+        let w = density as f64 / total;
+        vm += w;
+        vm_correlated += factors[j] as f64 * w;
     }
     ProxyWeights { pt: share(0..2), lt: share(lt_index..lt_index + 1), con: share(2..lt_index), vm, vm_correlated }
 }
