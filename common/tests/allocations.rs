@@ -101,7 +101,7 @@ fn connections_and_merges_do_not_allocate() {
         if let Some(w) = next_event(&scene, &camera, k as f32 / 1000.0, Vec2::splat(0.37), &counts, &report) {
             energy += w.value;
         }
-        energy += merge(&scene, &camera, &cache, &photons, radius, 1.0, &counts, 12, &report);
+        energy += merge(&scene, &camera, &cache, &photons, radius, 1.0, &counts, 12, &report).0;
     }
     let made = allocations() - before;
     // the counter does see this thread's allocations
