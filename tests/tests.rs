@@ -129,12 +129,18 @@ fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
     let (_, job) =
         rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 24, "seed": 4}));
     let id = job["id"].as_str().unwrap().to_string();
-    wait_for(TIMEOUT, "first tile", || {
-        (rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64() >= Some(1)).then_some(())
+    let at_kill = wait_for(TIMEOUT, "first tile", || {
+        let job = rest::get_json(&job_url(&c, &id), None).1;
+        (job["tiles_done"].as_u64() >= Some(1)).then_some(job)
     });
     workers[0].kill();
+    assert!(at_kill["tiles_done"].as_u64() < Some(14), "the job was nearly done before the kill: {at_kill}");
     let done = wait_done(&c, &id, None);
     assert_eq!(done["tiles_done"], done["tiles_total"]);
+    // the killed worker always holds a lease (it leases one tile per thread): it expired
+    let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
+    let metrics = String::from_utf8(metrics).unwrap();
+    assert!(!metrics.contains("tessera_leases_expired_total 0"), "{metrics}");
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, &id)), None, &out);
     assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 24, 4));
@@ -237,6 +243,15 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
     assert!(String::from_utf8(metrics).unwrap().contains("tessera_tiles_leased 0"));
     assert_eq!(rest::get(&format!("{}/result.exr", job_url(&c, id)), ct).0, 409);
     assert_eq!(rest::get(&job_url(&c, "no-such-job"), ct).0, 404);
+}
+
+#[test]
+fn image_comparison_notices_a_different_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = local_render(dir.path(), &scene("cornell-box"), "pt", 1, 1);
+    let b = local_render(dir.path(), &scene("cornell-box"), "pt", 1, 2);
+    assert_same_image(&a, &a);
+    assert!(std::panic::catch_unwind(|| assert_same_image(&a, &b)).is_err());
 }
 
 mod bad_results;

@@ -166,7 +166,7 @@ impl JobService {
         {
             let mut inner = svc.lock();
             for id in svc_ids {
-                svc.merge_ready(&mut inner, &id, now_ms, true)?;
+                svc.merge_ready(&mut inner, &id, now_ms)?;
             }
         }
         Ok(svc)
@@ -380,7 +380,7 @@ impl JobService {
             (ResultOutcome::Accepted, Ok(accum)) => {
                 inner.counters.results_accepted += 1;
                 inner.held.insert((lease.job.clone(), lease.tile), accum);
-                self.merge_ready(&mut inner, &lease.job, now_ms, false)?;
+                self.merge_ready(&mut inner, &lease.job, now_ms)?;
                 Ok(outcome)
             }
             (ResultOutcome::Refused(reason), _) => {
@@ -397,15 +397,9 @@ impl JobService {
     }
 
     /// Merges the accepted tiles that are next in order, runs barriers, checkpoints.
-    fn merge_ready(
-        &self,
-        inner: &mut Inner,
-        job: &str,
-        now_ms: u64,
-        force_checkpoint: bool,
-    ) -> Result<(), ServiceError> {
+    fn merge_ready(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let range = inner.model.mergeable(job);
-        if range.is_empty() && !force_checkpoint {
+        if range.is_empty() {
             return Ok(());
         }
         let Some(mut film) = inner.films.remove(job) else { return Ok(()) };
@@ -418,8 +412,7 @@ impl JobService {
             }
         };
         inner.counters.tiles_merged += range.len() as u64;
-        let (action, changes) =
-            if range.is_empty() { (None, Changes::new()) } else { inner.model.merged(job, range.end, now_ms) };
+        let (action, changes) = inner.model.merged(job, range.end, now_ms);
         let upto = inner.model.jobs[job].merged;
         let mut extras = Vec::new();
         let due =

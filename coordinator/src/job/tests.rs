@@ -247,10 +247,14 @@ proptest! {
             prop_assert!(accepted.values().all(|&n| n == 1), "a tile was accepted twice");
             prop_assert!(merges.iter().all(|&n| n <= 1), "a tile was merged twice");
         }
-        if m.jobs["j"].state != JobState::Failed {
-            // a fresh worker drives the job to completion after all leases lapse
-            now += 10 * TTL;
-            m.expire(now);
+        // a fresh worker drives the job to completion after all leases lapse (unless expiring
+        // them pushes a tile over the failure limit, which fails the job)
+        now += 10 * TTL;
+        m.expire(now);
+        if m.jobs["j"].state == JobState::Failed {
+            prop_assert!(m.jobs["j"].tiles.iter().any(|t| t.failures >= MAX_TILE_FAILURES));
+            prop_assert!(m.lease("finisher", 4, now, TTL).0.is_empty());
+        } else {
             for _ in 0..1000 {
                 let (leases, _) = m.lease("finisher", 4, now, TTL);
                 if leases.is_empty() { break; }
