@@ -246,6 +246,14 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
 }
 
 #[test]
+fn serve_refuses_a_public_address_without_tokens() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (ok, _, err) = tessera(&["serve", "--listen", "0.0.0.0:0", "--data-dir", data.to_str().unwrap()]);
+    assert!(!ok && err.contains("refusing to listen on 0.0.0.0:0") && err.contains("--insecure"), "{err}");
+}
+
+#[test]
 fn image_comparison_notices_a_different_seed() {
     let dir = tempfile::tempdir().unwrap();
     let a = local_render(dir.path(), &scene("cornell-box"), "pt", 1, 1);

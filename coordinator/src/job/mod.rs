@@ -9,4 +9,6 @@ pub mod validate;
 pub mod view;
 
 #[cfg(test)]
+mod service_tests;
+#[cfg(test)]
 mod tests;

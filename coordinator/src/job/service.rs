@@ -306,6 +306,12 @@ impl JobService {
             .collect())
     }
 
+    /// The tile a lease refers to.
+    pub fn lease_spec(&self, lease: &LeaseRef) -> Option<TileSpec> {
+        let inner = self.lock();
+        inner.model.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).map(|t| t.spec.clone())
+    }
+
     /// Extends `worker`'s leases; returns those that are no longer current.
     pub fn heartbeat(&self, worker: &str, leases: &[LeaseRef], now_ms: u64) -> Result<Vec<LeaseRef>, ServiceError> {
         let mut inner = self.lock();
@@ -488,7 +494,6 @@ impl JobService {
 
     /// Writes the result EXR and PNG preview as blobs; returns their digests.
     fn write_outputs(&self, spec: &JobSpec, job: &str, film: &Film) -> Result<(String, String), ServiceError> {
-        let rgb = film.average();
         let attributes = vec![
             ("tessera/integrator".to_string(), spec.settings.integrator.to_string()),
             ("tessera/spp".to_string(), film.count.iter().max().copied().unwrap_or(0).to_string()),
@@ -496,17 +501,7 @@ impl JobService {
             ("tessera/scene".to_string(), spec.name.clone()),
             ("tessera/job".to_string(), job.to_string()),
         ];
-        let exr_path = self.blobs.temp_path(".exr");
-        tessera_common::film::exr::write_exr(&exr_path, film.width, film.height, &rgb, Some(&film.count), &attributes)
-            .map_err(|e| ServiceError::Io(std::io::Error::other(e.to_string())))?;
-        let png_path = self.blobs.temp_path(".png");
-        tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
-            .map_err(|e| ServiceError::Io(std::io::Error::other(e.to_string())))?;
-        let exr = self.blobs.put(&std::fs::read(&exr_path)?)?;
-        let png = self.blobs.put(&std::fs::read(&png_path)?)?;
-        let _ = std::fs::remove_file(exr_path);
-        let _ = std::fs::remove_file(png_path);
-        Ok((exr, png))
+        Ok(self.blobs.put_outputs(film, &attributes)?)
     }
 
     /// Cancels a job.

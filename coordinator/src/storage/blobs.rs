@@ -123,6 +123,31 @@ impl BlobStore {
     pub fn temp_path(&self, suffix: &str) -> PathBuf {
         self.root.join("tmp").join(format!("{}{suffix}", uuid::Uuid::new_v4()))
     }
+
+    /// Stores a finished film as an EXR (beauty plus sample counts, with `attributes`) and an
+    /// sRGB PNG preview, exactly as `tessera render` writes them; returns both digests.
+    pub fn put_outputs(&self, film: &Film, attributes: &[(String, String)]) -> std::io::Result<(String, String)> {
+        let rgb = film.average();
+        let exr_path = self.temp_path(".exr");
+        let png_path = self.temp_path(".png");
+        let written = tessera_common::film::exr::write_exr(
+            &exr_path,
+            film.width,
+            film.height,
+            &rgb,
+            Some(&film.count),
+            attributes,
+        )
+        .map_err(|e| std::io::Error::other(e.to_string()))
+        .and_then(|()| {
+            tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
+                .map_err(|e| std::io::Error::other(e.to_string()))
+        })
+        .and_then(|()| Ok((self.put(&std::fs::read(&exr_path)?)?, self.put(&std::fs::read(&png_path)?)?)));
+        let _ = std::fs::remove_file(exr_path);
+        let _ = std::fs::remove_file(png_path);
+        written
+    }
 }
 
 #[cfg(test)]
