@@ -124,14 +124,18 @@ fn scene_with_assets_renders_over_rest() {
 fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
     let dir = tempfile::tempdir().unwrap();
     let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-timeout", "1"]);
-    let mut workers: Vec<_> = (0..3).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let mut workers: Vec<_> =
+        (0..3).map(|i| Worker::start(&c.url, &dir.path().join("cache"), &["--name", &format!("w{i}")])).collect();
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     let (_, job) =
         rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 24, "seed": 4}));
     let id = job["id"].as_str().unwrap().to_string();
+    // kill w0 while it holds a lease, once some tiles are in
     let at_kill = wait_for(TIMEOUT, "first tile", || {
         let job = rest::get_json(&job_url(&c, &id), None).1;
-        (job["tiles_done"].as_u64() >= Some(1)).then_some(job)
+        let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
+        let w0_busy = workers.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"].as_u64() >= Some(1));
+        (job["tiles_done"].as_u64() >= Some(1) && w0_busy).then_some(job)
     });
     workers[0].kill();
     assert!(at_kill["tiles_done"].as_u64() < Some(14), "the job was nearly done before the kill: {at_kill}");

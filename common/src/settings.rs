@@ -141,10 +141,10 @@ impl RenderSettings {
         if self.spp == Some(0) {
             return Err(invalid("spp", "must be at least 1".into()));
         }
-        if let Some(t) = self.time_s {
-            if !(t > 0.0 && t.is_finite()) {
-                return Err(invalid("time_s", format!("must be a positive number of seconds, got {t}")));
-            }
+        if let Some(t) = self.time_s
+            && !(t > 0.0 && t.is_finite())
+        {
+            return Err(invalid("time_s", format!("must be a positive number of seconds, got {t}")));
         }
         let nu = self.light_paths_per_pixel;
         if !(nu >= 0.0 && nu.is_finite()) || (self.integrator == IntegratorName::Lt && nu == 0.0) {

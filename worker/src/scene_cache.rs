@@ -15,10 +15,13 @@ use tokio_stream::StreamExt;
 /// Loaded scenes kept in memory.
 const KEEP_LOADED: usize = 4;
 
+/// A loaded scene's identity: bundle digest and sorted defines.
+type SceneKey = (String, Vec<(String, String)>);
+
 /// The cache.
 pub struct SceneCache {
     dir: PathBuf,
-    loaded: Vec<((String, Vec<(String, String)>), Arc<Scene>)>,
+    loaded: Vec<(SceneKey, Arc<Scene>)>,
 }
 
 fn hex(bytes: &[u8]) -> String {

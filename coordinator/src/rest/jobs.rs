@@ -71,8 +71,7 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
     }
     let svc = st.svc.clone();
     let (settings, priority, name) = settings;
-    let view =
-        blocking(move || svc.submit(bundle, settings, priority, name, now_ms())).await.map_err(ApiError::from)?;
+    let view = blocking(move || svc.submit(bundle, settings, priority, name, now_ms())).await?;
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 

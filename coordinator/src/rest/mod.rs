@@ -32,5 +32,34 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/metrics", get(jobs::metrics))
         .route("/api/v1/metrics", get(jobs::metrics))
         .layer(DefaultBodyLimit::max(limit))
+        .layer(axum::middleware::from_fn_with_state(limit, refuse_oversized))
         .with_state(state)
+}
+
+/// Bodies up to this much over the limit are read and discarded before the 413 goes out.
+const DRAIN_CAP: u64 = 64 << 20;
+
+/// Answers 413 to a request whose `Content-Length` exceeds the upload limit. A modestly
+/// oversized body is read and discarded first: closing the socket while the client is still
+/// sending makes it see a connection reset instead of the 413. (Chunked bodies without a
+/// length are cut off by `DefaultBodyLimit` as they are read.)
+async fn refuse_oversized(
+    axum::extract::State(limit): axum::extract::State<usize>,
+    req: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    use axum::response::IntoResponse;
+    use tokio_stream::StreamExt;
+    let length = req.headers().get(http::header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+    match length {
+        Some(n) if n > limit as u64 => {
+            if n <= limit as u64 + DRAIN_CAP {
+                let mut body = req.into_body().into_data_stream();
+                while let Some(Ok(_)) = body.next().await {}
+            }
+            let message = format!("upload of {n} bytes exceeds the limit of {limit} bytes (--max-upload-mb)");
+            crate::error::ApiError::new(crate::error::ErrorCode::PayloadTooLarge, message).into_response()
+        }
+        _ => next.run(req).await,
+    }
 }
