@@ -151,6 +151,31 @@ fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
 }
 
 #[test]
+fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    // leases would take a minute to expire: only the drain can deliver the tile in time
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-timeout", "60"]);
+    let mut w = Worker::start(&c.url, &dir.path().join("cache"), &["--name", "w0"]);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (_, job) =
+        rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 32, "seed": 1}));
+    let id = job["id"].as_str().unwrap().to_string();
+    wait_for(TIMEOUT, "a lease", || {
+        let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
+        workers.as_array()?.iter().any(|w| w["leases"].as_u64() >= Some(1)).then_some(())
+    });
+    let before = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64().unwrap();
+    // SAFETY: signalling our own child process
+    unsafe { libc::kill(w.child.id() as i32, libc::SIGTERM) };
+    let status = wait_for(TIMEOUT, "the worker to drain", || w.child.try_wait().unwrap());
+    assert!(status.success(), "{status:?}");
+    let (_, job) = rest::get_json(&job_url(&c, &id), None);
+    assert!(job["tiles_done"].as_u64().unwrap() > before, "the tile in hand was not uploaded: {job}");
+    let (_, workers) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
+    assert_eq!(workers[0]["leases"], 0, "{workers}");
+}
+
+#[test]
 fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
