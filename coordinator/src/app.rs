@@ -46,6 +46,9 @@ pub struct ServeArgs {
     pub max_upload_mb: usize,
 }
 
+/// How long a graceful shutdown waits for open requests (long polls, watch streams).
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
+
 /// What the API layers share.
 pub struct AppState {
     /// The domain service.
@@ -148,7 +151,22 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             })
         };
-        axum::serve(listener, router(state, tokens)).with_graceful_shutdown(shutdown_signal()).await?;
+        // graceful shutdown waits for requests in flight, but long polls and watch streams may
+        // not end by themselves: give them DRAIN_TIMEOUT, then stop (every transition is
+        // already persisted, so stopping is safe)
+        let (stopping_tx, mut stopping) = tokio::sync::watch::channel(false);
+        let server = axum::serve(listener, router(state, tokens)).with_graceful_shutdown(async move {
+            shutdown_signal().await;
+            tracing::info!("shutting down");
+            let _ = stopping_tx.send(true);
+        });
+        tokio::select! {
+            r = server => r?,
+            _ = async {
+                let _ = stopping.wait_for(|s| *s).await;
+                tokio::time::sleep(DRAIN_TIMEOUT).await;
+            } => tracing::warn!("requests still open after the drain timeout; stopping anyway"),
+        }
         ticker.abort();
         tracing::info!("coordinator stopped");
         Ok(())

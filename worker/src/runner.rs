@@ -125,6 +125,7 @@ async fn work_loop(
 }
 
 /// Renders one batch of leases (all of one job) and uploads the results.
+#[tracing::instrument(skip_all, fields(job_id = %leases[0].lease.as_ref().map_or("", |l| l.job_id.as_str()), tiles = leases.len()))]
 async fn render_and_upload(
     client: &mut Client,
     worker: &str,

@@ -129,18 +129,51 @@ async fn follow(c: &mut Client, id: &str) -> anyhow::Result<pb::Job> {
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let mut stream =
-        c.jobs.watch_job(c.request(pb::GetJobRequest { id: id.to_string() })).await.map_err(status_error)?.into_inner();
-    let mut last = None;
-    while let Some(job) = stream.next().await {
-        let job = job.map_err(status_error)?;
-        bar.set_position((job.progress * 1000.0) as u64);
-        let eta = job.eta_s.map(|e| format!(" eta {e:.0}s")).unwrap_or_default();
-        bar.set_message(format!("{} {}/{} tiles{eta}", job.phase, job.tiles_done, job.tiles_total));
-        last = Some(job);
+    // a coordinator restart resumes the job, so a lost connection is retried for a while
+    let mut lost_since: Option<std::time::Instant> = None;
+    loop {
+        let watched = async {
+            let req = c.request(pb::GetJobRequest { id: id.to_string() });
+            let mut stream = c.jobs.watch_job(req).await?.into_inner();
+            let mut last = None;
+            while let Some(job) = stream.next().await {
+                let job = job?;
+                lost_since = None;
+                bar.set_position((job.progress * 1000.0) as u64);
+                let eta = job.eta_s.map(|e| format!(" eta {e:.0}s")).unwrap_or_default();
+                bar.set_message(format!("{} {}/{} tiles{eta}", job.phase, job.tiles_done, job.tiles_total));
+                last = Some(job);
+            }
+            Ok::<_, tonic::Status>(last)
+        }
+        .await;
+        match watched {
+            Ok(Some(job)) if is_final(&job) => {
+                bar.finish_and_clear();
+                return Ok(job);
+            }
+            Ok(_) => {}
+            Err(s) if !matches!(s.code(), tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal) => {
+                bar.finish_and_clear();
+                return Err(status_error(s));
+            }
+            Err(s) if lost_since.is_some_and(|t| t.elapsed() > RECONNECT_FOR) => {
+                bar.finish_and_clear();
+                return Err(status_error(s).context("lost the coordinator"));
+            }
+            Err(_) => {}
+        }
+        lost_since.get_or_insert_with(std::time::Instant::now);
+        bar.set_message("coordinator unreachable, retrying");
+        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
     }
-    bar.finish_and_clear();
-    last.context("the coordinator closed the watch stream without a job")
+}
+
+/// How long `--wait` keeps retrying an unreachable coordinator.
+const RECONNECT_FOR: std::time::Duration = std::time::Duration::from_secs(120);
+
+fn is_final(job: &pb::Job) -> bool {
+    [pb::JobState::Done, pb::JobState::Failed, pb::JobState::Cancelled].iter().any(|s| *s as i32 == job.state)
 }
 
 async fn download(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> anyhow::Result<()> {

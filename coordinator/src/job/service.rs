@@ -188,6 +188,7 @@ impl JobService {
     }
 
     /// Validates and stores a scene bundle and settings, and queues the job.
+    #[tracing::instrument(skip_all, fields(scene = %bundle.scene_path))]
     pub fn submit(
         &self,
         bundle: Bundle,
@@ -350,6 +351,7 @@ impl JobService {
 
     /// An uploaded result: validated, stored, accepted once for the current epoch, merged in
     /// tile order. A refused result re-queues its tile and returns [`ServiceError::InvalidResult`].
+    #[tracing::instrument(skip_all, fields(job_id = %lease.job, tile = lease.tile, epoch = lease.epoch, worker))]
     pub fn upload(
         &self,
         worker: &str,
