@@ -130,12 +130,21 @@ fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
     let (_, job) =
         rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 24, "seed": 4}));
     let id = job["id"].as_str().unwrap().to_string();
-    // kill w0 while it holds a lease, once some tiles are in
-    let at_kill = wait_for(TIMEOUT, "first tile", || {
+    // kill w0 while it holds a lease, once some tiles are in: freeze it (SIGSTOP), check that it
+    // holds a lease, else let it go on and try again
+    let pid = workers[0].child.id() as i32;
+    let at_kill = wait_for(TIMEOUT, "w0 to hold a lease after the first tile", || {
         let job = rest::get_json(&job_url(&c, &id), None).1;
+        // SAFETY: signalling our own child process
+        unsafe { libc::kill(pid, libc::SIGSTOP) };
         let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
         let w0_busy = workers.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"].as_u64() >= Some(1));
-        (job["tiles_done"].as_u64() >= Some(1) && w0_busy).then_some(job)
+        let ready = job["tiles_done"].as_u64() >= Some(1) && w0_busy;
+        if !ready {
+            // SAFETY: as above
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+        }
+        ready.then_some(job)
     });
     workers[0].kill();
     assert!(at_kill["tiles_done"].as_u64() < Some(14), "the job was nearly done before the kill: {at_kill}");
@@ -160,11 +169,11 @@ fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
     let (_, job) =
         rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 32, "seed": 1}));
     let id = job["id"].as_str().unwrap().to_string();
-    wait_for(TIMEOUT, "a lease", || {
+    let before = wait_for(TIMEOUT, "a lease", || {
+        let before = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64()?;
         let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
-        workers.as_array()?.iter().any(|w| w["leases"].as_u64() >= Some(1)).then_some(())
+        workers.as_array()?.iter().any(|w| w["leases"].as_u64() >= Some(1)).then_some(before)
     });
-    let before = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64().unwrap();
     // SAFETY: signalling our own child process
     unsafe { libc::kill(w.child.id() as i32, libc::SIGTERM) };
     let status = wait_for(TIMEOUT, "the worker to drain", || w.child.try_wait().unwrap());
@@ -172,7 +181,7 @@ fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
     let (_, job) = rest::get_json(&job_url(&c, &id), None);
     assert!(job["tiles_done"].as_u64().unwrap() > before, "the tile in hand was not uploaded: {job}");
     let (_, workers) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
-    assert_eq!(workers[0]["leases"], 0, "{workers}");
+    assert_eq!(workers[0]["leases"], 0, "the worker left a lease behind: {workers}");
 }
 
 #[test]

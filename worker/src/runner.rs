@@ -13,8 +13,8 @@ use std::time::Duration;
 use tessera_proto::v1 as pb;
 use tokio::sync::watch;
 
-/// How long a lease request waits for work.
-const LEASE_WAIT_MS: u32 = 10_000;
+/// How long a lease request waits for work (and so the longest a drain waits for one).
+const LEASE_WAIT_MS: u32 = 5_000;
 /// How long an upload is retried while the coordinator is unreachable.
 const UPLOAD_RETRY: Duration = Duration::from_secs(120);
 
@@ -97,7 +97,7 @@ async fn work_loop(
     pool: &Arc<rayon::ThreadPool>,
     cache: &mut SceneCache,
     held: &Arc<Mutex<Held>>,
-    mut drain: watch::Receiver<bool>,
+    drain: watch::Receiver<bool>,
 ) -> anyhow::Result<()> {
     loop {
         if *drain.borrow() {
@@ -105,11 +105,14 @@ async fn work_loop(
         }
         let req =
             client.request(pb::LeaseTileRequest { worker_id: worker.to_string(), max_tiles, wait_ms: LEASE_WAIT_MS });
-        let mut lease_client = client.inner.clone();
-        let leases = tokio::select! {
-            r = lease_client.lease_tile(req) => r?.into_inner().leases,
-            _ = drain.wait_for(|v| *v) => return Ok(()),
-        };
+        // a lease request is never abandoned, not even to drain: the coordinator may already
+        // have granted it, and a dropped grant would sit idle until its lease expires
+        let timeout = Duration::from_millis(LEASE_WAIT_MS as u64) + Duration::from_secs(10);
+        let leases = tokio::time::timeout(timeout, client.inner.lease_tile(req))
+            .await
+            .map_err(|_| anyhow::anyhow!("lease request timed out"))??
+            .into_inner()
+            .leases;
         if leases.is_empty() {
             continue;
         }
