@@ -12,6 +12,7 @@
 #![deny(missing_docs)]
 
 pub mod bsdf;
+pub mod bundle;
 pub mod camera;
 pub mod film;
 pub mod geometry;
@@ -22,5 +23,6 @@ pub mod mis;
 pub mod render;
 pub mod sampler;
 pub mod scene;
+pub mod settings;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;

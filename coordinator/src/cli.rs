@@ -84,6 +84,14 @@ pub enum Command {
     Render(RenderArgs),
     /// Measure rendering speed (samples per second) on scenes.
     Bench(crate::bench::BenchArgs),
+    /// Run the farm coordinator: gRPC and REST on one port, jobs kept in --data-dir.
+    Serve(crate::app::ServeArgs),
+    /// Submit a scene (and every file it references) to a coordinator.
+    Submit(crate::client::submit::SubmitArgs),
+    /// Show one job or all jobs of a coordinator.
+    Status(crate::client::StatusArgs),
+    /// Cancel a job on a coordinator.
+    Cancel(crate::client::CancelArgs),
 }
 
 /// Arguments of `tessera render`.
@@ -145,5 +153,9 @@ pub fn run() -> anyhow::Result<()> {
     match cli.command {
         Command::Render(args) => crate::local::render_command(&args),
         Command::Bench(args) => crate::bench::bench_command(&args),
+        Command::Serve(args) => crate::app::serve_command(&args),
+        Command::Submit(args) => crate::client::submit::submit_command(&args),
+        Command::Status(args) => crate::client::status_command(&args),
+        Command::Cancel(args) => crate::client::cancel_command(&args),
     }
 }

@@ -1,0 +1,222 @@
+//! Render settings as plain data: what a farm job carries from client to coordinator to worker
+//! (serde, so REST and storage can use JSON), and the one function that turns them plus a
+//! loaded scene into an [`Integrator`].
+//!
+//! The rules are those of `tessera render` (`coordinator/src/local.rs`): unset values come from
+//! the scene file (spp and seed from its sampler, max depth from its integrator), so a farm job
+//! and a local render with the same settings build the same integrator and the same tiles.
+//!
+//! ```
+//! use tessera_common::settings::{IntegratorName, RenderSettings};
+//! let s: RenderSettings = serde_json::from_str(r#"{"integrator": "vcm", "spp": 4}"#).unwrap();
+//! assert_eq!(s.integrator, IntegratorName::Vcm);
+//! assert!(s.validate().is_ok());
+//! ```
+
+use crate::integrator::vcm::{MergeConfig, MergeMask};
+use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
+use crate::scene::Scene;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+
+/// The rendering algorithms a job can ask for.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IntegratorName {
+    /// Path tracing.
+    #[default]
+    Pt,
+    /// Light tracing.
+    Lt,
+    /// Bidirectional path tracing.
+    Bdpt,
+    /// Vertex connection and merging.
+    Vcm,
+}
+
+impl IntegratorName {
+    /// Every name, for messages.
+    pub const ALL: [IntegratorName; 4] =
+        [IntegratorName::Pt, IntegratorName::Lt, IntegratorName::Bdpt, IntegratorName::Vcm];
+
+    /// The command-line and wire spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IntegratorName::Pt => "pt",
+            IntegratorName::Lt => "lt",
+            IntegratorName::Bdpt => "bdpt",
+            IntegratorName::Vcm => "vcm",
+        }
+    }
+
+    /// Whether tiles are full frames × iteration ranges (light paths are image-level).
+    pub fn full_frame(self) -> bool {
+        !matches!(self, IntegratorName::Pt)
+    }
+}
+
+impl std::str::FromStr for IntegratorName {
+    type Err = SettingsError;
+    fn from_str(s: &str) -> Result<Self, SettingsError> {
+        IntegratorName::ALL.into_iter().find(|n| n.as_str() == s).ok_or_else(|| SettingsError::Invalid {
+            field: "integrator",
+            message: format!("unknown integrator \"{s}\" (expected pt, lt, bdpt or vcm)"),
+        })
+    }
+}
+
+impl std::fmt::Display for IntegratorName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Settings of one render. `None` means "the scene file's value".
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Algorithm.
+    pub integrator: IntegratorName,
+    /// Samples per pixel (iterations for lt, bdpt, vcm).
+    pub spp: Option<u32>,
+    /// Time budget in seconds, instead of `spp`.
+    pub time_s: Option<f64>,
+    /// Seed of every random number.
+    pub seed: Option<u64>,
+    /// Longest path in segments counting the camera ray; -1 = unlimited.
+    pub max_depth: Option<i64>,
+    /// Light paths per pixel per iteration (ν).
+    pub light_paths_per_pixel: f32,
+    /// Connections per camera vertex (c).
+    pub connections: u32,
+    /// Vertex merging (vcm).
+    pub merge: bool,
+    /// Correlation-aware MIS for merges (vcm).
+    pub correlation_aware: bool,
+    /// Scene parameter overrides (`-D name=value`).
+    pub defines: BTreeMap<String, String>,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            integrator: IntegratorName::Pt,
+            spp: None,
+            time_s: None,
+            seed: None,
+            max_depth: None,
+            light_paths_per_pixel: 1.0,
+            connections: 1,
+            merge: true,
+            correlation_aware: true,
+            defines: BTreeMap::new(),
+        }
+    }
+}
+
+/// Settings that cannot work.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SettingsError {
+    /// A field has an unusable value.
+    #[error("settings field \"{field}\": {message}")]
+    Invalid {
+        /// The field at fault.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn invalid(field: &'static str, message: String) -> SettingsError {
+    SettingsError::Invalid { field, message }
+}
+
+impl RenderSettings {
+    /// Checks the values that do not need the scene.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        if self.spp.is_some() && self.time_s.is_some() {
+            return Err(invalid("time_s", "spp and time_s exclude each other".into()));
+        }
+        if self.spp == Some(0) {
+            return Err(invalid("spp", "must be at least 1".into()));
+        }
+        if let Some(t) = self.time_s
+            && !(t > 0.0 && t.is_finite())
+        {
+            return Err(invalid("time_s", format!("must be a positive number of seconds, got {t}")));
+        }
+        let nu = self.light_paths_per_pixel;
+        if !(nu >= 0.0 && nu.is_finite()) || (self.integrator == IntegratorName::Lt && nu == 0.0) {
+            return Err(invalid(
+                "light_paths_per_pixel",
+                format!("must be positive (or 0 for bdpt and vcm: no light paths), got {nu}"),
+            ));
+        }
+        self.max_depth_limit()?;
+        Ok(())
+    }
+
+    /// `max_depth` as the integrators take it (`None` = the scene's).
+    fn max_depth_limit(&self) -> Result<Option<u32>, SettingsError> {
+        match self.max_depth {
+            None => Ok(None),
+            Some(-1) => Ok(Some(u32::MAX)),
+            Some(d) if d >= 0 => Ok(Some(d.min(u32::MAX as i64) as u32)),
+            Some(d) => Err(invalid("max_depth", format!("must be -1 (unlimited) or non-negative, got {d}"))),
+        }
+    }
+
+    /// The defines as the scene loader takes them.
+    pub fn define_map(&self) -> HashMap<String, String> {
+        self.defines.iter().map(|(k, v)| (k.clone(), v.clone())).collect()
+    }
+
+    /// A copy with the scene's defaults filled in: `spp` (unless a time budget is set) and
+    /// `seed`, so that every worker renders with exactly the same values.
+    pub fn resolved(&self, scene: &Scene) -> RenderSettings {
+        let mut s = self.clone();
+        if s.time_s.is_none() {
+            s.spp = Some(s.spp.unwrap_or(scene.spp));
+        }
+        s.seed = Some(s.seed.unwrap_or(scene.seed));
+        s
+    }
+
+    /// Builds the integrator, with the same rules as `tessera render`.
+    pub fn make_integrator(&self, scene: &Scene) -> Result<Box<dyn Integrator>, SettingsError> {
+        self.validate()?;
+        let settings = PathSettings::from_scene(scene, self.max_depth_limit()?);
+        let (nu, c) = (self.light_paths_per_pixel, self.connections);
+        Ok(match self.integrator {
+            IntegratorName::Pt => Box::new(PathTracer { settings }),
+            IntegratorName::Lt => Box::new(LightTracer { settings, light_paths_per_pixel: nu }),
+            IntegratorName::Bdpt => Box::new(Bidir::bdpt(settings, nu, c)),
+            IntegratorName::Vcm => {
+                let mask = MergeMask::Constant(if self.merge { 1.0 } else { 0.0 });
+                Box::new(Bidir::vcm(settings, nu, c, MergeConfig { mask, correlation_aware: self.correlation_aware }))
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_reject_spp_with_time_and_name_the_field() {
+        let s = RenderSettings { spp: Some(4), time_s: Some(1.0), ..Default::default() };
+        assert!(s.validate().unwrap_err().to_string().contains("time_s"));
+        let s = RenderSettings { max_depth: Some(-3), ..Default::default() };
+        assert!(s.validate().unwrap_err().to_string().contains("max_depth"));
+    }
+
+    #[test]
+    fn settings_json_rejects_unknown_fields() {
+        let e = serde_json::from_str::<RenderSettings>(r#"{"integrator":"pt","sppp":3}"#).unwrap_err();
+        assert!(e.to_string().contains("sppp"), "{e}");
+        assert_eq!("bdpt".parse::<IntegratorName>().unwrap(), IntegratorName::Bdpt);
+        assert!("emis".parse::<IntegratorName>().is_err());
+    }
+}

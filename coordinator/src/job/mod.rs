@@ -1,0 +1,14 @@
+//! Jobs: the pure state machine ([`model`]), how jobs are cut into tiles and passes
+//! ([`plan`]), result validation ([`validate`]) and the service that wraps them with storage
+//! and notifications ([`service`]).
+
+pub mod model;
+pub mod plan;
+pub mod service;
+pub mod validate;
+pub mod view;
+
+#[cfg(test)]
+mod service_tests;
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,273 @@
+//! Tests of the pure job state machine: every transition, plus property tests over arbitrary
+//! interleavings of lease, heartbeat, expiry, result and failure events.
+
+use super::model::*;
+use super::plan::BarrierAction;
+use proptest::prelude::*;
+use tessera_common::settings::{IntegratorName, RenderSettings};
+
+const TTL: u64 = 1000;
+
+fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
+    JobSpec {
+        name: "j".into(),
+        priority,
+        settings: RenderSettings { integrator, spp: Some(spp), seed: Some(7), ..Default::default() },
+        width: 128,
+        height: 128,
+        full_frame: integrator.full_frame(),
+        bundle_digest: "digest".into(),
+        scene_path: "scene.xml".into(),
+    }
+}
+
+/// Merges whatever can be merged, as the service does, and counts merges per tile.
+fn merge_all(m: &mut JobsModel, job: &str, merges: &mut Vec<u32>, now: u64) {
+    loop {
+        let r = m.mergeable(job);
+        if r.is_empty() {
+            return;
+        }
+        for i in r.clone() {
+            if merges.len() <= i {
+                merges.resize(i + 1, 0);
+            }
+            merges[i] += 1;
+        }
+        m.merged(job, r.end, now);
+    }
+}
+
+#[test]
+fn job_runs_queued_final_done_and_merges_in_order() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 4, 0), 0).unwrap();
+    assert_eq!(m.jobs["a"].state, JobState::Queued);
+    assert_eq!(m.jobs["a"].tiles.len(), 4);
+    let (leases, _) = m.lease("w1", 4, 10, TTL);
+    assert_eq!(leases.len(), 4);
+    assert_eq!(m.jobs["a"].state, JobState::Final);
+    // results arrive out of order: nothing merges until tile 0 is in
+    for l in leases.iter().rev().take(3) {
+        assert_eq!(m.result("w1", l, Ok(()), 20).0, ResultOutcome::Accepted);
+    }
+    assert!(m.mergeable("a").is_empty());
+    m.result("w1", &leases[0], Ok(()), 20);
+    assert_eq!(m.mergeable("a"), 0..4);
+    let (action, _) = m.merged("a", 4, 30);
+    assert_eq!(action, Some(BarrierAction::Finish));
+    assert_eq!(m.jobs["a"].state, JobState::Done);
+    assert_eq!(m.jobs["a"].samples_merged(), 128 * 128 * 4);
+}
+
+#[test]
+fn expired_lease_requeues_with_next_epoch_and_late_result_is_stale() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Vcm, 2, 0), 0).unwrap();
+    let (l, _) = m.lease("w1", 8, 0, TTL);
+    assert_eq!(l.len(), 1, "full-frame jobs lease one tile at a time");
+    assert_eq!(m.heartbeat("w1", &l, 900, TTL), vec![]);
+    assert!(m.expire(1500).is_empty(), "the heartbeat extended the lease");
+    let changes = m.expire(1900);
+    assert_eq!(changes["a"].iter().copied().collect::<Vec<_>>(), vec![0]);
+    assert_eq!(m.jobs["a"].tiles[0].epoch, 1);
+    assert_eq!(m.result("w1", &l[0], Ok(()), 2000).0, ResultOutcome::Stale);
+    assert_eq!(m.heartbeat("w1", &l, 2000, TTL), l, "the old lease is reported lost");
+    let (l2, _) = m.lease("w2", 1, 2000, TTL);
+    assert_eq!(l2[0], LeaseRef { job: "a".into(), tile: 0, epoch: 1 });
+    assert_eq!(m.result("w2", &l2[0], Ok(()), 2100).0, ResultOutcome::Accepted);
+    assert_eq!(m.result("w2", &l2[0], Ok(()), 2100).0, ResultOutcome::Duplicate);
+}
+
+#[test]
+fn refused_result_requeues_and_repeat_offender_is_blocklisted() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    for round in 0..BLOCKLIST_AFTER_FAILURES {
+        let (l, _) = m.lease("bad", 1, 0, TTL);
+        assert_eq!(l.len(), 1, "round {round}");
+        let (outcome, _) = m.result("bad", &l[0], Err("sum is NaN".into()), 0);
+        assert_eq!(outcome, ResultOutcome::Refused("sum is NaN".into()));
+        assert_eq!(m.jobs["a"].tiles[l[0].tile].state, TileState::Queued);
+    }
+    assert!(m.jobs["a"].is_blocklisted("bad"));
+    assert!(m.lease("bad", 1, 0, TTL).0.is_empty());
+    assert_eq!(m.lease("good", 1, 0, TTL).0.len(), 1);
+}
+
+#[test]
+fn tile_failing_too_often_fails_the_job() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Bdpt, 1, 0), 0).unwrap();
+    for k in 0..MAX_TILE_FAILURES {
+        let (l, _) = m.lease(&format!("w{k}"), 1, 0, TTL);
+        m.report_failure(&format!("w{k}"), &l[0], "scene failed to load", 0);
+    }
+    assert_eq!(m.jobs["a"].state, JobState::Failed);
+    assert!(m.jobs["a"].error.as_deref().unwrap().contains("scene failed to load"));
+    assert!(m.lease("w9", 1, 0, TTL).0.is_empty());
+}
+
+#[test]
+fn priorities_order_jobs_then_submission_order() {
+    let mut m = JobsModel::default();
+    m.submit("low", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    m.submit("high", spec(IntegratorName::Pt, 1, 5), 1).unwrap();
+    m.submit("high2", spec(IntegratorName::Pt, 1, 5), 2).unwrap();
+    assert!(m.lease("w", 4, 0, TTL).0.iter().all(|l| l.job == "high"));
+    assert!(m.lease("w", 4, 0, TTL).0.iter().all(|l| l.job == "high2"));
+    assert!(m.lease("w", 4, 0, TTL).0.iter().all(|l| l.job == "low"));
+}
+
+#[test]
+fn cancel_stops_dispatch_and_makes_results_stale() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    let (l, _) = m.lease("w", 1, 0, TTL);
+    m.cancel("a", 1).unwrap();
+    assert_eq!(m.jobs["a"].state, JobState::Cancelled);
+    assert!(m.lease("w", 4, 2, TTL).0.is_empty());
+    assert_eq!(m.result("w", &l[0], Ok(()), 3).0, ResultOutcome::Stale);
+    assert!(m.mergeable("a").is_empty());
+    assert!(m.cancel("nope", 0).is_err());
+}
+
+#[test]
+fn time_budget_plans_passes_at_barriers() {
+    let mut m = JobsModel::default();
+    let mut s = spec(IntegratorName::Pt, 1, 0);
+    s.settings.spp = None;
+    s.settings.time_s = Some(1.0);
+    m.submit("a", s, 0).unwrap();
+    let (l, _) = m.lease("w", 8, 0, TTL);
+    for x in &l {
+        m.result("w", x, Ok(()), 10);
+    }
+    let (action, changes) = m.merged("a", 4, 10);
+    assert!(matches!(action, Some(BarrierAction::NextPass(_))));
+    assert_eq!(m.jobs["a"].passes.len(), 2);
+    assert_eq!(changes["a"].len(), 8, "the merged tiles and the new pass's tiles");
+    assert_eq!(m.jobs["a"].tiles[4].spec.samples.start, 1);
+}
+
+#[test]
+fn optimizer_hook_plans_the_final_pass_only_at_a_barrier() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    assert_eq!(m.optimized("a", vec![]), Err(TransitionError::NotOptimizing("a".into())));
+    m.jobs.get_mut("a").unwrap().state = JobState::Optimizing;
+    let tiles = super::plan::pass_tiles(&m.jobs["a"].spec, 1, 2);
+    m.optimized("a", tiles).unwrap();
+    assert_eq!(m.jobs["a"].state, JobState::Final);
+    assert_eq!(m.jobs["a"].passes.len(), 2);
+}
+
+/// One step of a random schedule.
+#[derive(Clone, Debug)]
+enum Event {
+    Lease { worker: usize, max: usize },
+    Heartbeat { worker: usize },
+    Advance { ms: u64 },
+    Result { pick: usize, valid: bool, wrong_worker: bool },
+    Fail { pick: usize },
+}
+
+fn event() -> impl Strategy<Value = Event> {
+    prop_oneof![
+        (0..3usize, 1..4usize).prop_map(|(worker, max)| Event::Lease { worker, max }),
+        (0..3usize).prop_map(|worker| Event::Heartbeat { worker }),
+        (0..1500u64).prop_map(|ms| Event::Advance { ms }),
+        (0..64usize, proptest::bool::weighted(0.85), proptest::bool::weighted(0.05))
+            .prop_map(|(pick, valid, wrong_worker)| Event::Result { pick, valid, wrong_worker }),
+        (0..64usize).prop_map(|pick| Event::Fail { pick }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    /// Under any interleaving, each tile is accepted at most once, merged exactly once when
+    /// the job completes, epochs never go back, and the merged prefix is exactly the merged
+    /// tiles; a fresh well-behaved worker always finishes a job that has not failed.
+    #[test]
+    fn exactly_once_merge_under_arbitrary_interleavings(
+        events in proptest::collection::vec(event(), 1..120),
+        full_frame in any::<bool>(),
+        spp in 1..4u32,
+    ) {
+        let integrator = if full_frame { IntegratorName::Vcm } else { IntegratorName::Pt };
+        let mut m = JobsModel::default();
+        m.submit("j", spec(integrator, spp, 0), 0).unwrap();
+        let mut now = 0u64;
+        let mut issued: Vec<(String, LeaseRef)> = Vec::new();
+        let mut merges = Vec::new();
+        let mut accepted = std::collections::HashMap::<usize, u32>::new();
+        let mut epochs: Vec<u64> = m.jobs["j"].tiles.iter().map(|t| t.epoch).collect();
+        for e in events {
+            match e {
+                Event::Lease { worker, max } => {
+                    let w = format!("w{worker}");
+                    let blocked = m.jobs["j"].is_blocklisted(&w);
+                    let (leases, _) = m.lease(&w, max, now, TTL);
+                    prop_assert!(!blocked || leases.is_empty(), "a blocklisted worker got a lease");
+                    issued.extend(leases.into_iter().map(|l| (w.clone(), l)));
+                }
+                Event::Heartbeat { worker } => {
+                    let w = format!("w{worker}");
+                    let mine: Vec<LeaseRef> = issued.iter().filter(|(x, _)| *x == w).map(|(_, l)| l.clone()).collect();
+                    m.heartbeat(&w, &mine, now, TTL);
+                }
+                Event::Advance { ms } => {
+                    now += ms;
+                    m.expire(now);
+                }
+                Event::Result { pick, valid, wrong_worker } if !issued.is_empty() => {
+                    let (w, l) = issued[pick % issued.len()].clone();
+                    let w = if wrong_worker { "intruder".to_string() } else { w };
+                    let verdict = if valid { Ok(()) } else { Err("bad".to_string()) };
+                    let (outcome, _) = m.result(&w, &l, verdict, now);
+                    if outcome == ResultOutcome::Accepted {
+                        *accepted.entry(l.tile).or_default() += 1;
+                        prop_assert_eq!(m.jobs["j"].tiles[l.tile].epoch, l.epoch);
+                    }
+                }
+                Event::Fail { pick } if !issued.is_empty() => {
+                    let (w, l) = issued[pick % issued.len()].clone();
+                    m.report_failure(&w, &l, "failed", now);
+                }
+                _ => {}
+            }
+            merge_all(&mut m, "j", &mut merges, now);
+            let job = &m.jobs["j"];
+            for (i, t) in job.tiles.iter().enumerate() {
+                prop_assert!(t.epoch >= epochs[i], "epoch went back");
+                prop_assert_eq!(t.state == TileState::Merged, i < job.merged);
+            }
+            epochs = job.tiles.iter().map(|t| t.epoch).collect();
+            prop_assert!(accepted.values().all(|&n| n == 1), "a tile was accepted twice");
+            prop_assert!(merges.iter().all(|&n| n <= 1), "a tile was merged twice");
+        }
+        // a fresh worker drives the job to completion after all leases lapse (unless expiring
+        // them pushes a tile over the failure limit, which fails the job)
+        now += 10 * TTL;
+        m.expire(now);
+        if m.jobs["j"].state == JobState::Failed {
+            prop_assert!(m.jobs["j"].tiles.iter().any(|t| t.failures >= MAX_TILE_FAILURES));
+            prop_assert!(m.lease("finisher", 4, now, TTL).0.is_empty());
+        } else {
+            for _ in 0..1000 {
+                let (leases, _) = m.lease("finisher", 4, now, TTL);
+                if leases.is_empty() { break; }
+                for l in leases {
+                    prop_assert_eq!(m.result("finisher", &l, Ok(()), now).0, ResultOutcome::Accepted);
+                }
+                merge_all(&mut m, "j", &mut merges, now);
+            }
+            let job = &m.jobs["j"];
+            prop_assert_eq!(job.state, JobState::Done);
+            prop_assert_eq!(merges.len(), job.tiles.len());
+            prop_assert!(merges.iter().all(|&n| n == 1));
+            prop_assert_eq!(job.samples_merged(), 128 * 128 * spp as u64);
+        }
+    }
+}

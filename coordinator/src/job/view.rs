@@ -1,0 +1,99 @@
+//! Read-only views of jobs and workers that the API layers encode (REST JSON, gRPC messages):
+//! state, phase, progress, tiles, samples and an ETA computed from the model and the time.
+
+use super::model::{Job, JobState};
+use tessera_common::settings::RenderSettings;
+
+/// A job as clients see it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JobView {
+    /// Id.
+    pub id: String,
+    /// Display name.
+    pub name: String,
+    /// Lifecycle state.
+    pub state: JobState,
+    /// E.g. `final pass 1/1`.
+    pub phase: String,
+    /// 0..1.
+    pub progress: f64,
+    /// Tiles accepted or merged.
+    pub tiles_done: u64,
+    /// Tiles planned.
+    pub tiles_total: u64,
+    /// Pixel samples merged.
+    pub samples_done: u64,
+    /// Estimated seconds left.
+    pub eta_s: Option<f64>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// Priority.
+    pub priority: i32,
+    /// Resolved settings.
+    pub settings: RenderSettings,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Submission time (Unix ms).
+    pub created_ms: u64,
+    /// Bundle digest.
+    pub scene_digest: String,
+}
+
+impl JobView {
+    /// The view of `job` at `now_ms`.
+    pub fn of(job: &Job, now_ms: u64) -> JobView {
+        let elapsed_s = job.started_ms.map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
+        let progress = match (job.state, job.spec.settings.time_s) {
+            (JobState::Done, _) => 1.0,
+            (_, Some(budget)) => (elapsed_s.unwrap_or(0.0) / budget).clamp(0.0, 0.99),
+            _ => job.samples_merged() as f64 / job.samples_planned().max(1) as f64,
+        };
+        let eta_s = match elapsed_s {
+            Some(e) if !job.state.is_terminal() && progress > 0.0 => Some(e * (1.0 - progress) / progress),
+            _ => None,
+        };
+        let current_pass =
+            job.passes.iter().position(|p| p.tiles.end > job.merged).unwrap_or(job.passes.len().max(1) - 1);
+        let phase = match job.state {
+            JobState::Queued | JobState::Done | JobState::Failed | JobState::Cancelled => {
+                job.state.as_str().to_string()
+            }
+            s => format!("{} pass {}/{}", s.as_str(), current_pass + 1, job.passes.len()),
+        };
+        JobView {
+            id: job.id.clone(),
+            name: job.spec.name.clone(),
+            state: job.state,
+            phase,
+            progress,
+            tiles_done: job.tiles_done() as u64,
+            tiles_total: job.tiles.len() as u64,
+            samples_done: job.samples_merged(),
+            eta_s,
+            error: job.error.clone(),
+            priority: job.spec.priority,
+            settings: job.spec.settings.clone(),
+            width: job.spec.width,
+            height: job.spec.height,
+            created_ms: job.created_ms,
+            scene_digest: job.spec.bundle_digest.clone(),
+        }
+    }
+}
+
+/// A worker as clients see it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorkerView {
+    /// Id.
+    pub id: String,
+    /// Name.
+    pub name: String,
+    /// Render threads.
+    pub threads: u32,
+    /// Seconds since the last contact.
+    pub last_seen_s_ago: f64,
+    /// Leases held.
+    pub leases: usize,
+}

@@ -1,0 +1,176 @@
+//! The blob directory: content-addressed blobs (scene bundles, result EXRs and PNGs, keyed by
+//! the SHA-256 of their bytes), per-lease tile results waiting to be merged, and checkpoints of
+//! merged films. Every file is written to a temporary name and renamed into place, so a crash
+//! never leaves a half-written blob under a real name.
+
+use sha2::{Digest, Sha256};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use tessera_common::film::Film;
+use tessera_common::film::exr::{Attribute, ExrExtras};
+
+/// Blob storage under one directory.
+#[derive(Clone, Debug)]
+pub struct BlobStore {
+    root: PathBuf,
+}
+
+/// SHA-256 of `bytes`, lowercase hex.
+pub fn digest_of(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn is_digest(s: &str) -> bool {
+    s.len() == 64 && s.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+impl BlobStore {
+    /// Opens (creating) the blob directory.
+    pub fn open(root: &Path) -> std::io::Result<Self> {
+        for sub in ["cas", "results", "checkpoints", "tmp"] {
+            std::fs::create_dir_all(root.join(sub))?;
+        }
+        Ok(BlobStore { root: root.to_path_buf() })
+    }
+
+    fn write_atomic(&self, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        let tmp = self.root.join("tmp").join(uuid::Uuid::new_v4().to_string());
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    }
+
+    /// Stores `bytes` content-addressed; returns the digest.
+    pub fn put(&self, bytes: &[u8]) -> std::io::Result<String> {
+        let digest = digest_of(bytes);
+        let path = self.cas_path(&digest).expect("invariant: digest_of gives a valid digest");
+        if !path.exists() {
+            self.write_atomic(&path, bytes)?;
+        }
+        Ok(digest)
+    }
+
+    /// Where blob `digest` lives; `None` if `digest` is not a SHA-256 hex string.
+    pub fn cas_path(&self, digest: &str) -> Option<PathBuf> {
+        is_digest(digest).then(|| self.root.join("cas").join(&digest[..2]).join(digest))
+    }
+
+    /// A content-addressed blob; `Ok(None)` when there is no such blob.
+    pub fn get(&self, digest: &str) -> std::io::Result<Option<Vec<u8>>> {
+        let Some(path) = self.cas_path(digest) else { return Ok(None) };
+        match std::fs::read(path) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn result_path(&self, job: &str, tile: usize, epoch: u64) -> PathBuf {
+        self.root.join("results").join(job).join(format!("{tile}-{epoch}.bin"))
+    }
+
+    /// Stores an accepted tile result's payload.
+    pub fn put_result(&self, job: &str, tile: usize, epoch: u64, payload: &[u8]) -> std::io::Result<()> {
+        self.write_atomic(&self.result_path(job, tile, epoch), payload)
+    }
+
+    /// An accepted tile result's payload.
+    pub fn get_result(&self, job: &str, tile: usize, epoch: u64) -> std::io::Result<Vec<u8>> {
+        std::fs::read(self.result_path(job, tile, epoch))
+    }
+
+    /// Deletes a merged tile result (it is in a checkpoint now).
+    pub fn remove_result(&self, job: &str, tile: usize, epoch: u64) {
+        let _ = std::fs::remove_file(self.result_path(job, tile, epoch));
+    }
+
+    /// Writes a checkpoint of `film` holding `tiles[..merged]`; returns its file name.
+    pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film) -> std::io::Result<String> {
+        let name = format!("{job}.{merged}.film");
+        let mut bytes = Vec::with_capacity(16 + film.sum.len() * tessera_proto::RESULT_BYTES_PER_PIXEL);
+        bytes.extend_from_slice(&film.width.to_le_bytes());
+        bytes.extend_from_slice(&film.height.to_le_bytes());
+        bytes.extend_from_slice(&film.non_finite.to_le_bytes());
+        bytes.extend_from_slice(&tessera_proto::encode_tile_payload(&film.sum, &film.count));
+        self.write_atomic(&self.root.join("checkpoints").join(&name), &bytes)?;
+        Ok(name)
+    }
+
+    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`].
+    pub fn get_checkpoint(&self, name: &str) -> std::io::Result<Film> {
+        let bytes = std::fs::read(self.root.join("checkpoints").join(name))?;
+        let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt"));
+        if bytes.len() < 16 {
+            return Err(bad());
+        }
+        let width = u32::from_le_bytes(bytes[0..4].try_into().map_err(|_| bad())?);
+        let height = u32::from_le_bytes(bytes[4..8].try_into().map_err(|_| bad())?);
+        let non_finite = u64::from_le_bytes(bytes[8..16].try_into().map_err(|_| bad())?);
+        let (sum, count) =
+            tessera_proto::decode_tile_payload(&bytes[16..], width as usize * height as usize).ok_or_else(bad)?;
+        Ok(Film { width, height, sum, count, non_finite })
+    }
+
+    /// Deletes a superseded checkpoint.
+    pub fn remove_checkpoint(&self, name: &str) {
+        let _ = std::fs::remove_file(self.root.join("checkpoints").join(name));
+    }
+
+    /// A fresh path for temporary files (e.g. an EXR written by a library before hashing).
+    pub fn temp_path(&self, suffix: &str) -> PathBuf {
+        self.root.join("tmp").join(format!("{}{suffix}", uuid::Uuid::new_v4()))
+    }
+
+    /// Stores a finished film as an EXR (beauty plus sample counts, with `attributes`) and an
+    /// sRGB PNG preview, exactly as `tessera render` writes them; returns both digests.
+    pub fn put_outputs(&self, film: &Film, attributes: &[(String, String)]) -> std::io::Result<(String, String)> {
+        let rgb = film.average();
+        let exr_path = self.temp_path(".exr");
+        let png_path = self.temp_path(".png");
+        let written = tessera_common::film::exr::write_exr(
+            &exr_path,
+            film.width,
+            film.height,
+            &rgb,
+            &ExrExtras {
+                counts: Some(&film.count),
+                layers: Vec::new(),
+                attributes: attributes.iter().map(|(k, v)| (k.clone(), Attribute::Text(v.clone()))).collect(),
+            },
+        )
+        .map_err(|e| std::io::Error::other(e.to_string()))
+        .and_then(|()| {
+            tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
+                .map_err(|e| std::io::Error::other(e.to_string()))
+        })
+        .and_then(|()| Ok((self.put(&std::fs::read(&exr_path)?)?, self.put(&std::fs::read(&png_path)?)?)));
+        let _ = std::fs::remove_file(exr_path);
+        let _ = std::fs::remove_file(png_path);
+        written
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blobs_are_content_addressed_and_checkpoints_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let blobs = BlobStore::open(dir.path()).unwrap();
+        let d = blobs.put(b"hello").unwrap();
+        assert_eq!(d, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");
+        assert_eq!(blobs.get(&d).unwrap().unwrap(), b"hello");
+        assert!(blobs.get("../../etc/passwd").unwrap().is_none());
+        let mut film = Film::new(2, 1);
+        film.sum[1] = [0.5, 1.5, -0.0];
+        film.count[1] = 3;
+        film.non_finite = 2;
+        let name = blobs.put_checkpoint("job", 1, &film).unwrap();
+        assert_eq!(blobs.get_checkpoint(&name).unwrap(), film);
+    }
+}

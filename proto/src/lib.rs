@@ -1,0 +1,85 @@
+//! Tessera's gRPC protocol, package `tessera.v1`, generated from `proto/tessera/v1/*.proto`.
+//!
+//! * [`v1::job_service_server`] / [`v1::job_service_client`]: clients submit, watch, cancel jobs
+//!   and download results.
+//! * [`v1::worker_service_server`] / [`v1::worker_service_client`]: render workers register,
+//!   heartbeat, lease tiles (long poll), upload tile sums and fetch scene bundles by digest.
+//!
+//! The crate holds generated code plus the few constants both ends must agree on; conversions
+//! to renderer types live in the coordinator and the worker.
+//!
+//! ```no_run
+//! use tessera_proto::v1::job_service_client::JobServiceClient;
+//! # async fn f() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut client = JobServiceClient::connect("http://127.0.0.1:7878").await?;
+//! let jobs = client.list_jobs(tessera_proto::v1::ListJobsRequest {}).await?.into_inner();
+//! println!("{} jobs", jobs.jobs.len());
+//! # Ok(()) }
+//! ```
+
+#![deny(missing_docs)]
+
+/// Generated `tessera.v1` messages, clients and servers.
+#[allow(missing_docs)]
+pub mod v1 {
+    tonic::include_proto!("tessera.v1");
+}
+
+/// Bytes per pixel of a tile result payload: three little-endian f64 sums then, after all
+/// pixels' sums, one little-endian u32 sample count per pixel (see `TileResultHeader`).
+pub const RESULT_BYTES_PER_PIXEL: usize = 3 * 8 + 4;
+
+/// Size of the chunks that byte streams (uploads, blobs, results) are cut into.
+pub const CHUNK_BYTES: usize = 1 << 20;
+
+/// Largest gRPC message either side accepts: a chunk plus headers, or an inline scene bundle.
+pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
+
+/// Encodes a tile result payload: every pixel's three sums, then every pixel's count, all
+/// little-endian (the layout `TileResultHeader` documents).
+pub fn encode_tile_payload(sum: &[[f64; 3]], count: &[u32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(sum.len() * 24 + count.len() * 4);
+    for s in sum {
+        for c in s {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for c in count {
+        out.extend_from_slice(&c.to_le_bytes());
+    }
+    out
+}
+
+/// Decodes a tile result payload for `pixels` pixels; `None` when the length is not exactly
+/// `pixels` × [`RESULT_BYTES_PER_PIXEL`].
+pub fn decode_tile_payload(bytes: &[u8], pixels: usize) -> Option<(Vec<[f64; 3]>, Vec<u32>)> {
+    if bytes.len() != pixels.checked_mul(RESULT_BYTES_PER_PIXEL)? {
+        return None;
+    }
+    let (sums, counts) = bytes.split_at(pixels * 24);
+    let f = |b: &[u8]| f64::from_le_bytes(b.try_into().expect("invariant: 8-byte chunk"));
+    let sum = sums.chunks_exact(24).map(|p| [f(&p[0..8]), f(&p[8..16]), f(&p[16..24])]).collect();
+    let count =
+        counts.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().expect("invariant: 4-byte chunk"))).collect();
+    Some((sum, count))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tile_payload_round_trips_bit_exactly_and_checks_length() {
+        let sum = vec![[0.1, -0.0, f64::MAX], [1e-300, 2.5, 3.0]];
+        let count = vec![7, u32::MAX];
+        let bytes = encode_tile_payload(&sum, &count);
+        assert_eq!(bytes.len(), 2 * RESULT_BYTES_PER_PIXEL);
+        let (s, c) = decode_tile_payload(&bytes, 2).unwrap();
+        assert_eq!(c, count);
+        for (a, b) in s.iter().flatten().zip(sum.iter().flatten()) {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
+        assert!(decode_tile_payload(&bytes, 3).is_none());
+        assert!(decode_tile_payload(&bytes[1..], 2).is_none());
+    }
+}

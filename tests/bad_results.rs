@@ -1,0 +1,101 @@
+//! A hand-driven worker uploads malformed results: each is refused with INVALID_ARGUMENT, its
+//! tile re-queued with the next epoch, and the finished image is still bit-identical to a
+//! local render. Duplicates and stale epochs are ignored.
+
+use super::*;
+use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::TileRequest;
+use tessera_common::settings::{IntegratorName, RenderSettings};
+use tessera_proto::v1 as pb;
+use tessera_proto::v1::worker_service_client::WorkerServiceClient;
+use tonic::transport::Channel;
+
+async fn upload(
+    client: &mut WorkerServiceClient<Channel>,
+    worker: &str,
+    lease: &pb::TileLease,
+    payload: Vec<u8>,
+) -> Result<pb::UploadResultResponse, tonic::Status> {
+    use pb::upload_result_request::Part;
+    let header = pb::TileResultHeader {
+        worker_id: worker.to_string(),
+        lease: lease.lease.clone(),
+        rect: lease.rect,
+        sample_begin: lease.sample_begin,
+        sample_end: lease.sample_end,
+        non_finite: 0,
+        render_seconds: 0.0,
+    };
+    let messages = vec![
+        pb::UploadResultRequest { part: Some(Part::Header(header)) },
+        pb::UploadResultRequest { part: Some(Part::Data(payload.into())) },
+    ];
+    client.upload_result(tokio_stream::iter(messages)).await.map(|r| r.into_inner())
+}
+
+async fn lease_one(client: &mut WorkerServiceClient<Channel>, worker: &str) -> pb::TileLease {
+    let req = pb::LeaseTileRequest { worker_id: worker.to_string(), max_tiles: 1, wait_ms: 5000 };
+    client.lease_tile(req).await.unwrap().into_inner().leases.pop().expect("a lease")
+}
+
+#[test]
+fn malformed_results_are_refused_and_the_tile_requeued() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (_, job) =
+        rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 1, "seed": 6}));
+    let id = job["id"].as_str().unwrap().to_string();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
+        let reg = pb::RegisterRequest { name: "hand".into(), threads: 1, version: "test".into() };
+        let worker = client.register(reg).await.unwrap().into_inner().worker_id;
+
+        let first = lease_one(&mut client, &worker).await;
+        let r = first.rect.unwrap();
+        let pixels = ((r.x1 - r.x0) * (r.y1 - r.y0)) as usize;
+        let e = upload(&mut client, &worker, &first, vec![0u8; 10]).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert!(e.message().contains("bytes"), "{}", e.message());
+
+        let second = lease_one(&mut client, &worker).await;
+        assert_eq!(
+            second.lease.as_ref().unwrap().tile,
+            first.lease.as_ref().unwrap().tile,
+            "the refused tile comes back"
+        );
+        assert_eq!(second.lease.as_ref().unwrap().epoch, 1);
+        let mut sums = vec![[0.5f64; 3]; pixels];
+        sums[7][1] = f64::NAN;
+        let nan = tessera_proto::encode_tile_payload(&sums, &vec![1; pixels]);
+        let e = upload(&mut client, &worker, &second, nan).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert!(e.message().contains("not finite"), "{}", e.message());
+
+        // the honest result of the third lease is accepted once; old epochs are stale
+        let third = lease_one(&mut client, &worker).await;
+        assert_eq!(third.lease.as_ref().unwrap().epoch, 2);
+        let scene = tessera_common::scene::Scene::load(&scene("cornell-box")).unwrap();
+        let settings =
+            RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), seed: Some(6), ..Default::default() };
+        let integrator = settings.make_integrator(&scene).unwrap();
+        let rect = Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 };
+        let mut accum = TileAccum::new(rect);
+        integrator.render_tile(&scene, &TileRequest { rect, samples: 0..1, seed: 6 }, &mut accum);
+        let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        let ok = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();
+        assert_eq!(ok.outcome, pb::UploadOutcome::Accepted as i32);
+        let again = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();
+        assert_eq!(again.outcome, pb::UploadOutcome::Duplicate as i32);
+        let stale = upload(&mut client, &worker, &first, payload).await.unwrap();
+        assert_eq!(stale.outcome, pb::UploadOutcome::Stale as i32);
+    });
+    let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
+    assert!(String::from_utf8(metrics).unwrap().contains("tessera_results_refused_total 2"));
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    wait_done(&c, &id, None);
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, &id)), None, &out);
+    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 1, 6));
+}

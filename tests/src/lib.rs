@@ -1,0 +1,242 @@
+//! Harness of the farm integration tests: starts the real `tessera` coordinator and
+//! `tessera-worker` binaries on loopback ports, runs the CLI, and compares images bit for bit.
+//!
+//! The binaries come from the same target directory as the test executable. `cargo test
+//! --workspace` builds them (the coordinator and worker crates have integration tests, which
+//! makes cargo build their binaries); alone, run
+//! `cargo build -p tessera-coordinator -p tessera-worker` first.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A binary of the workspace, from the target directory this test runs in.
+pub fn bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps");
+    let path = dir.join(name);
+    assert!(
+        path.exists(),
+        "{} is missing: run `cargo build -p tessera-coordinator -p tessera-worker` (or `cargo test --workspace`)",
+        path.display()
+    );
+    path
+}
+
+/// A scene of the repository.
+pub fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name).join("scene.xml")
+}
+
+/// A running coordinator, killed on drop.
+pub struct Coordinator {
+    /// The process.
+    pub child: Child,
+    /// `http://127.0.0.1:PORT`.
+    pub url: String,
+    /// Its log file (stderr).
+    pub log: PathBuf,
+}
+
+impl Coordinator {
+    /// Starts `tessera serve` on `listen` (e.g. `127.0.0.1:0`) with `data_dir` and extra flags.
+    pub fn start(data_dir: &Path, listen: &str, extra: &[&str]) -> Coordinator {
+        static STARTS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = STARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let log = data_dir.with_extension(format!("coordinator-{n}.log"));
+        let mut child = Command::new(bin("tessera"))
+            .args(["serve", "--listen", listen, "--data-dir"])
+            .arg(data_dir)
+            .args(extra)
+            .env("RUST_LOG", "tessera_coordinator=debug,warn")
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&log).expect("log file"))
+            .spawn()
+            .expect("start tessera serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("read address");
+        let url = line
+            .trim()
+            .rsplit(' ')
+            .next()
+            .filter(|u| u.starts_with("http://"))
+            .unwrap_or_else(|| {
+                panic!(
+                    "no address from tessera serve ({line:?}), log: {}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                )
+            })
+            .to_string();
+        Coordinator { child, url, log }
+    }
+
+    /// The port it listens on.
+    pub fn port(&self) -> u16 {
+        self.url.rsplit(':').next().and_then(|p| p.parse().ok()).expect("port in url")
+    }
+
+    /// SIGKILL.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Coordinator {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// A running worker, killed on drop.
+pub struct Worker {
+    /// The process.
+    pub child: Child,
+}
+
+impl Worker {
+    /// Starts `tessera-worker` against `url` with one thread and `extra` flags.
+    pub fn start(url: &str, cache: &Path, extra: &[&str]) -> Worker {
+        let child = Command::new(bin("tessera-worker"))
+            .args(["--coordinator", url, "--threads", "1", "--cache-dir"])
+            .arg(cache)
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start tessera-worker");
+        Worker { child }
+    }
+
+    /// SIGKILL.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// Runs `tessera ARGS` and returns (success, stdout, stderr).
+pub fn tessera(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(bin("tessera")).args(args).output().expect("run tessera");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Renders locally with `tessera render` and returns the EXR path.
+pub fn local_render(dir: &Path, scene: &Path, integrator: &str, spp: u32, seed: u64) -> PathBuf {
+    let out = dir.join(format!("local-{integrator}-{spp}-{seed}.exr"));
+    let (ok, _, err) = tessera(&[
+        "render",
+        scene.to_str().expect("utf-8 path"),
+        "--integrator",
+        integrator,
+        "--spp",
+        &spp.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--threads",
+        "1",
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(ok, "local render failed: {err}");
+    out
+}
+
+/// Asserts two EXRs have bit-identical RGB and sample counts.
+pub fn assert_same_image(farm: &Path, local: &Path) {
+    use tessera_common::film::exr::{read_rgb, read_sample_counts};
+    let (a, b) = (read_rgb(farm).expect("farm exr"), read_rgb(local).expect("local exr"));
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    let differing = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.to_bits() != y.to_bits()))
+        .count();
+    assert_eq!(differing, 0, "{differing} pixels differ between {} and {}", farm.display(), local.display());
+    assert_eq!(read_sample_counts(farm).expect("farm counts"), read_sample_counts(local).expect("local counts"));
+}
+
+/// Polls `f` every 50 ms until it returns `Some`, panicking after `timeout`.
+pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Blocking helpers over reqwest for the REST API.
+pub mod rest {
+    use reqwest::multipart::{Form, Part};
+
+    fn rt() -> tokio::runtime::Runtime {
+        tokio::runtime::Builder::new_current_thread().enable_all().build().expect("runtime")
+    }
+
+    fn auth(req: reqwest::RequestBuilder, token: Option<&str>) -> reqwest::RequestBuilder {
+        match token {
+            Some(t) => req.bearer_auth(t),
+            None => req,
+        }
+    }
+
+    /// GET, returning (status, body bytes).
+    pub fn get(url: &str, token: Option<&str>) -> (u16, Vec<u8>) {
+        rt().block_on(async {
+            let r = auth(reqwest::Client::new().get(url), token).send().await.expect("GET");
+            (r.status().as_u16(), r.bytes().await.expect("body").to_vec())
+        })
+    }
+
+    /// GET JSON.
+    pub fn get_json(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
+        let (s, b) = get(url, token);
+        (s, serde_json::from_slice(&b).unwrap_or(serde_json::Value::Null))
+    }
+
+    /// DELETE JSON.
+    pub fn delete(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
+        rt().block_on(async {
+            let r = auth(reqwest::Client::new().delete(url), token).send().await.expect("DELETE");
+            (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null))
+        })
+    }
+
+    /// POST /api/v1/jobs with a scene, assets `(path, bytes)` and settings JSON.
+    pub fn submit(
+        base: &str,
+        token: Option<&str>,
+        scene: (&str, Vec<u8>),
+        assets: Vec<(String, Vec<u8>)>,
+        settings: serde_json::Value,
+    ) -> (u16, serde_json::Value) {
+        rt().block_on(async {
+            let mut form = Form::new()
+                .part("scene", Part::bytes(scene.1).file_name(scene.0.to_string()))
+                .text("settings", settings.to_string());
+            for (path, bytes) in assets {
+                form = form.part("asset", Part::bytes(bytes).file_name(path));
+            }
+            let req = auth(reqwest::Client::new().post(format!("{base}/api/v1/jobs")).multipart(form), token);
+            match req.send().await {
+                Ok(r) => (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null)),
+                Err(e) => panic!("POST failed: {e}"),
+            }
+        })
+    }
+}

@@ -1,0 +1,311 @@
+//! Farm integration tests: the real `tessera serve` coordinator and `tessera-worker` processes
+//! on loopback ports. Every finished image is compared **bit for bit** with `tessera render` on
+//! the same scene, integrator, spp and seed: the farm cuts work and merges it in the same
+//! canonical order as local rendering (see `coordinator/src/job/plan.rs`).
+
+use serde_json::{Value, json};
+use std::path::Path;
+use std::time::Duration;
+use tessera_tests::{Coordinator, Worker, assert_same_image, local_render, rest, scene, tessera, wait_for};
+
+const TIMEOUT: Duration = Duration::from_secs(240);
+
+fn job_url(c: &Coordinator, id: &str) -> String {
+    format!("{}/api/v1/jobs/{id}", c.url)
+}
+
+/// Polls a job over REST until it is done, checking that its state only moves forward and
+/// its progress never goes back.
+fn wait_done(c: &Coordinator, id: &str, token: Option<&str>) -> Value {
+    let order = ["queued", "pilot", "optimizing", "final", "done"];
+    let (mut rank, mut progress, mut tiles) = (0, 0.0, 0);
+    wait_for(TIMEOUT, "job done", || {
+        let (status, job) = rest::get_json(&job_url(c, id), token);
+        assert_eq!(status, 200, "{job}");
+        let state = job["state"].as_str().unwrap_or("?");
+        let r = order.iter().position(|s| *s == state).unwrap_or_else(|| panic!("job ended {state}: {job}"));
+        assert!(r >= rank, "state went back to {state}");
+        let p = job["progress"].as_f64().unwrap();
+        let t = job["tiles_done"].as_u64().unwrap();
+        assert!(p >= progress && t >= tiles, "progress went back: {job}");
+        (rank, progress, tiles) = (r, p, t);
+        (state == "done").then_some(job)
+    })
+}
+
+fn download(url: &str, token: Option<&str>, path: &Path) {
+    let (status, bytes) = rest::get(url, token);
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&bytes));
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn grpc_submit_pt_with_two_workers_equals_local_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let out = dir.path().join("farm.exr");
+    let box_scene = scene("cornell-box");
+    let (ok, stdout, stderr) = tessera(&[
+        "submit",
+        box_scene.to_str().unwrap(),
+        "--server",
+        &c.url,
+        "--integrator",
+        "pt",
+        "--spp",
+        "3",
+        "--seed",
+        "5",
+        "--wait",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "submit failed: {stderr}\nlog: {}", c.log.display());
+    assert!(out.with_extension("png").exists());
+    let id = stdout.lines().next().unwrap().trim().to_string();
+    let (ok, status, _) = tessera(&["status", &id, "--server", &c.url, "--json"]);
+    assert!(ok);
+    let status: Value = serde_json::from_str(&status).unwrap();
+    assert_eq!((status["state"].as_str(), status["progress"].as_f64()), (Some("done"), Some(1.0)));
+    assert_same_image(&out, &local_render(dir.path(), &box_scene, "pt", 3, 5));
+}
+
+#[test]
+fn rest_submit_vcm_equals_local_render_and_reports_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (status, job) =
+        rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "vcm", "spp": 3, "seed": 9}));
+    assert_eq!(status, 201, "{job}");
+    assert_eq!(job["tiles_total"], 3, "one full-frame tile per iteration: {job}");
+    assert!(job["strategy"].is_null());
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&c, id, None);
+    assert_eq!(done["samples_done"], 256 * 256 * 3);
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "vcm", 3, 9));
+    let (status, png) = rest::get(&format!("{}/preview.png", job_url(&c, id)), None);
+    assert_eq!((status, &png[1..4]), (200, &b"PNG"[..]));
+    let (_, workers) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
+    assert_eq!(workers.as_array().unwrap().len(), 2);
+    let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
+    let metrics = String::from_utf8(metrics).unwrap();
+    assert!(metrics.contains("tessera_jobs{state=\"done\"} 1"), "{metrics}");
+    assert!(metrics.contains("tessera_tiles_merged_total 3"), "{metrics}");
+}
+
+#[test]
+fn scene_with_assets_renders_over_rest() {
+    // caustic-glass references gem.obj: the bundle must carry it to the workers
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let glass = scene("caustic-glass");
+    let xml = std::fs::read(&glass).unwrap();
+    let obj = std::fs::read(glass.with_file_name("gem.obj")).unwrap();
+    let settings = json!({"integrator": "pt", "spp": 1, "seed": 2, "defines": {}});
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml.clone()), vec![], settings.clone());
+    assert_eq!(status, 400, "a missing mesh is refused at submission: {job}");
+    assert!(job["error"].as_str().unwrap().contains("gem.obj"), "{job}");
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![("gem.obj".into(), obj)], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    wait_done(&c, id, None);
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    assert_same_image(&out, &local_render(dir.path(), &glass, "pt", 1, 2));
+}
+
+#[test]
+fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-timeout", "1"]);
+    let mut workers: Vec<_> =
+        (0..3).map(|i| Worker::start(&c.url, &dir.path().join("cache"), &["--name", &format!("w{i}")])).collect();
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (_, job) =
+        rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 24, "seed": 4}));
+    let id = job["id"].as_str().unwrap().to_string();
+    // kill w0 while it holds a lease, once some tiles are in: freeze it (SIGSTOP), check that it
+    // holds a lease, else let it go on and try again
+    let pid = workers[0].child.id() as i32;
+    let at_kill = wait_for(TIMEOUT, "w0 to hold a lease after the first tile", || {
+        let job = rest::get_json(&job_url(&c, &id), None).1;
+        // SAFETY: signalling our own child process
+        unsafe { libc::kill(pid, libc::SIGSTOP) };
+        let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
+        let w0_busy = workers.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"].as_u64() >= Some(1));
+        let ready = job["tiles_done"].as_u64() >= Some(1) && w0_busy;
+        if !ready {
+            // SAFETY: as above
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+        }
+        ready.then_some(job)
+    });
+    workers[0].kill();
+    assert!(at_kill["tiles_done"].as_u64() < Some(14), "the job was nearly done before the kill: {at_kill}");
+    let done = wait_done(&c, &id, None);
+    assert_eq!(done["tiles_done"], done["tiles_total"]);
+    // the killed worker always holds a lease (it leases one tile per thread): it expired
+    let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
+    let metrics = String::from_utf8(metrics).unwrap();
+    assert!(!metrics.contains("tessera_leases_expired_total 0"), "{metrics}");
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, &id)), None, &out);
+    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 24, 4));
+}
+
+#[test]
+fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    // leases would take a minute to expire: only the drain can deliver the tile in time
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-timeout", "60"]);
+    let mut w = Worker::start(&c.url, &dir.path().join("cache"), &["--name", "w0"]);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (_, job) =
+        rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 32, "seed": 1}));
+    let id = job["id"].as_str().unwrap().to_string();
+    let before = wait_for(TIMEOUT, "a lease", || {
+        let before = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64()?;
+        let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
+        workers.as_array()?.iter().any(|w| w["leases"].as_u64() >= Some(1)).then_some(before)
+    });
+    // SAFETY: signalling our own child process
+    unsafe { libc::kill(w.child.id() as i32, libc::SIGTERM) };
+    let status = wait_for(TIMEOUT, "the worker to drain", || w.child.try_wait().unwrap());
+    assert!(status.success(), "{status:?}");
+    let (_, job) = rest::get_json(&job_url(&c, &id), None);
+    assert!(job["tiles_done"].as_u64().unwrap() > before, "the tile in hand was not uploaded: {job}");
+    let (_, workers) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
+    assert_eq!(workers[0]["leases"], 0, "the worker left a lease behind: {workers}");
+}
+
+#[test]
+fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    // checkpoint after every merge, so that tiles are merged both before and after the crash
+    let flags = ["--lease-timeout", "2", "--checkpoint-interval", "0"];
+    let mut c = Coordinator::start(&data, "127.0.0.1:0", &flags);
+    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    // `tessera submit --wait` follows the job across the crash and downloads the result
+    let out = dir.path().join("farm.exr");
+    let mut submit = std::process::Command::new(tessera_tests::bin("tessera"))
+        .args(["submit", scene("cornell-box").to_str().unwrap(), "--server", &c.url, "--spp", "24", "--seed", "8"])
+        .args(["--wait", "-o", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut id = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(submit.stdout.take().unwrap()), &mut id).unwrap();
+    let id = id.trim().to_string();
+    let before = wait_for(TIMEOUT, "some tiles", || {
+        let t = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64().unwrap_or(0);
+        (t >= 3).then_some(t)
+    });
+    assert!(before < 16, "the job finished before the crash; make it longer");
+    c.kill();
+    let listen = format!("127.0.0.1:{}", c.port());
+    let c = wait_for(Duration::from_secs(20), "port to be free", || {
+        std::net::TcpListener::bind(&listen).ok().map(drop)?;
+        Some(Coordinator::start(&data, &listen, &flags))
+    });
+    let (_, resumed) = rest::get_json(&job_url(&c, &id), None);
+    assert!(resumed["tiles_done"].as_u64().unwrap() >= before, "accepted tiles were lost: {resumed}");
+    let done = wait_done(&c, &id, None);
+    assert_eq!(done["samples_done"], 256 * 256 * 24, "every pixel sample merged exactly once: {done}");
+    let status = wait_for(TIMEOUT, "tessera submit --wait to finish", || submit.try_wait().unwrap());
+    assert!(status.success(), "submit --wait did not survive the restart: {status:?}");
+    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 24, 8));
+}
+
+#[test]
+fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ct, wt) = (Some("client-secret"), "worker-secret");
+    let c = Coordinator::start(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--client-token", "client-secret", "--worker-token", wt, "--max-upload-mb", "1"],
+    );
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let settings = json!({"integrator": "pt", "spp": 1});
+    // no token: 401 on REST, UNAUTHENTICATED on gRPC; /healthz stays open
+    let (status, _) = rest::submit(&c.url, None, ("scene.xml", xml.clone()), vec![], settings.clone());
+    assert_eq!(status, 401);
+    assert_eq!(rest::get(&format!("{}/healthz", c.url), None).0, 200);
+    let (ok, _, err) = tessera(&["status", "--server", &c.url]);
+    assert!(!ok && err.contains("Unauthenticated"), "{err}");
+    let (ok, _, _) = tessera(&["status", "--server", &c.url, "--token", "client-secret"]);
+    assert!(ok);
+    // an invalid scene: 400 naming the file and line; the same over gRPC is INVALID_ARGUMENT
+    let bad = String::from_utf8(xml.clone()).unwrap().replacen(
+        "<bsdf type=\"diffuse\" id=\"white\">",
+        "<bsdf type=\"velvet\" id=\"white\">",
+        1,
+    );
+    let line = bad.lines().position(|l| l.contains("velvet")).unwrap() + 1;
+    let (status, body) = rest::submit(&c.url, ct, ("scene.xml", bad.clone().into_bytes()), vec![], settings.clone());
+    assert_eq!(status, 400, "{body}");
+    let message = body["error"].as_str().unwrap();
+    assert!(message.contains(&format!("scene.xml:{line}:")) && message.contains("velvet"), "{message}");
+    let bad_path = dir.path().join("scene.xml");
+    std::fs::write(&bad_path, &bad).unwrap();
+    let (ok, _, err) = tessera(&["submit", bad_path.to_str().unwrap(), "--server", &c.url, "--token", "client-secret"]);
+    assert!(!ok && err.contains("InvalidArgument") && err.contains(&format!("scene.xml:{line}:")), "{err}");
+    // settings naming an unknown field
+    let (status, body) = rest::submit(&c.url, ct, ("scene.xml", xml.clone()), vec![], json!({"spq": 3}));
+    assert_eq!(status, 400);
+    assert!(body["error"].as_str().unwrap().contains("spq"), "{body}");
+    // an upload over --max-upload-mb
+    let (status, _) = rest::submit(
+        &c.url,
+        ct,
+        ("scene.xml", xml.clone()),
+        vec![("big.bin".into(), vec![0u8; 2 << 20])],
+        settings.clone(),
+    );
+    assert_eq!(status, 413);
+    // cancel stops dispatch: a worker started afterwards gets nothing
+    let (status, job) = rest::submit(&c.url, ct, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    let (status, cancelled) = rest::delete(&job_url(&c, id), ct);
+    assert_eq!((status, cancelled["state"].as_str()), (200, Some("cancelled")));
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &["--token", wt]);
+    wait_for(TIMEOUT, "worker to register", || {
+        (rest::get_json(&format!("{}/api/v1/workers", c.url), ct).1.as_array().map_or(0, |a| a.len()) == 1)
+            .then_some(())
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let (_, job) = rest::get_json(&job_url(&c, id), ct);
+    assert_eq!((job["state"].as_str(), job["tiles_done"].as_u64()), (Some("cancelled"), Some(0)), "{job}");
+    let (_, metrics) = rest::get(&format!("{}/metrics", c.url), ct);
+    assert!(String::from_utf8(metrics).unwrap().contains("tessera_tiles_leased 0"));
+    assert_eq!(rest::get(&format!("{}/result.exr", job_url(&c, id)), ct).0, 409);
+    assert_eq!(rest::get(&job_url(&c, "no-such-job"), ct).0, 404);
+}
+
+#[test]
+fn serve_refuses_a_public_address_without_tokens() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (ok, _, err) = tessera(&["serve", "--listen", "0.0.0.0:0", "--data-dir", data.to_str().unwrap()]);
+    assert!(!ok && err.contains("refusing to listen on 0.0.0.0:0") && err.contains("--insecure"), "{err}");
+}
+
+#[test]
+fn image_comparison_notices_a_different_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = local_render(dir.path(), &scene("cornell-box"), "pt", 1, 1);
+    let b = local_render(dir.path(), &scene("cornell-box"), "pt", 1, 2);
+    assert_same_image(&a, &a);
+    assert!(std::panic::catch_unwind(|| assert_same_image(&a, &b)).is_err());
+}
+
+mod bad_results;

@@ -1,0 +1,276 @@
+//! The worker loop: register → (lease → fetch scene → render → upload)*, with a heartbeat task
+//! beside it, reconnection with backoff when the coordinator is unreachable, and draining on
+//! SIGTERM/SIGINT (no new leases; the tiles in hand are finished and uploaded).
+
+use crate::Args;
+use crate::client::{Backoff, Client};
+use crate::convert;
+use crate::render::{TileWork, render_batch};
+use crate::scene_cache::SceneCache;
+use std::collections::HashSet;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tessera_proto::v1 as pb;
+use tokio::sync::watch;
+
+/// How long a lease request waits for work (and so the longest a drain waits for one).
+const LEASE_WAIT_MS: u32 = 5_000;
+/// How long an upload is retried while the coordinator is unreachable.
+const UPLOAD_RETRY: Duration = Duration::from_secs(120);
+
+/// Leases in hand, shared with the heartbeat task; `lost` collects those the coordinator says
+/// are no longer current, whose results are not worth uploading.
+#[derive(Default)]
+struct Held {
+    leases: Vec<pb::LeaseRef>,
+    lost: HashSet<(String, u32, u64)>,
+}
+
+fn key(l: &pb::LeaseRef) -> (String, u32, u64) {
+    (l.job_id.clone(), l.tile, l.epoch)
+}
+
+/// Runs until drained.
+pub async fn run(args: Args) -> anyhow::Result<()> {
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?);
+    let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
+    std::fs::create_dir_all(&cache_dir)?;
+    let mut cache = SceneCache::new(cache_dir);
+    let name = args.name.clone().unwrap_or_else(|| std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into()));
+    let max_tiles = args.max_tiles.unwrap_or(threads as u32).max(1);
+    let (drain_tx, drain) = watch::channel(false);
+    tokio::spawn(async move {
+        wait_for_signal().await;
+        tracing::info!("draining: finishing the tiles in hand");
+        let _ = drain_tx.send(true);
+    });
+    let mut backoff = Backoff::default();
+    while !*drain.borrow() {
+        let session = async {
+            let mut client = Client::connect(&args.coordinator, args.token.clone()).await?;
+            let reg = client
+                .inner
+                .register(client.request(pb::RegisterRequest {
+                    name: name.clone(),
+                    threads: threads as u32,
+                    version: env!("CARGO_PKG_VERSION").into(),
+                }))
+                .await?
+                .into_inner();
+            tracing::info!(worker = %reg.worker_id, coordinator = %args.coordinator, threads, "registered");
+            backoff.reset();
+            let held = Arc::new(Mutex::new(Held::default()));
+            let heartbeat = tokio::spawn(heartbeat_loop(
+                client.clone(),
+                reg.worker_id.clone(),
+                reg.heartbeat_interval_ms,
+                held.clone(),
+            ));
+            let result =
+                work_loop(&mut client, &reg.worker_id, max_tiles, &pool, &mut cache, &held, drain.clone()).await;
+            heartbeat.abort();
+            result
+        };
+        match session.await {
+            Ok(()) => break,
+            Err(e) => {
+                let delay = backoff.next_delay();
+                tracing::warn!(error = %format!("{e:#}"), retry_in_ms = delay.as_millis() as u64, "coordinator unavailable");
+                let mut d = drain.clone();
+                tokio::select! {
+                    _ = tokio::time::sleep(delay) => {}
+                    _ = d.wait_for(|v| *v) => {}
+                }
+            }
+        }
+    }
+    tracing::info!("worker stopped");
+    Ok(())
+}
+
+/// Leases, renders and uploads until draining (Ok) or the connection fails (Err).
+async fn work_loop(
+    client: &mut Client,
+    worker: &str,
+    max_tiles: u32,
+    pool: &Arc<rayon::ThreadPool>,
+    cache: &mut SceneCache,
+    held: &Arc<Mutex<Held>>,
+    drain: watch::Receiver<bool>,
+) -> anyhow::Result<()> {
+    loop {
+        if *drain.borrow() {
+            return Ok(());
+        }
+        let req =
+            client.request(pb::LeaseTileRequest { worker_id: worker.to_string(), max_tiles, wait_ms: LEASE_WAIT_MS });
+        // a lease request is never abandoned, not even to drain: the coordinator may already
+        // have granted it, and a dropped grant would sit idle until its lease expires
+        let timeout = Duration::from_millis(LEASE_WAIT_MS as u64) + Duration::from_secs(10);
+        let leases = tokio::time::timeout(timeout, client.inner.lease_tile(req))
+            .await
+            .map_err(|_| anyhow::anyhow!("lease request timed out"))??
+            .into_inner()
+            .leases;
+        if leases.is_empty() {
+            continue;
+        }
+        held.lock().unwrap_or_else(|p| p.into_inner()).leases = leases.iter().filter_map(|l| l.lease.clone()).collect();
+        let outcome = render_and_upload(client, worker, pool, cache, held, &leases).await;
+        {
+            let mut h = held.lock().unwrap_or_else(|p| p.into_inner());
+            h.leases.clear();
+            h.lost.clear();
+        }
+        outcome?;
+    }
+}
+
+/// Renders one batch of leases (all of one job) and uploads the results.
+#[tracing::instrument(skip_all, fields(job_id = %leases[0].lease.as_ref().map_or("", |l| l.job_id.as_str()), tiles = leases.len()))]
+async fn render_and_upload(
+    client: &mut Client,
+    worker: &str,
+    pool: &Arc<rayon::ThreadPool>,
+    cache: &mut SceneCache,
+    held: &Arc<Mutex<Held>>,
+    leases: &[pb::TileLease],
+) -> anyhow::Result<()> {
+    let first = &leases[0];
+    let prepared = async {
+        let settings = convert::settings(first.settings.as_ref()).map_err(anyhow::Error::msg)?;
+        let scene = cache.get(client, &first.bundle_digest, &settings.define_map()).await?;
+        let integrator = settings.make_integrator(&scene)?;
+        let tiles = leases
+            .iter()
+            .map(|l| {
+                Ok(TileWork {
+                    rect: convert::rect(l.rect.as_ref())?,
+                    samples: l.sample_begin..l.sample_end,
+                    seed: settings.seed.unwrap_or(0),
+                })
+            })
+            .collect::<Result<Vec<_>, String>>()
+            .map_err(anyhow::Error::msg)?;
+        anyhow::Ok((scene, integrator, tiles))
+    }
+    .await;
+    let (scene, integrator, tiles) = match prepared {
+        Ok(p) => p,
+        Err(e) => {
+            // cannot render these leases (bad bundle, scene, settings): say so, so the tiles go
+            // back to the queue now instead of after the lease timeout
+            let message = format!("{e:#}");
+            tracing::error!(error = %message, "cannot render leased tiles");
+            for l in leases {
+                let req = pb::ReportFailureRequest {
+                    worker_id: worker.to_string(),
+                    lease: l.lease.clone(),
+                    message: message.clone(),
+                };
+                client.inner.report_failure(client.request(req)).await?;
+            }
+            return Ok(());
+        }
+    };
+    let pool = pool.clone();
+    let work = tiles.clone();
+    let results = tokio::task::spawn_blocking(move || render_batch(&pool, &scene, integrator.as_ref(), &work)).await?;
+    for (l, (accum, seconds)) in leases.iter().zip(results) {
+        let Some(lease) = l.lease.clone() else { continue };
+        if held.lock().unwrap_or_else(|p| p.into_inner()).lost.contains(&key(&lease)) {
+            tracing::debug!(tile = lease.tile, "lease lost while rendering: result dropped");
+            continue;
+        }
+        let header = pb::TileResultHeader {
+            worker_id: worker.to_string(),
+            lease: Some(lease.clone()),
+            rect: Some(convert::rect_to_pb(accum.rect)),
+            sample_begin: l.sample_begin,
+            sample_end: l.sample_end,
+            non_finite: accum.non_finite,
+            render_seconds: seconds,
+        };
+        let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        upload(client, header, payload).await?;
+        tracing::debug!(job_id = %lease.job_id, tile = lease.tile, seconds, non_finite = accum.non_finite, "tile uploaded");
+    }
+    Ok(())
+}
+
+/// Uploads one result, retrying while the coordinator is unreachable (a restarted coordinator
+/// still accepts results for leases it persisted).
+async fn upload(client: &mut Client, header: pb::TileResultHeader, payload: Vec<u8>) -> anyhow::Result<()> {
+    use pb::upload_result_request::Part;
+    let started = tokio::time::Instant::now();
+    let mut backoff = Backoff::default();
+    loop {
+        let mut messages = vec![pb::UploadResultRequest { part: Some(Part::Header(header.clone())) }];
+        messages.extend(
+            payload
+                .chunks(tessera_proto::CHUNK_BYTES)
+                .map(|c| pb::UploadResultRequest { part: Some(Part::Data(c.to_vec().into())) }),
+        );
+        match client.inner.upload_result(client.request(tokio_stream::iter(messages))).await {
+            Ok(r) => {
+                let r = r.into_inner();
+                if r.outcome != pb::UploadOutcome::Accepted as i32 {
+                    tracing::info!(message = %r.message, "result not merged");
+                }
+                return Ok(());
+            }
+            Err(s) if s.code() == tonic::Code::InvalidArgument => {
+                tracing::error!(message = %s.message(), "result refused by the coordinator");
+                return Ok(());
+            }
+            Err(s)
+                if started.elapsed() < UPLOAD_RETRY
+                    && matches!(s.code(), tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal) =>
+            {
+                let delay = backoff.next_delay();
+                tracing::warn!(message = %s.message(), retry_in_ms = delay.as_millis() as u64, "upload failed, retrying");
+                // the channel reconnects by itself on the next call
+                tokio::time::sleep(delay).await;
+            }
+            Err(s) => return Err(s.into()),
+        }
+    }
+}
+
+/// Extends the held leases every `interval_ms`, recording those the coordinator reports lost.
+async fn heartbeat_loop(mut client: Client, worker: String, interval_ms: u32, held: Arc<Mutex<Held>>) {
+    let mut tick = tokio::time::interval(Duration::from_millis(interval_ms.max(50) as u64));
+    loop {
+        tick.tick().await;
+        let leases = held.lock().unwrap_or_else(|p| p.into_inner()).leases.clone();
+        let req = client.request(pb::HeartbeatRequest { worker_id: worker.clone(), leases });
+        match client.inner.heartbeat(req).await {
+            Ok(r) => {
+                let mut h = held.lock().unwrap_or_else(|p| p.into_inner());
+                for l in r.into_inner().lost {
+                    h.lost.insert(key(&l));
+                }
+            }
+            Err(s) => tracing::debug!(message = %s.message(), "heartbeat failed"),
+        }
+    }
+}
+
+async fn wait_for_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match (signal(SignalKind::terminate()), signal(SignalKind::interrupt())) {
+            (Ok(mut term), Ok(mut int)) => {
+                tokio::select! {
+                    _ = term.recv() => {}
+                    _ = int.recv() => {}
+                }
+            }
+            _ => std::future::pending::<()>().await,
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = tokio::signal::ctrl_c().await;
+}

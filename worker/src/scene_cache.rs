@@ -1,0 +1,108 @@
+//! Scene bundles cached on disk by digest (fetched once through `FetchBlob`, verified against
+//! their SHA-256, unpacked into `<cache>/<digest>/`) and loaded scenes kept in memory for the
+//! few most recent (bundle, defines) pairs.
+
+use crate::client::Client;
+use prost::Message;
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tessera_common::scene::Scene;
+use tessera_proto::v1 as pb;
+use tokio_stream::StreamExt;
+
+/// Loaded scenes kept in memory.
+const KEEP_LOADED: usize = 4;
+
+/// A loaded scene's identity: bundle digest and sorted defines.
+type SceneKey = (String, Vec<(String, String)>);
+
+/// The cache.
+pub struct SceneCache {
+    dir: PathBuf,
+    loaded: Vec<(SceneKey, Arc<Scene>)>,
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl SceneCache {
+    /// A cache under `dir`.
+    pub fn new(dir: PathBuf) -> Self {
+        SceneCache { dir, loaded: Vec::new() }
+    }
+
+    /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
+    pub async fn get(
+        &mut self,
+        client: &mut Client,
+        digest: &str,
+        defines: &HashMap<String, String>,
+    ) -> anyhow::Result<Arc<Scene>> {
+        let mut key_defines: Vec<_> = defines.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+        key_defines.sort();
+        let key = (digest.to_string(), key_defines);
+        if let Some((_, scene)) = self.loaded.iter().find(|(k, _)| *k == key) {
+            return Ok(scene.clone());
+        }
+        let scene_file = self.unpack(client, digest).await?;
+        let defines = defines.clone();
+        let scene = tokio::task::spawn_blocking(move || Scene::load_with(&scene_file, &defines)).await??;
+        let scene = Arc::new(scene);
+        self.loaded.push((key, scene.clone()));
+        if self.loaded.len() > KEEP_LOADED {
+            self.loaded.remove(0);
+        }
+        Ok(scene)
+    }
+
+    /// Makes sure the bundle is unpacked; returns the scene file's path.
+    async fn unpack(&self, client: &mut Client, digest: &str) -> anyhow::Result<PathBuf> {
+        if digest.len() != 64 || !digest.bytes().all(|b| b.is_ascii_hexdigit()) {
+            anyhow::bail!("invalid bundle digest {digest:?}");
+        }
+        let dir = self.dir.join(digest);
+        let marker = dir.join(".scene_path");
+        if let Ok(p) = std::fs::read_to_string(&marker) {
+            return Ok(dir.join(p));
+        }
+        let mut stream = client
+            .inner
+            .fetch_blob(client.request(pb::FetchBlobRequest { digest: digest.to_string() }))
+            .await?
+            .into_inner();
+        let mut bytes = Vec::new();
+        while let Some(chunk) = stream.next().await {
+            bytes.extend_from_slice(&chunk?.data);
+        }
+        if hex(&Sha256::digest(&bytes)) != digest {
+            anyhow::bail!("bundle {digest} arrived corrupted (digest mismatch)");
+        }
+        let bundle = pb::SceneBundle::decode(bytes.as_slice())?;
+        let cache_dir = self.dir.clone();
+        let digest = digest.to_string();
+        tokio::task::spawn_blocking(move || write_bundle(&cache_dir, &digest, &bundle)).await?
+    }
+}
+
+fn write_bundle(cache: &Path, digest: &str, bundle: &pb::SceneBundle) -> anyhow::Result<PathBuf> {
+    use tessera_common::bundle::safe_relative_path;
+    let tmp = cache.join(format!(".{digest}.{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    for f in &bundle.files {
+        let rel = safe_relative_path(&f.path).ok_or_else(|| anyhow::anyhow!("unsafe bundle path {:?}", f.path))?;
+        let p = tmp.join(rel);
+        std::fs::create_dir_all(p.parent().unwrap_or(&tmp))?;
+        std::fs::write(&p, &f.data)?;
+    }
+    safe_relative_path(&bundle.scene_path).ok_or_else(|| anyhow::anyhow!("unsafe scene path"))?;
+    std::fs::write(tmp.join(".scene_path"), &bundle.scene_path)?;
+    let dir = cache.join(digest);
+    if std::fs::rename(&tmp, &dir).is_err() {
+        // another worker process sharing the cache unpacked it first
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    Ok(dir.join(&bundle.scene_path))
+}
