@@ -5,7 +5,7 @@
 use super::*;
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::TileRequest;
-use tessera_common::settings::{IntegratorName, RenderSettings};
+use tessera_common::settings::{IntegratorName, RenderSettings, Renderer};
 use tessera_proto::v1 as pb;
 use tessera_proto::v1::worker_service_client::WorkerServiceClient;
 use tonic::transport::Channel;
@@ -25,6 +25,7 @@ async fn upload(
         sample_end: lease.sample_end,
         non_finite: 0,
         render_seconds: 0.0,
+        pilot_bytes: 0,
     };
     let messages = vec![
         pb::UploadResultRequest { part: Some(Part::Header(header)) },
@@ -79,7 +80,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
         let scene = tessera_common::scene::Scene::load(&scene("cornell-box")).unwrap();
         let settings =
             RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), seed: Some(6), ..Default::default() };
-        let integrator = settings.make_integrator(&scene).unwrap();
+        let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(&scene) else { panic!("a tile integrator") };
         let rect = Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 };
         let mut accum = TileAccum::new(rect);
         integrator.render_tile(&scene, &TileRequest { rect, samples: 0..1, seed: 6 }, &mut accum);

@@ -98,6 +98,37 @@ fn rest_submit_vcm_equals_local_render_and_reports_progress() {
     assert!(metrics.contains("tessera_tiles_merged_total 3"), "{metrics}");
 }
 
+/// EMIS on the farm: a pilot pass, updates after iterations 1 and 4 run by the coordinator on
+/// the merged moments, final passes with the chosen strategy (its merge mask fetched by the
+/// workers as a blob) — and the same image, bit for bit, and the same decisions as locally.
+#[test]
+fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
+    use tessera_common::film::exr::{read_attribute, read_layer};
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let settings = json!({"integrator": "emis-vcm", "spp": 6, "seed": 4});
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    assert_eq!((job["state"].as_str(), job["tiles_total"].as_u64()), (Some("queued"), Some(1)), "the pilot: {job}");
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&c, id, None);
+    assert_eq!(done["tiles_total"], 6, "{done}");
+    let updates = done["strategy"]["updates"].as_array().expect("EMIS decisions in the status");
+    assert_eq!(updates.iter().map(|u| u["iteration"].as_u64().unwrap()).collect::<Vec<_>>(), [1, 4]);
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    let local = local_render(dir.path(), &scene("cornell-box"), "emis-vcm", 6, 4);
+    assert_same_image(&out, &local);
+    let (farm_mask, local_mask) = (read_layer(&out, "merge_mask").unwrap(), read_layer(&local, "merge_mask").unwrap());
+    assert!(farm_mask.iter().zip(&local_mask).all(|(a, b)| a.to_bits() == b.to_bits()), "same merge mask");
+    for key in ["tessera/emis_nu", "tessera/emis_connections", "tessera/emis_updates"] {
+        assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap(), "{key}");
+    }
+    assert_eq!(read_attribute(&out, "tessera/emis_updates").unwrap(), Some(2.0));
+}
+
 #[test]
 fn scene_with_assets_renders_over_rest() {
     // caustic-glass references gem.obj: the bundle must carry it to the workers

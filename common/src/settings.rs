@@ -1,6 +1,7 @@
 //! Render settings as plain data: what a farm job carries from client to coordinator to worker
 //! (serde, so REST and storage can use JSON), and the one function that turns them plus a
-//! loaded scene into an [`Integrator`].
+//! loaded scene into a [`Renderer`] (a tile [`Integrator`] or the EMIS loop's configuration),
+//! used by `tessera render`, the coordinator and the worker alike.
 //!
 //! The rules are those of `tessera render` (`coordinator/src/local.rs`): unset values come from
 //! the scene file (spp and seed from its sampler, max depth from its integrator), so a farm job
@@ -13,8 +14,11 @@
 //! assert!(s.validate().is_ok());
 //! ```
 
+use crate::integrator::emis::{EmisConfig, EmisMethod, EmisState, render_emis};
 use crate::integrator::vcm::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
+use crate::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
+use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -32,12 +36,22 @@ pub enum IntegratorName {
     Bdpt,
     /// Vertex connection and merging.
     Vcm,
+    /// Efficiency-aware MIS over bidirectional path tracing.
+    EmisBdpt,
+    /// Efficiency-aware MIS over vertex connection and merging.
+    EmisVcm,
 }
 
 impl IntegratorName {
     /// Every name, for messages.
-    pub const ALL: [IntegratorName; 4] =
-        [IntegratorName::Pt, IntegratorName::Lt, IntegratorName::Bdpt, IntegratorName::Vcm];
+    pub const ALL: [IntegratorName; 6] = [
+        IntegratorName::Pt,
+        IntegratorName::Lt,
+        IntegratorName::Bdpt,
+        IntegratorName::Vcm,
+        IntegratorName::EmisBdpt,
+        IntegratorName::EmisVcm,
+    ];
 
     /// The command-line and wire spelling.
     pub fn as_str(self) -> &'static str {
@@ -46,6 +60,17 @@ impl IntegratorName {
             IntegratorName::Lt => "lt",
             IntegratorName::Bdpt => "bdpt",
             IntegratorName::Vcm => "vcm",
+            IntegratorName::EmisBdpt => "emis-bdpt",
+            IntegratorName::EmisVcm => "emis-vcm",
+        }
+    }
+
+    /// The EMIS method, for `emis-*`.
+    pub fn emis_method(self) -> Option<EmisMethod> {
+        match self {
+            IntegratorName::EmisBdpt => Some(EmisMethod::Bdpt),
+            IntegratorName::EmisVcm => Some(EmisMethod::Vcm),
+            _ => None,
         }
     }
 
@@ -60,7 +85,7 @@ impl std::str::FromStr for IntegratorName {
     fn from_str(s: &str) -> Result<Self, SettingsError> {
         IntegratorName::ALL.into_iter().find(|n| n.as_str() == s).ok_or_else(|| SettingsError::Invalid {
             field: "integrator",
-            message: format!("unknown integrator \"{s}\" (expected pt, lt, bdpt or vcm)"),
+            message: format!("unknown integrator \"{s}\" (expected pt, lt, bdpt, vcm, emis-bdpt or emis-vcm)"),
         })
     }
 }
@@ -95,6 +120,12 @@ pub struct RenderSettings {
     pub correlation_aware: bool,
     /// Scene parameter overrides (`-D name=value`).
     pub defines: BTreeMap<String, String>,
+    /// EMIS: optimise after these many iterations (increasing, above 0).
+    pub emis_updates: Vec<u32>,
+    /// EMIS: count ratio of merge candidates in the moment estimator (decision 3a).
+    pub merge_ratio: MergeRatio,
+    /// EMIS: how merge samples enter the moments (decision 3b).
+    pub merge_kernel: MergeKernel,
 }
 
 impl Default for RenderSettings {
@@ -110,7 +141,45 @@ impl Default for RenderSettings {
             merge: true,
             correlation_aware: true,
             defines: BTreeMap::new(),
+            emis_updates: EmisConfig::DEFAULT_UPDATES.to_vec(),
+            merge_ratio: MomentSettings::default().merge_ratio,
+            merge_kernel: MomentSettings::default().merge_kernel,
         }
+    }
+}
+
+/// What renders a job: a tile integrator, or efficiency-aware MIS with its update loop.
+pub enum Renderer {
+    /// `pt`, `lt`, `bdpt`, `vcm`.
+    Tiles(Box<dyn Integrator>),
+    /// `emis-bdpt`, `emis-vcm`.
+    Emis(EmisConfig, PathSettings),
+}
+
+impl Renderer {
+    /// The integrator's name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Renderer::Tiles(i) => i.name(),
+            Renderer::Emis(c, _) => c.name(),
+        }
+    }
+
+    /// Renders `scene` on this machine; for EMIS also returns the final state (decisions and
+    /// reports).
+    pub fn render(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(RenderOutput, Option<EmisState>), RenderError> {
+        Ok(match self {
+            Renderer::Tiles(i) => (render(scene, i.as_ref(), opts, progress)?, None),
+            Renderer::Emis(config, settings) => {
+                let out = render_emis(scene, *settings, config, opts, progress)?;
+                (out.render, Some(out.state))
+            }
+        })
     }
 }
 
@@ -154,6 +223,12 @@ impl RenderSettings {
             ));
         }
         self.max_depth_limit()?;
+        if self.emis_updates.windows(2).any(|w| w[0] >= w[1]) || self.emis_updates.first() == Some(&0) {
+            return Err(invalid(
+                "emis_updates",
+                format!("must be increasing iteration counts above 0, got {:?}", self.emis_updates),
+            ));
+        }
         Ok(())
     }
 
@@ -183,20 +258,37 @@ impl RenderSettings {
         s
     }
 
-    /// Builds the integrator, with the same rules as `tessera render`.
-    pub fn make_integrator(&self, scene: &Scene) -> Result<Box<dyn Integrator>, SettingsError> {
+    /// Builds the renderer, with the same rules everywhere (`tessera render`, coordinator,
+    /// worker).
+    pub fn make_renderer(&self, scene: &Scene) -> Result<Renderer, SettingsError> {
         self.validate()?;
         let settings = PathSettings::from_scene(scene, self.max_depth_limit()?);
         let (nu, c) = (self.light_paths_per_pixel, self.connections);
-        Ok(match self.integrator {
-            IntegratorName::Pt => Box::new(PathTracer { settings }),
-            IntegratorName::Lt => Box::new(LightTracer { settings, light_paths_per_pixel: nu }),
-            IntegratorName::Bdpt => Box::new(Bidir::bdpt(settings, nu, c)),
+        let tiles = |i: Box<dyn Integrator>| Ok(Renderer::Tiles(i));
+        match self.integrator {
+            IntegratorName::Pt => tiles(Box::new(PathTracer { settings })),
+            IntegratorName::Lt => tiles(Box::new(LightTracer { settings, light_paths_per_pixel: nu })),
+            IntegratorName::Bdpt => tiles(Box::new(Bidir::bdpt(settings, nu, c))),
             IntegratorName::Vcm => {
                 let mask = MergeMask::Constant(if self.merge { 1.0 } else { 0.0 });
-                Box::new(Bidir::vcm(settings, nu, c, MergeConfig { mask, correlation_aware: self.correlation_aware }))
+                tiles(Box::new(Bidir::vcm(
+                    settings,
+                    nu,
+                    c,
+                    MergeConfig { mask, correlation_aware: self.correlation_aware },
+                )))
             }
-        })
+            IntegratorName::EmisBdpt | IntegratorName::EmisVcm => Ok(Renderer::Emis(self.emis_config(), settings)),
+        }
+    }
+
+    /// The EMIS configuration of `emis-*` settings (the defaults of the method otherwise).
+    pub fn emis_config(&self) -> EmisConfig {
+        let mut config = EmisConfig::new(self.integrator.emis_method().unwrap_or(EmisMethod::Vcm));
+        config.updates = self.emis_updates.clone();
+        config.correlation_aware = self.correlation_aware;
+        config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
+        config
     }
 }
 
@@ -218,5 +310,10 @@ mod tests {
         assert!(e.to_string().contains("sppp"), "{e}");
         assert_eq!("bdpt".parse::<IntegratorName>().unwrap(), IntegratorName::Bdpt);
         assert!("emis".parse::<IntegratorName>().is_err());
+        assert_eq!("emis-vcm".parse::<IntegratorName>().unwrap(), IntegratorName::EmisVcm);
+        let s = RenderSettings { emis_updates: vec![4, 4], ..Default::default() };
+        assert!(s.validate().unwrap_err().to_string().contains("emis_updates"));
+        let s: RenderSettings = serde_json::from_str(r#"{"integrator":"emis-vcm","merge_ratio":"reference"}"#).unwrap();
+        assert_eq!(s.emis_config().moments.merge_ratio, MergeRatio::Reference);
     }
 }

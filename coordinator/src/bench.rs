@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
+use tessera_common::settings::RenderSettings;
 
 /// Arguments of `tessera bench`.
 #[derive(clap::Args, Debug, Clone)]
@@ -84,7 +85,8 @@ struct Timing {
 }
 
 fn time_tessera(args: &BenchArgs, scene: &Scene) -> anyhow::Result<Timing> {
-    let renderer = make_renderer(args.integrator, scene, &crate::local::IntegratorOptions::default())?;
+    let renderer =
+        make_renderer(&RenderSettings { integrator: args.integrator.into(), ..RenderSettings::default() }, scene)?;
     let opts =
         RenderOptions { budget: Budget::Samples(args.spp), seed: 1, threads: args.threads.unwrap_or(0), tile_size: 32 };
     let mut best: Option<(f64, f64)> = None;

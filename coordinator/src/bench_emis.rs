@@ -10,7 +10,7 @@
 
 use crate::bench::BenchArgs;
 use crate::chart::{Group, write_bar_chart};
-use crate::local::{IntegratorOptions, make_renderer, scene_name};
+use crate::local::{make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tessera_common::film::{Rect, TileAccum};
@@ -26,6 +26,7 @@ use tessera_common::mis::optimize::{OptimizerInput, optimize};
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::sampler::Sampler;
 use tessera_common::scene::Scene;
+use tessera_common::settings::RenderSettings;
 
 /// One scene's equal-time results: (integrator, relMSE, samples/s).
 type Row = Vec<(String, f64, f64)>;
@@ -35,7 +36,7 @@ fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Resu
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
     for &kind in &args.integrators {
-        let renderer = make_renderer(kind, &scene, &IntegratorOptions::default())?;
+        let renderer = make_renderer(&RenderSettings { integrator: kind.into(), ..RenderSettings::default() }, &scene)?;
         let opts = RenderOptions {
             budget: Budget::Time(Duration::from_secs_f64(seconds)),
             seed: 1,

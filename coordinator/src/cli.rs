@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
+use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// Tessera: a distributed renderer for Mitsuba 3 scenes.
 #[derive(Parser, Debug)]
@@ -47,6 +49,56 @@ impl IntegratorKind {
             IntegratorKind::EmisBdpt => "emis-bdpt",
             IntegratorKind::EmisVcm => "emis-vcm",
         }
+    }
+}
+
+impl From<IntegratorKind> for IntegratorName {
+    fn from(kind: IntegratorKind) -> IntegratorName {
+        match kind {
+            IntegratorKind::Pt => IntegratorName::Pt,
+            IntegratorKind::Lt => IntegratorName::Lt,
+            IntegratorKind::Bdpt => IntegratorName::Bdpt,
+            IntegratorKind::Vcm => IntegratorName::Vcm,
+            IntegratorKind::EmisBdpt => IntegratorName::EmisBdpt,
+            IntegratorKind::EmisVcm => IntegratorName::EmisVcm,
+        }
+    }
+}
+
+/// Merging and EMIS options, shared by `render` and `submit`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MisArgs {
+    /// Merging for vcm (on: merge probability 1 in every pixel).
+    #[arg(long, value_enum, default_value = "on")]
+    pub merge: Switch,
+    /// Correlation-aware MIS weights for merges (vcm, emis-vcm).
+    #[arg(long, value_enum, default_value = "on")]
+    pub correlation_aware: Switch,
+    /// emis-*: optimise after these many iterations (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
+    pub emis_updates: Vec<u32>,
+    /// emis-*: count ratio of merge candidates in the correction factor.
+    #[arg(long, value_enum, default_value = "principled")]
+    pub merge_ratio: MergeRatioArg,
+    /// emis-*: merge moments with the kernel squared or (as the reference) once.
+    #[arg(long, value_enum, default_value = "squared")]
+    pub merge_kernel: MergeKernelArg,
+}
+
+impl MisArgs {
+    /// Sets these options in `settings`.
+    pub fn apply(&self, settings: &mut RenderSettings) {
+        settings.merge = self.merge == Switch::On;
+        settings.correlation_aware = self.correlation_aware == Switch::On;
+        settings.emis_updates = self.emis_updates.clone();
+        settings.merge_ratio = match self.merge_ratio {
+            MergeRatioArg::Principled => MergeRatio::Principled,
+            MergeRatioArg::Reference => MergeRatio::Reference,
+        };
+        settings.merge_kernel = match self.merge_kernel {
+            MergeKernelArg::Squared => MergeKernel::Squared,
+            MergeKernelArg::Reference => MergeKernel::Reference,
+        };
     }
 }
 
@@ -127,21 +179,9 @@ pub struct RenderArgs {
     /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.
     #[arg(long, default_value_t = 1)]
     pub connections: u32,
-    /// Merging for vcm (on: merge probability 1 in every pixel).
-    #[arg(long, value_enum, default_value = "on")]
-    pub merge: Switch,
-    /// Correlation-aware MIS weights for merges (vcm).
-    #[arg(long, value_enum, default_value = "on")]
-    pub correlation_aware: Switch,
-    /// emis-*: optimise after these many iterations (comma-separated).
-    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
-    pub emis_updates: Vec<u32>,
-    /// emis-*: count ratio of merge candidates in the correction factor.
-    #[arg(long, value_enum, default_value = "principled")]
-    pub merge_ratio: MergeRatioArg,
-    /// emis-*: merge moments with the kernel squared or (as the reference) once.
-    #[arg(long, value_enum, default_value = "squared")]
-    pub merge_kernel: MergeKernelArg,
+    /// Merging and EMIS options.
+    #[command(flatten)]
+    pub mis: MisArgs,
     /// Set a scene parameter ($name), overriding its <default>: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,

@@ -1,20 +1,18 @@
 //! `tessera render`: renders a scene on this machine with no setup, writing an EXR (beauty RGB
 //! plus per-pixel sample counts) and an sRGB PNG preview beside it.
 
-use crate::cli::{IntegratorKind, MergeKernelArg, MergeRatioArg, RenderArgs, Switch};
-use anyhow::{Context, bail};
+use crate::cli::RenderArgs;
+use anyhow::{Context, anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
 use tessera_common::film::png::write_png;
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, EmisState, render_emis};
-use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
-use tessera_common::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
-use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
-use tessera_common::render::{Budget, RenderOptions, RenderOutput, render};
+use tessera_common::integrator::emis::EmisState;
+use tessera_common::render::{Budget, RenderOptions, RenderOutput};
 use tessera_common::scene::Scene;
+use tessera_common::settings::{RenderSettings, Renderer, SettingsError};
 
 /// A scene's display name: the file stem, or the folder name for files called `scene.xml`.
 pub fn scene_name(path: &Path) -> String {
@@ -45,141 +43,26 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
         .collect()
 }
 
-/// The integrator parameters of the command line.
-#[derive(Clone, Debug)]
-pub struct IntegratorOptions {
-    /// `--max-depth`.
-    pub max_depth: Option<i64>,
-    /// `--light-paths-per-pixel`.
-    pub light_paths_per_pixel: f32,
-    /// `--connections`.
-    pub connections: u32,
-    /// `--merge`.
-    pub merge: bool,
-    /// `--correlation-aware`.
-    pub correlation_aware: bool,
-    /// `--emis-updates`.
-    pub emis_updates: Vec<u32>,
-    /// `--merge-ratio`.
-    pub merge_ratio: MergeRatio,
-    /// `--merge-kernel`.
-    pub merge_kernel: MergeKernel,
-}
-
-impl IntegratorOptions {
-    /// From `tessera render`'s arguments.
-    pub fn from_args(args: &RenderArgs) -> Self {
-        IntegratorOptions {
-            max_depth: args.max_depth,
-            light_paths_per_pixel: args.light_paths_per_pixel,
-            connections: args.connections,
-            merge: args.merge == Switch::On,
-            correlation_aware: args.correlation_aware == Switch::On,
-            emis_updates: args.emis_updates.clone(),
-            merge_ratio: match args.merge_ratio {
-                MergeRatioArg::Principled => MergeRatio::Principled,
-                MergeRatioArg::Reference => MergeRatio::Reference,
-            },
-            merge_kernel: match args.merge_kernel {
-                MergeKernelArg::Squared => MergeKernel::Squared,
-                MergeKernelArg::Reference => MergeKernel::Reference,
-            },
-        }
-    }
-}
-
-impl Default for IntegratorOptions {
-    fn default() -> Self {
-        IntegratorOptions {
-            max_depth: None,
-            light_paths_per_pixel: 1.0,
-            connections: 1,
-            merge: true,
-            correlation_aware: true,
-            emis_updates: vec![1, 4, 16, 64],
-            merge_ratio: MomentSettings::default().merge_ratio,
-            merge_kernel: MomentSettings::default().merge_kernel,
-        }
-    }
-}
-
-/// What renders: a tile integrator, or efficiency-aware MIS with its update loop.
-pub enum Renderer {
-    /// `pt`, `lt`, `bdpt`, `vcm`.
-    Tiles(Box<dyn Integrator>),
-    /// `emis-bdpt`, `emis-vcm`.
-    Emis(EmisConfig, PathSettings),
-}
-
-impl Renderer {
-    /// The integrator's name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Renderer::Tiles(i) => i.name(),
-            Renderer::Emis(c, _) => c.name(),
-        }
-    }
-
-    /// Renders `scene`; for EMIS also returns the final state (decisions and reports).
-    pub fn render(
-        &self,
-        scene: &Scene,
-        opts: &RenderOptions,
-        progress: &(dyn Fn(u64, u64) + Sync),
-    ) -> anyhow::Result<(RenderOutput, Option<EmisState>)> {
-        Ok(match self {
-            Renderer::Tiles(i) => (render(scene, i.as_ref(), opts, progress)?, None),
-            Renderer::Emis(config, settings) => {
-                let out = render_emis(scene, *settings, config, opts, progress)?;
-                (out.render, Some(out.state))
-            }
-        })
-    }
-}
-
-/// Builds the renderer the arguments ask for.
-pub fn make_renderer(kind: IntegratorKind, scene: &Scene, o: &IntegratorOptions) -> anyhow::Result<Renderer> {
-    if !(o.light_paths_per_pixel >= 0.0 && o.light_paths_per_pixel.is_finite())
-        || (kind == IntegratorKind::Lt && o.light_paths_per_pixel == 0.0)
-    {
-        bail!(
-            "--light-paths-per-pixel must be positive (or 0 for bdpt and vcm: no light paths), got {}",
-            o.light_paths_per_pixel
-        );
-    }
-    let max_depth = match o.max_depth {
-        None => None,
-        Some(-1) => Some(u32::MAX),
-        Some(d) if d >= 0 => Some(d.min(u32::MAX as i64) as u32),
-        Some(d) => bail!("--max-depth must be -1 (unlimited) or non-negative, got {d}"),
+/// The settings `tessera render`'s arguments ask for (spp, seed and time stay with the
+/// command: they are resolved against the scene there).
+pub fn settings_from_args(args: &RenderArgs) -> RenderSettings {
+    let mut settings = RenderSettings {
+        integrator: args.integrator.into(),
+        max_depth: args.max_depth,
+        light_paths_per_pixel: args.light_paths_per_pixel,
+        connections: args.connections,
+        ..RenderSettings::default()
     };
-    let settings = PathSettings::from_scene(scene, max_depth);
-    let (nu, c) = (o.light_paths_per_pixel, o.connections);
-    let emis = |method| {
-        if o.emis_updates.windows(2).any(|w| w[0] >= w[1]) || o.emis_updates.first() == Some(&0) {
-            bail!("--emis-updates must be increasing iteration counts above 0, got {:?}", o.emis_updates);
-        }
-        let mut config = EmisConfig::new(method);
-        config.updates = o.emis_updates.clone();
-        config.correlation_aware = o.correlation_aware;
-        config.moments = MomentSettings { merge_ratio: o.merge_ratio, merge_kernel: o.merge_kernel };
-        Ok(Renderer::Emis(config, settings))
-    };
-    Ok(match kind {
-        IntegratorKind::Pt => Renderer::Tiles(Box::new(PathTracer { settings })),
-        IntegratorKind::Lt => Renderer::Tiles(Box::new(LightTracer { settings, light_paths_per_pixel: nu })),
-        IntegratorKind::Bdpt => Renderer::Tiles(Box::new(Bidir::bdpt(settings, nu, c))),
-        IntegratorKind::Vcm => {
-            let mask = MergeMask::Constant(if o.merge { 1.0 } else { 0.0 });
-            Renderer::Tiles(Box::new(Bidir::vcm(
-                settings,
-                nu,
-                c,
-                MergeConfig { mask, correlation_aware: o.correlation_aware },
-            )))
-        }
-        IntegratorKind::EmisBdpt => emis(EmisMethod::Bdpt)?,
-        IntegratorKind::EmisVcm => emis(EmisMethod::Vcm)?,
+    args.mis.apply(&mut settings);
+    settings
+}
+
+/// Builds the renderer of `settings` (the rules shared with the farm), naming the command-line
+/// flag of a bad value.
+pub fn make_renderer(settings: &RenderSettings, scene: &Scene) -> anyhow::Result<Renderer> {
+    settings.make_renderer(scene).map_err(|e| match e {
+        SettingsError::Invalid { field, message } => anyhow!("--{} {message}", field.replace('_', "-")),
+        other => anyhow!(other),
     })
 }
 
@@ -198,7 +81,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--threads must be at least 1");
     }
     let scene = Scene::load_with(&args.scene, &defines)?;
-    let renderer = make_renderer(args.integrator, &scene, &IntegratorOptions::from_args(args))?;
+    let renderer = make_renderer(&settings_from_args(args), &scene)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match args.time {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
@@ -271,17 +154,8 @@ pub fn write_outputs(
         ],
     };
     let mask = emis.map(|e| e.merge_mask());
-    let relative = emis.and_then(|e| e.relative_moment.as_ref());
-    if let Some(e) = emis {
-        extras.attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
-        extras.attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
-        extras.attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
-    }
-    if let Some(mask) = &mask {
-        extras.layers.push(("merge_mask", mask));
-    }
-    if let Some(relative) = relative {
-        extras.layers.push(("relative_moment", &relative.data));
+    if let (Some(e), Some(mask)) = (emis, &mask) {
+        add_emis_extras(e, mask, &mut extras);
     }
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -306,6 +180,18 @@ pub fn write_outputs(
             .with_context(|| format!("cannot write {}", report.display()))?;
     }
     Ok(())
+}
+
+/// Adds what EMIS decided to an EXR: ν, c and the update count as attributes, the merge mask
+/// (`mask`, from [`EmisState::merge_mask`]) and the relative moment as layers.
+pub fn add_emis_extras<'a>(e: &'a EmisState, mask: &'a [f32], extras: &mut ExrExtras<'a>) {
+    extras.attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
+    extras.attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
+    extras.attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
+    extras.layers.push(("merge_mask", mask));
+    if let Some(relative) = &e.relative_moment {
+        extras.layers.push(("relative_moment", &relative.data));
+    }
 }
 
 /// The strategy as a picture: the image's luminance in grey, tinted orange by the merge

@@ -5,8 +5,8 @@
 //! * [`v1::worker_service_server`] / [`v1::worker_service_client`]: render workers register,
 //!   heartbeat, lease tiles (long poll), upload tile sums and fetch scene bundles by digest.
 //!
-//! The crate holds generated code plus the few constants both ends must agree on; conversions
-//! to renderer types live in the coordinator and the worker.
+//! The crate holds generated code plus what both ends must agree on: payload layouts and
+//! constants here, conversions to the renderer's settings and rectangles in [`convert`].
 //!
 //! ```no_run
 //! use tessera_proto::v1::job_service_client::JobServiceClient;
@@ -19,6 +19,8 @@
 
 #![deny(missing_docs)]
 
+pub mod convert;
+
 /// Generated `tessera.v1` messages, clients and servers.
 #[allow(missing_docs)]
 pub mod v1 {
@@ -28,6 +30,10 @@ pub mod v1 {
 /// Bytes per pixel of a tile result payload: three little-endian f64 sums then, after all
 /// pixels' sums, one little-endian u32 sample count per pixel (see `TileResultHeader`).
 pub const RESULT_BYTES_PER_PIXEL: usize = 3 * 8 + 4;
+
+/// Upper bound of the EMIS pilot data per pixel a result may carry (moment sums of up to 64
+/// candidates and seven guide channels, all f32); the exact size is checked on decoding.
+pub const MAX_PILOT_BYTES_PER_PIXEL: u64 = (64 + 7) * 4;
 
 /// Size of the chunks that byte streams (uploads, blobs, results) are cut into.
 pub const CHUNK_BYTES: usize = 1 << 20;

@@ -1,11 +1,15 @@
 //! Rendering a batch of leased tiles on the worker's rayon pool. Called from
 //! `tokio::task::spawn_blocking`, never on an async thread. Image tiles render in parallel,
-//! one per rayon task; full-frame tiles parallelise inside the integrator.
+//! one per rayon task; full-frame tiles parallelise inside the integrator. EMIS tiles render
+//! with the lease's strategy and, when asked, return the pilot data (moments, statistics,
+//! guides) encoded for the upload.
 
 use std::time::Instant;
 use tessera_common::film::{Rect, TileAccum};
-use tessera_common::integrator::{Integrator, TileRequest};
+use tessera_common::integrator::TileRequest;
+use tessera_common::integrator::emis::{Strategy, render_iterations};
 use tessera_common::scene::Scene;
+use tessera_common::settings::Renderer;
 
 /// A tile to render.
 #[derive(Clone, Debug)]
@@ -18,24 +22,62 @@ pub struct TileWork {
     pub seed: u64,
 }
 
-/// Renders `tiles` on `pool`; returns each tile's sums and seconds spent.
+/// What an EMIS lease renders with.
+#[derive(Clone, Debug)]
+pub struct EmisWork {
+    /// The pass's counts.
+    pub strategy: Strategy,
+    /// Whether to return pilot data.
+    pub collect: bool,
+}
+
+/// A rendered tile.
+pub struct TileOutput {
+    /// Image sums.
+    pub accum: TileAccum,
+    /// Seconds spent.
+    pub seconds: f64,
+    /// Encoded pilot data (empty unless collected).
+    pub pilot: Vec<u8>,
+}
+
+/// Renders `tiles` with `renderer` on `pool` (`emis` is required for EMIS renderers).
 pub fn render_batch(
     pool: &rayon::ThreadPool,
     scene: &Scene,
-    integrator: &dyn Integrator,
+    renderer: &Renderer,
+    emis: Option<&EmisWork>,
     tiles: &[TileWork],
-) -> Vec<(TileAccum, f64)> {
+) -> Vec<TileOutput> {
     use rayon::prelude::*;
-    pool.install(|| {
-        tiles
+    pool.install(|| match (renderer, emis) {
+        (Renderer::Emis(config, settings), Some(work)) => tiles
+            .iter()
+            .map(|t| {
+                let start = Instant::now();
+                let (accum, pilot) = render_iterations(
+                    scene,
+                    *settings,
+                    config,
+                    &work.strategy,
+                    t.seed,
+                    t.samples.clone(),
+                    work.collect,
+                );
+                let pilot = pilot.map(|p| p.encode()).unwrap_or_default();
+                TileOutput { accum, seconds: start.elapsed().as_secs_f64(), pilot }
+            })
+            .collect(),
+        (Renderer::Emis(..), None) => unreachable!("invariant: EMIS leases carry a strategy (checked by the runner)"),
+        (Renderer::Tiles(integrator), _) => tiles
             .par_iter()
             .map(|t| {
                 let start = Instant::now();
                 let mut accum = TileAccum::new(t.rect);
                 let req = TileRequest { rect: t.rect, samples: t.samples.clone(), seed: t.seed };
                 integrator.render_tile(scene, &req, &mut accum);
-                (accum, start.elapsed().as_secs_f64())
+                TileOutput { accum, seconds: start.elapsed().as_secs_f64(), pilot: Vec::new() }
             })
-            .collect()
+            .collect(),
     })
 }

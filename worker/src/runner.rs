@@ -5,11 +5,14 @@
 use crate::Args;
 use crate::client::{Backoff, Client};
 use crate::convert;
-use crate::render::{TileWork, render_batch};
-use crate::scene_cache::SceneCache;
+use crate::render::{EmisWork, TileOutput, TileWork, render_batch};
+use crate::scene_cache::{MaskCache, SceneCache};
 use std::collections::HashSet;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use tessera_common::integrator::emis::Strategy;
+use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::settings::Renderer;
 use tessera_proto::v1 as pb;
 use tokio::sync::watch;
 
@@ -127,6 +130,26 @@ async fn work_loop(
     }
 }
 
+/// The strategy of an EMIS lease, with its merge mask fetched (or cached).
+async fn emis_work(
+    client: &mut Client,
+    masks: &mut MaskCache,
+    s: &pb::TileStrategy,
+    pixels: usize,
+) -> anyhow::Result<EmisWork> {
+    use pb::tile_strategy::Merge;
+    let merge = match &s.merge {
+        None => None,
+        Some(Merge::MergeConstant(c)) => Some(MergeMask::Constant(*c)),
+        Some(Merge::MergeMaskDigest(d)) => Some(MergeMask::PerPixel(masks.get(client, d, pixels).await?)),
+    };
+    if !(s.light_paths_per_pixel >= 0.0 && s.light_paths_per_pixel.is_finite()) {
+        anyhow::bail!("lease strategy has light_paths_per_pixel {}", s.light_paths_per_pixel);
+    }
+    let strategy = Strategy { nu: s.light_paths_per_pixel, connections: s.connections, merge };
+    Ok(EmisWork { strategy, collect: s.collect_moments })
+}
+
 /// Renders one batch of leases (all of one job) and uploads the results.
 #[tracing::instrument(skip_all, fields(job_id = %leases[0].lease.as_ref().map_or("", |l| l.job_id.as_str()), tiles = leases.len()))]
 async fn render_and_upload(
@@ -141,7 +164,15 @@ async fn render_and_upload(
     let prepared = async {
         let settings = convert::settings(first.settings.as_ref()).map_err(anyhow::Error::msg)?;
         let scene = cache.get(client, &first.bundle_digest, &settings.define_map()).await?;
-        let integrator = settings.make_integrator(&scene)?;
+        let renderer = settings.make_renderer(&scene)?;
+        let emis = match (&renderer, &first.strategy) {
+            (Renderer::Emis(..), Some(s)) => {
+                let pixels = scene.camera.width as usize * scene.camera.height as usize;
+                Some(emis_work(client, &mut cache.masks, s, pixels).await?)
+            }
+            (Renderer::Emis(..), None) => anyhow::bail!("an EMIS lease came without a strategy"),
+            (Renderer::Tiles(_), _) => None,
+        };
         let tiles = leases
             .iter()
             .map(|l| {
@@ -153,10 +184,10 @@ async fn render_and_upload(
             })
             .collect::<Result<Vec<_>, String>>()
             .map_err(anyhow::Error::msg)?;
-        anyhow::Ok((scene, integrator, tiles))
+        anyhow::Ok((scene, renderer, emis, tiles))
     }
     .await;
-    let (scene, integrator, tiles) = match prepared {
+    let (scene, renderer, emis, tiles) = match prepared {
         Ok(p) => p,
         Err(e) => {
             // cannot render these leases (bad bundle, scene, settings): say so, so the tiles go
@@ -176,8 +207,9 @@ async fn render_and_upload(
     };
     let pool = pool.clone();
     let work = tiles.clone();
-    let results = tokio::task::spawn_blocking(move || render_batch(&pool, &scene, integrator.as_ref(), &work)).await?;
-    for (l, (accum, seconds)) in leases.iter().zip(results) {
+    let results =
+        tokio::task::spawn_blocking(move || render_batch(&pool, &scene, &renderer, emis.as_ref(), &work)).await?;
+    for (l, TileOutput { accum, seconds, pilot }) in leases.iter().zip(results) {
         let Some(lease) = l.lease.clone() else { continue };
         if held.lock().unwrap_or_else(|p| p.into_inner()).lost.contains(&key(&lease)) {
             tracing::debug!(tile = lease.tile, "lease lost while rendering: result dropped");
@@ -191,8 +223,10 @@ async fn render_and_upload(
             sample_end: l.sample_end,
             non_finite: accum.non_finite,
             render_seconds: seconds,
+            pilot_bytes: pilot.len() as u64,
         };
-        let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        let mut payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        payload.extend_from_slice(&pilot);
         upload(client, header, payload).await?;
         tracing::debug!(job_id = %lease.job_id, tile = lease.tile, seconds, non_finite = accum.non_finite, "tile uploaded");
     }

@@ -1,6 +1,6 @@
 //! Scene bundles cached on disk by digest (fetched once through `FetchBlob`, verified against
 //! their SHA-256, unpacked into `<cache>/<digest>/`) and loaded scenes kept in memory for the
-//! few most recent (bundle, defines) pairs.
+//! few most recent (bundle, defines) pairs; also the current EMIS merge mask (a blob too).
 
 use crate::client::Client;
 use prost::Message;
@@ -22,6 +22,8 @@ type SceneKey = (String, Vec<(String, String)>);
 pub struct SceneCache {
     dir: PathBuf,
     loaded: Vec<(SceneKey, Arc<Scene>)>,
+    /// The current EMIS merge mask.
+    pub masks: MaskCache,
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -31,7 +33,7 @@ fn hex(bytes: &[u8]) -> String {
 impl SceneCache {
     /// A cache under `dir`.
     pub fn new(dir: PathBuf) -> Self {
-        SceneCache { dir, loaded: Vec::new() }
+        SceneCache { dir, loaded: Vec::new(), masks: MaskCache::default() }
     }
 
     /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
@@ -68,22 +70,57 @@ impl SceneCache {
         if let Ok(p) = std::fs::read_to_string(&marker) {
             return Ok(dir.join(p));
         }
-        let mut stream = client
-            .inner
-            .fetch_blob(client.request(pb::FetchBlobRequest { digest: digest.to_string() }))
-            .await?
-            .into_inner();
-        let mut bytes = Vec::new();
-        while let Some(chunk) = stream.next().await {
-            bytes.extend_from_slice(&chunk?.data);
-        }
-        if hex(&Sha256::digest(&bytes)) != digest {
-            anyhow::bail!("bundle {digest} arrived corrupted (digest mismatch)");
-        }
+        let bytes = fetch_verified(client, digest).await?;
         let bundle = pb::SceneBundle::decode(bytes.as_slice())?;
         let cache_dir = self.dir.clone();
         let digest = digest.to_string();
         tokio::task::spawn_blocking(move || write_bundle(&cache_dir, &digest, &bundle)).await?
+    }
+}
+
+/// A blob fetched by digest and checked against it.
+async fn fetch_verified(client: &mut Client, digest: &str) -> anyhow::Result<Vec<u8>> {
+    let mut stream = client
+        .inner
+        .fetch_blob(client.request(pb::FetchBlobRequest { digest: digest.to_string() }))
+        .await?
+        .into_inner();
+    let mut bytes = Vec::new();
+    while let Some(chunk) = stream.next().await {
+        bytes.extend_from_slice(&chunk?.data);
+    }
+    if hex(&Sha256::digest(&bytes)) != digest {
+        anyhow::bail!("blob {digest} arrived corrupted (digest mismatch)");
+    }
+    Ok(bytes)
+}
+
+/// The most recent EMIS merge mask, kept in memory: every tile of a pass uses the same one.
+#[derive(Default)]
+pub struct MaskCache {
+    last: Option<(String, Arc<Vec<f32>>)>,
+}
+
+impl MaskCache {
+    /// The per-pixel merge probabilities of blob `digest` (`pixels` little-endian f32).
+    pub async fn get(&mut self, client: &mut Client, digest: &str, pixels: usize) -> anyhow::Result<Arc<Vec<f32>>> {
+        if let Some((d, mask)) = &self.last
+            && d == digest
+        {
+            return Ok(mask.clone());
+        }
+        let bytes = fetch_verified(client, digest).await?;
+        if bytes.len() != pixels * 4 {
+            anyhow::bail!("merge mask {digest} has {} bytes, expected {} for {pixels} pixels", bytes.len(), pixels * 4);
+        }
+        let mask: Vec<f32> =
+            bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("invariant: 4 bytes"))).collect();
+        if mask.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            anyhow::bail!("merge mask {digest} has values outside [0, 1]");
+        }
+        let mask = Arc::new(mask);
+        self.last = Some((digest.to_string(), mask.clone()));
+        Ok(mask)
     }
 }
 

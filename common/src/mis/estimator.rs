@@ -47,6 +47,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 
 /// The count ratio of merge candidates (decision 3a).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum MergeRatio {
     /// χ·ν: a merge candidate merges against N = ν·P light paths, like its MIS weights.
     Principled,
@@ -56,6 +57,7 @@ pub enum MergeRatio {
 
 /// How merge samples enter the moments (decision 3b).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum MergeKernel {
     /// (contribution × kernel)², the square of what is added to the image.
     Squared,

@@ -99,7 +99,11 @@ pub fn job_json(j: &pb::Job) -> serde_json::Value {
     serde_json::json!({
         "id": j.id, "name": j.name, "state": state_name(j.state), "phase": j.phase,
         "progress": j.progress, "tiles_done": j.tiles_done, "tiles_total": j.tiles_total,
-        "samples_done": j.samples_done, "eta_s": j.eta_s, "strategy": null, "error": j.error,
+        "samples_done": j.samples_done, "eta_s": j.eta_s, "error": j.error,
+        "strategy": j.strategy.as_ref().map(|s| serde_json::json!({
+            "nu": s.light_paths_per_pixel, "connections": s.connections,
+            "mean_merge_probability": s.mean_merge_probability, "updates": s.updates,
+        })),
         "priority": j.priority, "width": j.width, "height": j.height,
         "integrator": j.settings.as_ref().map(|s| s.integrator.clone()),
     })

@@ -2,6 +2,7 @@
 //! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG.
 
 use super::{Client, ServerArgs, runtime, state_name, status_error};
+use crate::cli::MisArgs;
 use crate::local::{parse_defines, scene_name};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -18,7 +19,7 @@ pub struct SubmitArgs {
     /// Coordinator.
     #[command(flatten)]
     pub server: ServerArgs,
-    /// Rendering algorithm: pt, lt, bdpt or vcm.
+    /// Rendering algorithm: pt, lt, bdpt, vcm, emis-bdpt or emis-vcm.
     #[arg(long, default_value = "pt")]
     pub integrator: IntegratorName,
     /// Samples per pixel (iterations for lt, bdpt, vcm) [default: the scene's].
@@ -42,6 +43,9 @@ pub struct SubmitArgs {
     /// Connections per camera vertex (bdpt, vcm).
     #[arg(long, default_value_t = 1)]
     pub connections: u32,
+    /// Merging and EMIS options.
+    #[command(flatten)]
+    pub mis: MisArgs,
     /// Set a scene parameter: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,
@@ -79,7 +83,7 @@ pub fn bundle_of(scene: &Path, defines: &std::collections::HashMap<String, Strin
 /// Runs `tessera submit`.
 pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let defines = parse_defines(&args.define)?;
-    let settings = RenderSettings {
+    let mut settings = RenderSettings {
         integrator: args.integrator,
         spp: args.spp,
         time_s: args.time,
@@ -90,6 +94,7 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         defines: defines.clone().into_iter().collect(),
         ..RenderSettings::default()
     };
+    args.mis.apply(&mut settings);
     settings.validate()?;
     let bundle = bundle_of(&args.scene, &defines)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));

@@ -1,6 +1,7 @@
 //! Conversions between prost messages and domain types. Prost types never leave `grpc/`;
 //! a message that does not convert is an `INVALID_ARGUMENT` naming the field.
 
+use crate::job::emis::{MergeSpec, TileStrategy};
 use crate::job::model::{JobState, LeaseRef};
 use crate::job::service::{JobView, LeaseGrant};
 use tessera_common::film::Rect;
@@ -8,59 +9,16 @@ use tessera_common::settings::RenderSettings;
 use tessera_proto::v1 as pb;
 use tonic::Status;
 
-/// Wire settings → domain settings.
+/// Wire settings → domain settings (`tessera_proto::convert` holds the rules).
 pub fn settings_from_pb(s: Option<pb::RenderSettings>) -> Result<RenderSettings, Status> {
-    let s = s.unwrap_or_default();
-    let d = RenderSettings::default();
-    let integrator = if s.integrator.is_empty() {
-        d.integrator
-    } else {
-        s.integrator
-            .parse()
-            .map_err(|e: tessera_common::settings::SettingsError| Status::invalid_argument(e.to_string()))?
-    };
-    Ok(RenderSettings {
-        integrator,
-        spp: s.spp,
-        time_s: s.time_s,
-        seed: s.seed,
-        max_depth: s.max_depth,
-        light_paths_per_pixel: s.light_paths_per_pixel.unwrap_or(d.light_paths_per_pixel),
-        connections: s.connections.unwrap_or(d.connections),
-        merge: s.merge.unwrap_or(d.merge),
-        correlation_aware: s.correlation_aware.unwrap_or(d.correlation_aware),
-        defines: s.defines.into_iter().collect(),
-    })
+    tessera_proto::convert::settings_from_pb(&s.unwrap_or_default()).map_err(Status::invalid_argument)
 }
 
-/// Domain settings → wire settings.
-pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
-    pb::RenderSettings {
-        integrator: s.integrator.to_string(),
-        spp: s.spp,
-        time_s: s.time_s,
-        seed: s.seed,
-        max_depth: s.max_depth,
-        light_paths_per_pixel: Some(s.light_paths_per_pixel),
-        connections: Some(s.connections),
-        merge: Some(s.merge),
-        correlation_aware: Some(s.correlation_aware),
-        defines: s.defines.clone().into_iter().collect(),
-    }
-}
+pub use tessera_proto::convert::{rect_to_pb, settings_to_pb};
 
 /// Wire rect → domain rect.
 pub fn rect_from_pb(r: Option<pb::Rect>) -> Result<Rect, Status> {
-    let r = r.ok_or_else(|| Status::invalid_argument("field \"rect\" is missing"))?;
-    if r.x0 >= r.x1 || r.y0 >= r.y1 {
-        return Err(Status::invalid_argument(format!("field \"rect\" is empty: {r:?}")));
-    }
-    Ok(Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 })
-}
-
-/// Domain rect → wire rect.
-pub fn rect_to_pb(r: Rect) -> pb::Rect {
-    pb::Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 }
+    tessera_proto::convert::rect_from_pb(r.as_ref()).map_err(Status::invalid_argument)
 }
 
 /// Wire lease → domain lease.
@@ -83,6 +41,20 @@ pub fn grant_to_pb(g: &LeaseGrant) -> pb::TileLease {
         rect: Some(rect_to_pb(g.tile.rect)),
         sample_begin: g.tile.samples.start,
         sample_end: g.tile.samples.end,
+        strategy: g.strategy.as_ref().map(strategy_to_pb),
+    }
+}
+
+fn strategy_to_pb(s: &TileStrategy) -> pb::TileStrategy {
+    pb::TileStrategy {
+        light_paths_per_pixel: s.nu,
+        connections: s.connections,
+        merge: match &s.merge {
+            MergeSpec::None => None,
+            MergeSpec::Constant(c) => Some(pb::tile_strategy::Merge::MergeConstant(*c)),
+            MergeSpec::Mask(digest) => Some(pb::tile_strategy::Merge::MergeMaskDigest(digest.clone())),
+        },
+        collect_moments: s.collect,
     }
 }
 
@@ -117,5 +89,11 @@ pub fn job_to_pb(j: &JobView) -> pb::Job {
         height: j.height,
         created_unix_ms: j.created_ms,
         scene_digest: j.scene_digest.clone(),
+        strategy: j.strategy.as_ref().map(|s| pb::EmisStrategy {
+            light_paths_per_pixel: s.nu,
+            connections: s.connections,
+            mean_merge_probability: s.mean_merge_probability,
+            updates: s.updates.len() as u32,
+        }),
     }
 }

@@ -69,7 +69,14 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         let rect = rect_from_pb(header.rect)?;
         let lease = lease_from_pb(header.lease)?;
         // never buffer more than the claimed rectangle can need
-        let limit = rect.area() * tessera_proto::RESULT_BYTES_PER_PIXEL;
+        let pilot_limit = rect.area() as u64 * tessera_proto::MAX_PILOT_BYTES_PER_PIXEL + 4096;
+        if header.pilot_bytes > pilot_limit {
+            return Err(Status::invalid_argument(format!(
+                "field \"pilot_bytes\" ({}) exceeds {pilot_limit} for {rect:?}",
+                header.pilot_bytes
+            )));
+        }
+        let limit = rect.area() * tessera_proto::RESULT_BYTES_PER_PIXEL + header.pilot_bytes as usize;
         let mut payload = Vec::with_capacity(limit.min(1 << 28));
         while let Some(msg) = stream.next().await {
             match msg?.part {
@@ -84,8 +91,12 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
                 _ => return Err(Status::invalid_argument("only data may follow the upload header")),
             }
         }
-        let claim =
-            ResultClaim { rect, samples: header.sample_begin..header.sample_end, non_finite: header.non_finite };
+        let claim = ResultClaim {
+            rect,
+            samples: header.sample_begin..header.sample_end,
+            non_finite: header.non_finite,
+            pilot_bytes: header.pilot_bytes,
+        };
         let svc = self.0.svc.clone();
         let worker = header.worker_id;
         let outcome = blocking(move || svc.upload(&worker, &lease, &claim, &payload, now_ms())).await?;

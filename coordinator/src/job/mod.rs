@@ -1,7 +1,8 @@
 //! Jobs: the pure state machine ([`model`]), how jobs are cut into tiles and passes
-//! ([`plan`]), result validation ([`validate`]) and the service that wraps them with storage
-//! and notifications ([`service`]).
+//! ([`plan`]), result validation ([`validate`]), the EMIS state and updates ([`emis`]) and the
+//! service that wraps them with storage and notifications ([`service`]).
 
+pub mod emis;
 pub mod model;
 pub mod plan;
 pub mod service;

@@ -11,7 +11,7 @@
 //!
 //! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`.
 
-use super::plan::{self, BarrierAction};
+use super::plan::{self, BarrierAction, PassPlan};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
@@ -80,6 +80,9 @@ pub struct Pass {
     pub kind: PassKind,
     /// Its tiles.
     pub tiles: Range<usize>,
+    /// EMIS: its tiles collect moments for an update at its end.
+    #[serde(default)]
+    pub collect: bool,
 }
 
 /// What a tile renders.
@@ -210,11 +213,21 @@ impl Job {
         self.passes.iter().position(|p| p.tiles.contains(&tile))
     }
 
-    fn append_pass(&mut self, kind: PassKind, tiles: Vec<TileSpec>) -> Range<usize> {
+    /// Whether tile `tile` collects EMIS moments.
+    pub fn collects(&self, tile: usize) -> bool {
+        self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
+    }
+
+    fn append_pass(&mut self, kind: PassKind, plan: PassPlan) -> Range<usize> {
         let start = self.tiles.len();
-        self.tiles.extend(tiles.into_iter().map(|spec| Tile { spec, epoch: 0, state: TileState::Queued, failures: 0 }));
+        self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
+            spec,
+            epoch: 0,
+            state: TileState::Queued,
+            failures: 0,
+        }));
         let range = start..self.tiles.len();
-        self.passes.push(Pass { kind, tiles: range.clone() });
+        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect });
         range
     }
 
@@ -303,7 +316,8 @@ impl JobsModel {
             started_ms: None,
             finished_ms: None,
         };
-        let range = job.append_pass(PassKind::Final, first);
+        let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
+        let range = job.append_pass(kind, first);
         self.jobs.insert(id.to_string(), job);
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
@@ -470,10 +484,11 @@ impl JobsModel {
         }
         // every planned tile is merged: the last pass's barrier
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
-        let action = plan::after_pass(&j.spec, j.spp_merged(), elapsed_s);
+        let collected = j.passes.last().is_some_and(|p| p.collect);
+        let action = plan::after_pass(&j.spec, j.spp_merged(), elapsed_s, collected);
         match &action {
-            BarrierAction::NextPass(tiles) => {
-                let range = j.append_pass(PassKind::Final, tiles.clone());
+            BarrierAction::NextPass(plan) => {
+                let range = j.append_pass(PassKind::Final, plan.clone());
                 changes.entry(job.to_string()).or_default().extend(range);
             }
             BarrierAction::Optimize => j.state = JobState::Optimizing,
@@ -482,14 +497,16 @@ impl JobsModel {
         (Some(action), changes)
     }
 
-    /// The optimiser has chosen a strategy at a barrier: plan the final pass. (EMIS hook.)
-    pub fn optimized(&mut self, job: &str, final_pass: Vec<TileSpec>) -> Result<Changes, TransitionError> {
+    /// The optimiser has chosen a strategy at an EMIS barrier: plan the next pass with it.
+    pub fn optimized(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state != JobState::Optimizing {
             return Err(TransitionError::NotOptimizing(job.to_string()));
         }
         j.state = JobState::Final;
-        let range = j.append_pass(PassKind::Final, final_pass);
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let plan = plan::pass_after_update(&j.spec, j.spp_merged(), elapsed_s);
+        let range = j.append_pass(PassKind::Final, plan);
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());
         Ok(changes)

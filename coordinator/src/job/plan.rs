@@ -22,26 +22,75 @@ use tessera_common::film::Rect;
 /// Edge of the rectangles of image-tile integrators.
 pub const TILE_SIZE: u32 = 64;
 
+/// A pass to append: its tiles, and whether they collect EMIS moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PassPlan {
+    /// The tiles, in merge order.
+    pub tiles: Vec<TileSpec>,
+    /// EMIS: the tiles record moments, statistics and guides for an update at the pass's end.
+    pub collect: bool,
+}
+
 /// What a job does when a pass has been merged completely (a barrier).
 #[derive(Clone, Debug, PartialEq)]
 pub enum BarrierAction {
-    /// Render these tiles as the next final pass.
-    NextPass(Vec<TileSpec>),
-    /// Hook for EMIS: the pilot pass is merged, so the coordinator runs the optimiser on the
-    /// merged moments and then calls `JobsModel::optimized` with the final pass. No current
-    /// integrator plans a pilot pass, so nothing produces this yet.
+    /// Render this as the next pass, with the current strategy.
+    NextPass(PassPlan),
+    /// EMIS: an update is due. The coordinator runs the optimiser on the merged image and
+    /// moments, then calls `JobsModel::optimized` with [`pass_after_update`].
     Optimize,
     /// Nothing left: the job is done.
     Finish,
 }
 
-/// The tiles of the first pass.
-pub fn first_pass(spec: &JobSpec) -> Vec<TileSpec> {
-    match spec.settings.spp {
-        Some(spp) => pass_tiles(spec, 0, spp),
-        // a time budget starts with one sample per pixel to measure the speed
-        None => pass_tiles(spec, 0, 1),
+fn is_emis(spec: &JobSpec) -> bool {
+    spec.settings.integrator.emis_method().is_some()
+}
+
+/// Iterations the budget allows in total, as far as is known after `spp_done` took
+/// `elapsed_s` seconds (a time budget's is unknown before the first iteration).
+fn expected_total(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> u32 {
+    match (spec.settings.spp, spec.settings.time_s) {
+        (Some(n), _) => n,
+        (None, Some(budget)) if spp_done > 0 && elapsed_s > 0.0 => {
+            ((budget / (elapsed_s / spp_done as f64)) as u32).max(spp_done)
+        }
+        _ => u32::MAX,
     }
+}
+
+/// Iterations the next pass may render: the rest of a sample budget, or for a time budget
+/// about a tenth of it, never planned past the deadline (as locally). 0: finished.
+fn next_count(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> u32 {
+    match (spec.settings.spp, spec.settings.time_s) {
+        (Some(n), _) => n.saturating_sub(spp_done),
+        (None, Some(budget)) => {
+            let remaining = budget - elapsed_s;
+            if remaining <= 0.0 || spp_done == 0 {
+                return 0;
+            }
+            let per_spp = (elapsed_s / spp_done as f64).max(1e-9);
+            ((remaining / per_spp).floor() as u32).min(((budget * 0.1 / per_spp) as u32).max(1))
+        }
+        (None, None) => 0,
+    }
+}
+
+/// A pass from `spp_done` of at most `count` iterations. EMIS collects moments while another
+/// update can come within the budget (`may_collect`: no earlier pass stopped collecting), and
+/// then ends the pass at that update, where the barrier runs it.
+fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total: u32) -> PassPlan {
+    let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done).filter(|&u| u < total);
+    let update = update.filter(|_| may_collect && is_emis(spec));
+    let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
+    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done), collect: update.is_some() }
+}
+
+/// The first pass (the pilot for EMIS). A time budget starts with one iteration to measure
+/// the speed.
+pub fn first_pass(spec: &JobSpec) -> PassPlan {
+    let count = spec.settings.spp.unwrap_or(1);
+    plan_from(spec, 0, count, true, expected_total(spec, 0, 0.0))
 }
 
 /// Tiles rendering samples `[begin, begin + count)` of every pixel.
@@ -59,17 +108,25 @@ pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32) -> Vec<TileSpec> {
 }
 
 /// What to do at the barrier after a pass. `spp_done` samples per pixel are merged, rendering
-/// has run for `elapsed_s` seconds.
-pub fn after_pass(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> BarrierAction {
-    let Some(budget) = spec.settings.time_s else { return BarrierAction::Finish };
-    let remaining = budget - elapsed_s;
-    if remaining <= 0.0 || spp_done == 0 {
-        return BarrierAction::Finish;
+/// has run for `elapsed_s` seconds, and `collected` says whether the pass collected moments.
+/// An EMIS update is due when the pass collected up to an update point and iterations remain
+/// to use it (as `render_emis` decides locally).
+pub fn after_pass(spec: &JobSpec, spp_done: u32, elapsed_s: f64, collected: bool) -> BarrierAction {
+    let total = expected_total(spec, spp_done, elapsed_s);
+    if collected && spec.settings.emis_updates.contains(&spp_done) && spp_done < total {
+        return BarrierAction::Optimize;
     }
-    // passes of about a tenth of the budget, never planned past the deadline (as locally)
-    let per_spp = (elapsed_s / spp_done as f64).max(1e-9);
-    let count = ((remaining / per_spp).floor() as u32).min(((budget * 0.1 / per_spp) as u32).max(1));
-    if count == 0 { BarrierAction::Finish } else { BarrierAction::NextPass(pass_tiles(spec, spp_done, count)) }
+    match next_count(spec, spp_done, elapsed_s) {
+        0 => BarrierAction::Finish,
+        count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total)),
+    }
+}
+
+/// The pass after an EMIS update at `spp_done` (at least one iteration: the update was run
+/// because iterations remain).
+pub fn pass_after_update(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> PassPlan {
+    let total = expected_total(spec, spp_done, elapsed_s);
+    plan_from(spec, spp_done, next_count(spec, spp_done, elapsed_s).max(1), true, total)
 }
 
 #[cfg(test)]
@@ -92,7 +149,7 @@ mod tests {
 
     #[test]
     fn plan_pt_covers_every_pixel_once_with_all_samples() {
-        let tiles = first_pass(&spec(IntegratorName::Pt, Some(8), None));
+        let tiles = first_pass(&spec(IntegratorName::Pt, Some(8), None)).tiles;
         assert_eq!(tiles.len(), 3 * 2);
         assert_eq!(tiles.iter().map(|t| t.rect.area()).sum::<usize>(), 130 * 70);
         assert!(tiles.iter().all(|t| t.samples == (0..8)));
@@ -100,23 +157,51 @@ mod tests {
 
     #[test]
     fn plan_bidir_is_one_full_frame_iteration_per_tile() {
-        let tiles = first_pass(&spec(IntegratorName::Vcm, Some(3), None));
+        let tiles = first_pass(&spec(IntegratorName::Vcm, Some(3), None)).tiles;
         assert_eq!(tiles.len(), 3);
         for (i, t) in tiles.iter().enumerate() {
             assert_eq!(t.rect, Rect::full(130, 70));
             assert_eq!(t.samples, i as u32..i as u32 + 1);
         }
-        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 1.0), BarrierAction::Finish);
+        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 1.0, false), BarrierAction::Finish);
     }
 
     #[test]
     fn plan_time_budget_adds_passes_until_the_time_is_used() {
         let s = spec(IntegratorName::Pt, None, Some(10.0));
-        assert!(first_pass(&s).iter().all(|t| t.samples == (0..1)));
-        match after_pass(&s, 1, 0.1) {
-            BarrierAction::NextPass(t) => assert_eq!(t[0].samples, 1..11),
+        assert!(first_pass(&s).tiles.iter().all(|t| t.samples == (0..1)));
+        match after_pass(&s, 1, 0.1, false) {
+            BarrierAction::NextPass(p) => assert_eq!(p.tiles[0].samples, 1..11),
             other => panic!("{other:?}"),
         }
-        assert_eq!(after_pass(&s, 50, 10.5), BarrierAction::Finish);
+        assert_eq!(after_pass(&s, 50, 10.5, false), BarrierAction::Finish);
+    }
+
+    /// The passes and barriers of an EMIS job with a sample budget, as `render_emis` does
+    /// locally: updates after 1 and 4 (16 is not reached within 12), moments collected up to
+    /// the last reachable update only.
+    #[test]
+    fn plan_emis_passes_end_at_the_updates_the_budget_reaches() {
+        let s = spec(IntegratorName::EmisVcm, Some(12), None);
+        let first = first_pass(&s);
+        assert_eq!(first.tiles.len(), 1);
+        assert!(first.collect);
+        assert_eq!(after_pass(&s, 1, 1.0, true), BarrierAction::Optimize);
+        let second = pass_after_update(&s, 1, 1.0);
+        assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
+        assert_eq!(after_pass(&s, 4, 1.0, true), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 1.0);
+        assert_eq!((third.tiles.first().unwrap().samples.start, third.tiles.len(), third.collect), (4, 8, false));
+        assert_eq!(after_pass(&s, 12, 1.0, false), BarrierAction::Finish);
+        // a budget that ends at an update point runs no update there, and collects nothing
+        // for it
+        let s = spec(IntegratorName::EmisBdpt, Some(4), None);
+        let after = pass_after_update(&s, 1, 1.0);
+        assert!(!after.collect);
+        assert_eq!(after.tiles.len(), 3);
+        let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
+        assert!(!one.collect);
+        // other integrators never collect
+        assert!(!first_pass(&spec(IntegratorName::Vcm, Some(12), None)).collect);
     }
 }

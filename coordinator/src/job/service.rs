@@ -10,6 +10,7 @@
 //! Methods are synchronous and may do file IO; async callers run the heavy ones (submit,
 //! upload, results) on blocking threads.
 
+use super::emis::{EmisJob, TileStrategy};
 use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, ResultOutcome, TileSpec, TileState};
 use super::plan::BarrierAction;
 use super::validate::{ResultClaim, validate_result};
@@ -17,11 +18,13 @@ use crate::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use tessera_common::film::exr::{Attribute, ExrExtras};
 use tessera_common::film::{Film, TileAccum};
+use tessera_common::integrator::emis::PilotData;
 use tessera_common::scene::Scene;
 use tessera_common::settings::RenderSettings;
 
-pub use super::view::{JobView, WorkerView};
+pub use super::view::{JobView, StrategyView, WorkerView};
 
 /// Tunables of the service.
 #[derive(Clone, Debug)]
@@ -74,6 +77,8 @@ pub struct LeaseGrant {
     pub tile: TileSpec,
     /// The job's description (settings, bundle).
     pub job: JobSpec,
+    /// EMIS: the counts to render with.
+    pub strategy: Option<TileStrategy>,
 }
 
 /// Which finished output.
@@ -104,7 +109,10 @@ struct Inner {
     model: JobsModel,
     store: Store,
     films: HashMap<String, Film>,
-    held: HashMap<(String, usize), TileAccum>,
+    emis: HashMap<String, EmisJob>,
+    /// EMIS decisions of finished jobs (whose state is dropped).
+    strategies: HashMap<String, StrategyView>,
+    held: HashMap<(String, usize), (TileAccum, Option<PilotData>)>,
     files: HashMap<String, JobFiles>,
     last_checkpoint_ms: HashMap<String, u64>,
     workers: BTreeMap<String, WorkerRow>,
@@ -133,6 +141,8 @@ impl JobService {
             model: JobsModel::default(),
             store,
             films: HashMap::new(),
+            emis: HashMap::new(),
+            strategies: HashMap::new(),
             held: HashMap::new(),
             files: HashMap::new(),
             last_checkpoint_ms: HashMap::new(),
@@ -146,11 +156,20 @@ impl JobService {
         let svc_ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
         for (job, files) in jobs {
             if !job.state.is_terminal() {
-                let film = match &files.checkpoint {
+                let (film, emis_bytes) = match &files.checkpoint {
                     Some(name) => blobs.get_checkpoint(name)?,
-                    None => Film::new(job.spec.width, job.spec.height),
+                    None => (Film::new(job.spec.width, job.spec.height), Vec::new()),
                 };
                 inner.films.insert(job.id.clone(), film);
+                let emis = match emis_bytes.is_empty() {
+                    true => EmisJob::new(&job.spec),
+                    false => Some(EmisJob::restore(&job.spec, &emis_bytes).map_err(|e| {
+                        ServiceError::Io(std::io::Error::other(format!("EMIS checkpoint of job {}: {e}", job.id)))
+                    })?),
+                };
+                if let Some(e) = emis {
+                    inner.emis.insert(job.id.clone(), e);
+                }
             }
             inner.files.insert(job.id.clone(), files);
             inner.model.restore(job);
@@ -166,6 +185,10 @@ impl JobService {
         {
             let mut inner = svc.lock();
             for id in svc_ids {
+                if inner.model.jobs[&id].state == JobState::Optimizing {
+                    // stopped between a barrier and its update: run the update now
+                    svc.optimize(&mut inner, &id, now_ms)?;
+                }
                 svc.merge_ready(&mut inner, &id, now_ms)?;
             }
         }
@@ -200,7 +223,7 @@ impl JobService {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
         let (digest, scene) = self.store_bundle(&bundle, &settings)?;
         let integrator_settings = settings.resolved(&scene);
-        integrator_settings.make_integrator(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
         let spec = JobSpec {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
             priority,
@@ -216,10 +239,13 @@ impl JobService {
         let changes =
             inner.model.submit(&id, spec.clone(), now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
         inner.films.insert(id.clone(), Film::new(spec.width, spec.height));
+        if let Some(e) = EmisJob::new(&spec) {
+            inner.emis.insert(id.clone(), e);
+        }
         self.persist(&mut inner, &changes, &[])?;
         tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
         self.work.notify_waiters();
-        Ok(JobView::of(&inner.model.jobs[&id], now_ms))
+        Ok(self.view(&inner, &id, now_ms))
     }
 
     /// Stores the bundle blob, unpacks it and loads the scene from it to validate it. Scene
@@ -298,13 +324,18 @@ impl JobService {
         self.seen(&mut inner, worker, now_ms)?;
         let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
         self.persist(&mut inner, &changes, &[])?;
-        Ok(leases
+        let inner = &mut *inner;
+        leases
             .into_iter()
             .map(|l| {
                 let job = &inner.model.jobs[&l.job];
-                LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l }
+                let strategy = match inner.emis.get_mut(&l.job) {
+                    Some(e) => Some(e.strategy(&self.blobs, job.collects(l.tile))?),
+                    None => None,
+                };
+                Ok(LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l, strategy })
             })
-            .collect())
+            .collect()
     }
 
     /// The tile a lease refers to.
@@ -362,21 +393,23 @@ impl JobService {
     ) -> Result<ResultOutcome, ServiceError> {
         let tile = {
             let inner = self.lock();
-            let current = inner.model.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).filter(|t| {
+            let job = inner.model.jobs.get(&lease.job);
+            let current = job.and_then(|j| j.tiles.get(lease.tile)).filter(|t| {
                 t.epoch == lease.epoch && matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker)
             });
-            current.map(|t| t.spec.clone())
+            current.map(|t| (t.spec.clone(), job.is_some_and(|j| j.collects(lease.tile))))
         };
-        let Some(tile) = tile else {
+        let Some((tile, collect)) = tile else {
             // not current: let the model say whether it is a duplicate or stale
             let mut inner = self.lock();
             let (outcome, _) = inner.model.result(worker, lease, Ok(()), now_ms);
             inner.counters.results_ignored += 1;
             return Ok(outcome);
         };
-        let verdict = validate_result(&tile, claim, payload);
-        if let Ok(accum) = &verdict {
+        let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
+        if let Ok((accum, _)) = &verdict {
             let mut stored = accum.non_finite.to_le_bytes().to_vec();
+            stored.extend_from_slice(&claim.pilot_bytes.to_le_bytes());
             stored.extend_from_slice(payload);
             self.blobs.put_result(&lease.job, lease.tile, lease.epoch, &stored)?;
         }
@@ -385,9 +418,9 @@ impl JobService {
             inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
         self.persist(&mut inner, &changes, &[])?;
         match (&outcome, verdict) {
-            (ResultOutcome::Accepted, Ok(accum)) => {
+            (ResultOutcome::Accepted, Ok(result)) => {
                 inner.counters.results_accepted += 1;
-                inner.held.insert((lease.job.clone(), lease.tile), accum);
+                inner.held.insert((lease.job.clone(), lease.tile), result);
                 self.merge_ready(&mut inner, &lease.job, now_ms)?;
                 Ok(outcome)
             }
@@ -404,6 +437,79 @@ impl JobService {
         }
     }
 
+    /// Checks a result's image sums and, for EMIS tiles, its pilot data (which the worker
+    /// appends to the payload); the error says what is wrong.
+    fn validate(
+        &self,
+        job: &str,
+        tile: &TileSpec,
+        collect: bool,
+        claim: &ResultClaim,
+        payload: &[u8],
+    ) -> Result<(TileAccum, Option<PilotData>), String> {
+        let pilot_bytes = usize::try_from(claim.pilot_bytes).ok().filter(|&n| n <= payload.len()).ok_or_else(|| {
+            format!("result claims {} pilot bytes in a payload of {}", claim.pilot_bytes, payload.len())
+        })?;
+        let (image, pilot) = payload.split_at(payload.len() - pilot_bytes);
+        let accum = validate_result(tile, claim, image)?;
+        let inner = self.lock();
+        let pilot = match inner.emis.get(job) {
+            Some(e) => e.decode_pilot(tile, collect, pilot)?,
+            None if pilot.is_empty() => None,
+            None => return Err("result has pilot data but the job is not an EMIS job".into()),
+        };
+        Ok((accum, pilot))
+    }
+
+    /// The update at an EMIS barrier: optimise on the merged film and moments, then plan the
+    /// next pass with the new strategy. Persisted with a checkpoint of both, so a restart
+    /// resumes after the update (or, if it stopped before, runs it again identically).
+    fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
+        let iterations = inner.model.jobs[job].spp_merged();
+        let (Some(film), Some(emis)) = (inner.films.get(job), inner.emis.get_mut(job)) else {
+            let changes = inner.model.fail(job, "the EMIS state of this job is missing".into(), now_ms);
+            return self.persist(inner, &changes, &[]);
+        };
+        let span = tracing::info_span!("emis_update", job_id = %job, iterations);
+        span.in_scope(|| emis.update(film, iterations));
+        let changes = inner.model.optimized(job, now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
+        let upto = inner.model.jobs[job].merged;
+        self.checkpoint(inner, job, upto, &changes, None, now_ms)?;
+        self.work.notify_waiters();
+        Ok(())
+    }
+
+    /// Writes a checkpoint of the film (and EMIS state) holding `tiles[..upto]` and persists
+    /// `changes` (and `outputs`) with it; then drops the superseded checkpoint and the merged
+    /// results.
+    fn checkpoint(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        upto: usize,
+        changes: &Changes,
+        outputs: Option<Extra>,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
+        let Some(film) = inner.films.get(job) else { return self.persist(inner, changes, &[]) };
+        let emis = inner.emis.get(job).map(EmisJob::checkpoint).unwrap_or_default();
+        let old = inner.files.get(job).and_then(|f| f.checkpoint.clone());
+        let file = self.blobs.put_checkpoint(job, upto, film, &emis)?;
+        let mut extras = vec![Extra::Checkpoint { job: job.to_string(), merged: upto, file: file.clone() }];
+        extras.extend(outputs);
+        self.persist(inner, changes, &extras)?;
+        inner.last_checkpoint_ms.insert(job.to_string(), now_ms);
+        inner.files.entry(job.to_string()).or_default().checkpoint = Some(file.clone());
+        if let Some(old) = old.filter(|o| *o != file) {
+            self.blobs.remove_checkpoint(&old);
+        }
+        let j = &inner.model.jobs[job];
+        for (i, t) in j.tiles[..upto].iter().enumerate() {
+            self.blobs.remove_result(job, i, t.epoch);
+        }
+        Ok(())
+    }
+
     /// Merges the accepted tiles that are next in order, runs barriers, checkpoints.
     fn merge_ready(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let range = inner.model.mergeable(job);
@@ -412,57 +518,37 @@ impl JobService {
         }
         let Some(mut film) = inner.films.remove(job) else { return Ok(()) };
         let merged = self.merge_range(inner, job, range.clone(), &mut film);
-        let merged = match merged {
-            Ok(()) => film,
-            Err(e) => {
-                inner.films.insert(job.to_string(), film);
-                return Err(e);
-            }
-        };
+        inner.films.insert(job.to_string(), film);
+        merged?;
         inner.counters.tiles_merged += range.len() as u64;
         let (action, changes) = inner.model.merged(job, range.end, now_ms);
         let upto = inner.model.jobs[job].merged;
-        let mut extras = Vec::new();
         let due =
             now_ms.saturating_sub(*inner.last_checkpoint_ms.get(job).unwrap_or(&0)) >= self.cfg.checkpoint_interval_ms;
-        let done = action == Some(BarrierAction::Finish);
-        if done || due || matches!(action, Some(BarrierAction::NextPass(_))) {
-            let old = inner.files.get(job).and_then(|f| f.checkpoint.clone());
-            let file = self.blobs.put_checkpoint(job, upto, &merged)?;
-            extras.push(Extra::Checkpoint { job: job.to_string(), merged: upto, file: file.clone() });
-            if done {
-                let (exr, png) = self.write_outputs(&inner.model.jobs[job].spec, job, &merged)?;
-                extras.push(Extra::Outputs { job: job.to_string(), exr: exr.clone(), png: png.clone() });
+        match action {
+            Some(BarrierAction::Finish) => {
+                let (exr, png) = self.write_outputs(inner, job)?;
+                let outputs = Extra::Outputs { job: job.to_string(), exr: exr.clone(), png: png.clone() };
+                self.checkpoint(inner, job, upto, &changes, Some(outputs), now_ms)?;
                 let f = inner.files.entry(job.to_string()).or_default();
                 (f.result_exr, f.preview_png) = (Some(exr), Some(png));
+                inner.films.remove(job);
+                if let Some(view) = inner.emis.remove(job).and_then(|e| e.view()) {
+                    inner.strategies.insert(job.to_string(), view);
+                }
+                tracing::info!(job_id = %job, "job done");
             }
-            self.persist(inner, &changes, &extras)?;
-            inner.last_checkpoint_ms.insert(job.to_string(), now_ms);
-            inner.files.entry(job.to_string()).or_default().checkpoint = Some(file.clone());
-            if let Some(old) = old.filter(|o| *o != file) {
-                self.blobs.remove_checkpoint(&old);
+            Some(BarrierAction::NextPass(_)) => {
+                self.checkpoint(inner, job, upto, &changes, None, now_ms)?;
+                self.work.notify_waiters();
             }
-            let j = &inner.model.jobs[job];
-            for (i, t) in j.tiles[..upto].iter().enumerate() {
-                self.blobs.remove_result(job, i, t.epoch);
-            }
-        } else {
-            self.persist(inner, &changes, &[])?;
-        }
-        match action {
-            Some(BarrierAction::Finish) => tracing::info!(job_id = %job, "job done"),
-            Some(BarrierAction::NextPass(_)) => self.work.notify_waiters(),
             Some(BarrierAction::Optimize) => {
-                // EMIS hook: run the optimiser on the merged pilot film and moments here, then
-                // call `JobsModel::optimized` with the final pass. No integrator plans a pilot
-                // pass yet, so reaching this is a planning bug: fail the job loudly.
-                let changes = inner.model.fail(job, "no optimiser is available for this job".into(), now_ms);
+                // the barrier and the update are persisted together (with the checkpoint)
                 self.persist(inner, &changes, &[])?;
+                self.optimize(inner, job, now_ms)?;
             }
-            None => {}
-        }
-        if !inner.model.jobs[job].state.is_terminal() {
-            inner.films.insert(job.to_string(), merged);
+            None if due => self.checkpoint(inner, job, upto, &changes, None, now_ms)?,
+            None => self.persist(inner, &changes, &[])?,
         }
         Ok(())
     }
@@ -475,35 +561,77 @@ impl JobService {
         film: &mut Film,
     ) -> Result<(), ServiceError> {
         for i in range {
-            let accum = match inner.held.remove(&(job.to_string(), i)) {
-                Some(a) => a,
-                None => {
-                    let t = &inner.model.jobs[job].tiles[i];
-                    let bytes = self.blobs.get_result(job, i, t.epoch)?;
-                    let corrupt =
-                        || ServiceError::Io(std::io::Error::other(format!("stored result of tile {i} is corrupt")));
-                    let non_finite =
-                        u64::from_le_bytes(bytes.get(..8).ok_or_else(corrupt)?.try_into().map_err(|_| corrupt())?);
-                    let (sum, count) =
-                        tessera_proto::decode_tile_payload(&bytes[8..], t.spec.rect.area()).ok_or_else(corrupt)?;
-                    TileAccum { rect: t.spec.rect, sum, count, non_finite }
-                }
+            let (accum, pilot) = match inner.held.remove(&(job.to_string(), i)) {
+                Some(r) => r,
+                None => self.stored_result(inner, job, i)?,
             };
             film.merge_tile(&accum);
+            if let (Some(p), Some(e)) = (pilot, inner.emis.get_mut(job)) {
+                e.absorb(&p).map_err(|m| ServiceError::Io(std::io::Error::other(m)))?;
+            }
         }
         Ok(())
     }
 
-    /// Writes the result EXR and PNG preview as blobs; returns their digests.
-    fn write_outputs(&self, spec: &JobSpec, job: &str, film: &Film) -> Result<(String, String), ServiceError> {
-        let attributes = vec![
-            ("tessera/integrator".to_string(), spec.settings.integrator.to_string()),
-            ("tessera/spp".to_string(), film.count.iter().max().copied().unwrap_or(0).to_string()),
-            ("tessera/seed".to_string(), spec.settings.seed.unwrap_or(0).to_string()),
-            ("tessera/scene".to_string(), spec.name.clone()),
-            ("tessera/job".to_string(), job.to_string()),
-        ];
-        Ok(self.blobs.put_outputs(film, &attributes)?)
+    /// An accepted result read back from the blob store (after a restart).
+    fn stored_result(
+        &self,
+        inner: &Inner,
+        job: &str,
+        i: usize,
+    ) -> Result<(TileAccum, Option<PilotData>), ServiceError> {
+        let j = &inner.model.jobs[job];
+        let t = &j.tiles[i];
+        let bytes = self.blobs.get_result(job, i, t.epoch)?;
+        let corrupt =
+            |why: String| ServiceError::Io(std::io::Error::other(format!("stored result of tile {i}: {why}")));
+        let (head, payload) = bytes.split_at_checked(16).ok_or_else(|| corrupt("too short".into()))?;
+        let non_finite = u64::from_le_bytes(head[..8].try_into().expect("invariant: 8 bytes"));
+        let pilot_bytes = u64::from_le_bytes(head[8..].try_into().expect("invariant: 8 bytes")) as usize;
+        let image_bytes = payload.len().checked_sub(pilot_bytes).ok_or_else(|| corrupt("too short".into()))?;
+        let (image, pilot) = payload.split_at(image_bytes);
+        let (sum, count) = tessera_proto::decode_tile_payload(image, t.spec.rect.area())
+            .ok_or_else(|| corrupt("wrong image size".into()))?;
+        let pilot = match inner.emis.get(job) {
+            Some(e) => e.decode_pilot(&t.spec, j.collects(i), pilot).map_err(corrupt)?,
+            None => None,
+        };
+        Ok((TileAccum { rect: t.spec.rect, sum, count, non_finite }, pilot))
+    }
+
+    /// Writes the result EXR (with the EMIS layers and decisions) and PNG preview as blobs;
+    /// returns their digests.
+    fn write_outputs(&self, inner: &Inner, job: &str) -> Result<(String, String), ServiceError> {
+        let spec = &inner.model.jobs[job].spec;
+        let film = &inner.films[job];
+        let text = |k: &str, v: String| (format!("tessera/{k}"), Attribute::Text(v));
+        let mut extras = ExrExtras {
+            counts: Some(&film.count),
+            layers: Vec::new(),
+            attributes: vec![
+                text("integrator", spec.settings.integrator.to_string()),
+                text("spp", film.count.iter().max().copied().unwrap_or(0).to_string()),
+                text("seed", spec.settings.seed.unwrap_or(0).to_string()),
+                text("scene", spec.name.clone()),
+                text("job", job.to_string()),
+            ],
+        };
+        let emis = inner.emis.get(job).map(|e| &e.state);
+        let mask = emis.map(|e| e.merge_mask());
+        if let (Some(e), Some(mask)) = (emis, &mask) {
+            crate::local::add_emis_extras(e, mask, &mut extras);
+        }
+        Ok(self.blobs.put_outputs(film, &extras)?)
+    }
+
+    /// A job's view with its EMIS decisions (kept after the job ends).
+    fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
+        let mut view = JobView::of(&inner.model.jobs[job], now_ms);
+        view.strategy = match inner.emis.get(job) {
+            Some(e) => e.view(),
+            None => inner.strategies.get(job).cloned(),
+        };
+        view
     }
 
     /// Cancels a job.
@@ -512,15 +640,18 @@ impl JobService {
         let changes = inner.model.cancel(job, now_ms).map_err(|e| ServiceError::NotFound(e.to_string()))?;
         self.persist(&mut inner, &changes, &[])?;
         inner.films.remove(job);
+        if let Some(view) = inner.emis.remove(job).and_then(|e| e.view()) {
+            inner.strategies.insert(job.to_string(), view);
+        }
         tracing::info!(job_id = %job, "job cancelled");
-        Ok(JobView::of(&inner.model.jobs[job], now_ms))
+        Ok(self.view(&inner, job, now_ms))
     }
 
     /// One job.
     pub fn get(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         let inner = self.lock();
         let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-        Ok(JobView::of(j, now_ms))
+        Ok(self.view(&inner, &j.id, now_ms))
     }
 
     /// Every job, newest first.
@@ -528,7 +659,7 @@ impl JobService {
         let inner = self.lock();
         let mut jobs: Vec<_> = inner.model.jobs.values().collect();
         jobs.sort_by_key(|j| std::cmp::Reverse(j.seq));
-        jobs.into_iter().map(|j| JobView::of(j, now_ms)).collect()
+        jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect()
     }
 
     /// A finished job's EXR or PNG.

@@ -8,7 +8,7 @@ use std::path::Path;
 use tessera_common::film::TileAccum;
 use tessera_common::integrator::TileRequest;
 use tessera_common::scene::Scene;
-use tessera_common::settings::RenderSettings;
+use tessera_common::settings::{RenderSettings, Renderer};
 
 const CFG: ServiceConfig = ServiceConfig { lease_timeout_ms: 10_000, checkpoint_interval_ms: 3_600_000 };
 
@@ -29,11 +29,11 @@ fn upload(
 ) -> Result<ResultOutcome, ServiceError> {
     let tile = svc.lease_spec(lease).unwrap();
     let settings = RenderSettings { spp: Some(1), seed: Some(3), ..Default::default() };
-    let integrator = settings.make_integrator(scene).unwrap();
+    let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(scene) else { panic!("a tile integrator") };
     let mut accum = TileAccum::new(tile.rect);
     integrator.render_tile(scene, &TileRequest { rect: tile.rect, samples: tile.samples.clone(), seed: 3 }, &mut accum);
     let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
-    let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite };
+    let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite, pilot_bytes: 0 };
     svc.upload(worker, lease, &claim, &payload, now)
 }
 
@@ -65,7 +65,7 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
     assert_eq!(svc.get(&job, 50_002).unwrap().samples_done, 3 * 64 * 64);
     // a bad result is refused and its tile re-queued with the next epoch
     let next = svc.lease(&worker, 1, 50_003).unwrap().remove(0).lease;
-    let bad = ResultClaim { rect: svc.lease_spec(&next).unwrap().rect, samples: 0..1, non_finite: 0 };
+    let bad = ResultClaim { rect: svc.lease_spec(&next).unwrap().rect, samples: 0..1, non_finite: 0, pilot_bytes: 0 };
     assert!(matches!(svc.upload(&worker, &next, &bad, &[0; 3], 50_004), Err(ServiceError::InvalidResult(_))));
     // the remaining tiles finish the job; the EXR has exactly one sample per pixel
     loop {

@@ -34,7 +34,10 @@ fn merge_all(m: &mut JobsModel, job: &str, merges: &mut Vec<u32>, now: u64) {
             }
             merges[i] += 1;
         }
-        m.merged(job, r.end, now);
+        if let (Some(BarrierAction::Optimize), _) = m.merged(job, r.end, now) {
+            // the service runs the optimiser here
+            m.optimized(job, now).unwrap();
+        }
     }
 }
 
@@ -151,15 +154,36 @@ fn time_budget_plans_passes_at_barriers() {
 }
 
 #[test]
-fn optimizer_hook_plans_the_final_pass_only_at_a_barrier() {
+fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     let mut m = JobsModel::default();
-    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
-    assert_eq!(m.optimized("a", vec![]), Err(TransitionError::NotOptimizing("a".into())));
-    m.jobs.get_mut("a").unwrap().state = JobState::Optimizing;
-    let tiles = super::plan::pass_tiles(&m.jobs["a"].spec, 1, 2);
-    m.optimized("a", tiles).unwrap();
-    assert_eq!(m.jobs["a"].state, JobState::Final);
-    assert_eq!(m.jobs["a"].passes.len(), 2);
+    m.submit("a", spec(IntegratorName::EmisVcm, 6, 0), 0).unwrap();
+    assert_eq!(m.optimized("a", 0), Err(TransitionError::NotOptimizing("a".into())));
+    let job = &m.jobs["a"];
+    assert_eq!((job.passes.len(), job.passes[0].kind, job.collects(0)), (1, PassKind::Pilot, true));
+    let (l, _) = m.lease("w", 8, 0, TTL);
+    assert_eq!((l.len(), m.jobs["a"].state), (1, JobState::Pilot));
+    m.result("w", &l[0], Ok(()), 1);
+    let (action, _) = m.merged("a", 1, 1);
+    assert_eq!(action, Some(BarrierAction::Optimize));
+    assert_eq!(m.jobs["a"].state, JobState::Optimizing);
+    assert!(m.lease("w", 8, 1, TTL).0.is_empty(), "nothing to render while optimising");
+    m.optimized("a", 2).unwrap();
+    let job = &m.jobs["a"];
+    assert_eq!(job.state, JobState::Final);
+    assert_eq!((job.passes[1].tiles.clone(), job.passes[1].collect), (1..4, true));
+    let mut merges = vec![1];
+    for _ in 0..10 {
+        for l in m.lease("w", 8, 3, TTL).0 {
+            m.result("w", &l, Ok(()), 3);
+        }
+        merge_all(&mut m, "a", &mut merges, 3);
+    }
+    let job = &m.jobs["a"];
+    assert_eq!(job.state, JobState::Done);
+    assert_eq!(
+        job.passes.iter().map(|p| (p.tiles.clone(), p.collect)).collect::<Vec<_>>(),
+        [(0..1, true), (1..4, true), (4..6, false)]
+    );
 }
 
 /// One step of a random schedule.
@@ -193,9 +217,14 @@ proptest! {
     fn exactly_once_merge_under_arbitrary_interleavings(
         events in proptest::collection::vec(event(), 1..120),
         full_frame in any::<bool>(),
-        spp in 1..4u32,
+        emis in any::<bool>(),
+        spp in 1..6u32,
     ) {
-        let integrator = if full_frame { IntegratorName::Vcm } else { IntegratorName::Pt };
+        let integrator = match (full_frame, emis) {
+            (false, _) => IntegratorName::Pt,
+            (true, false) => IntegratorName::Vcm,
+            (true, true) => IntegratorName::EmisVcm,
+        };
         let mut m = JobsModel::default();
         m.submit("j", spec(integrator, spp, 0), 0).unwrap();
         let mut now = 0u64;
@@ -240,7 +269,7 @@ proptest! {
             merge_all(&mut m, "j", &mut merges, now);
             let job = &m.jobs["j"];
             for (i, t) in job.tiles.iter().enumerate() {
-                prop_assert!(t.epoch >= epochs[i], "epoch went back");
+                prop_assert!(t.epoch >= epochs.get(i).copied().unwrap_or(0), "epoch went back");
                 prop_assert_eq!(t.state == TileState::Merged, i < job.merged);
             }
             epochs = job.tiles.iter().map(|t| t.epoch).collect();

@@ -15,9 +15,11 @@ pub struct ResultClaim {
     pub samples: std::ops::Range<u32>,
     /// Non-finite samples the renderer zeroed.
     pub non_finite: u64,
+    /// Bytes of EMIS pilot data at the end of the payload (checked apart).
+    pub pilot_bytes: u64,
 }
 
-/// Decodes and checks a result for `tile`; the error says what is wrong.
+/// Decodes and checks the image part of a result for `tile`; the error says what is wrong.
 pub fn validate_result(tile: &TileSpec, claim: &ResultClaim, payload: &[u8]) -> Result<TileAccum, String> {
     if claim.rect != tile.rect {
         return Err(format!("result rect {:?} does not match the tile's {:?}", claim.rect, tile.rect));
@@ -56,7 +58,7 @@ mod tests {
     }
 
     fn claim() -> ResultClaim {
-        ResultClaim { rect: tile().rect, samples: 0..4, non_finite: 0 }
+        ResultClaim { rect: tile().rect, samples: 0..4, non_finite: 0, pilot_bytes: 0 }
     }
 
     #[test]

@@ -2,10 +2,25 @@
 //! state, phase, progress, tiles, samples and an ETA computed from the model and the time.
 
 use super::model::{Job, JobState};
+use serde::Serialize;
+use tessera_common::integrator::emis::UpdateReport;
 use tessera_common::settings::RenderSettings;
 
+/// What EMIS has chosen so far.
+#[derive(Clone, Debug, Serialize)]
+pub struct StrategyView {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Mean per-pixel merge probability.
+    pub mean_merge_probability: f64,
+    /// Every update: the chosen counts and every candidate's predicted moment and cost.
+    pub updates: Vec<UpdateReport>,
+}
+
 /// A job as clients see it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct JobView {
     /// Id.
     pub id: String,
@@ -39,16 +54,21 @@ pub struct JobView {
     pub created_ms: u64,
     /// Bundle digest.
     pub scene_digest: String,
+    /// EMIS decisions once known (filled in by the service, which holds them).
+    pub strategy: Option<StrategyView>,
 }
 
 impl JobView {
     /// The view of `job` at `now_ms`.
     pub fn of(job: &Job, now_ms: u64) -> JobView {
+        // passes are planned at barriers (EMIS), so a sample budget is the measure of the whole
+        let pixels = job.spec.width as u64 * job.spec.height as u64;
+        let planned = job.samples_planned().max(job.spec.settings.spp.map_or(0, |n| n as u64 * pixels));
         let elapsed_s = job.started_ms.map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
         let progress = match (job.state, job.spec.settings.time_s) {
             (JobState::Done, _) => 1.0,
             (_, Some(budget)) => (elapsed_s.unwrap_or(0.0) / budget).clamp(0.0, 0.99),
-            _ => job.samples_merged() as f64 / job.samples_planned().max(1) as f64,
+            _ => job.samples_merged() as f64 / planned.max(1) as f64,
         };
         let eta_s = match elapsed_s {
             Some(e) if !job.state.is_terminal() && progress > 0.0 => Some(e * (1.0 - progress) / progress),
@@ -79,6 +99,7 @@ impl JobView {
             height: job.spec.height,
             created_ms: job.created_ms,
             scene_digest: job.spec.bundle_digest.clone(),
+            strategy: None,
         }
     }
 }

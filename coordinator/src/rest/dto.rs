@@ -2,6 +2,7 @@
 
 use crate::error::ApiError;
 use crate::job::service::{JobView, WorkerView};
+use crate::job::view::StrategyView;
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use tessera_common::settings::RenderSettings;
@@ -27,8 +28,8 @@ pub struct JobDto {
     pub samples_done: u64,
     /// Estimated seconds left.
     pub eta_s: Option<f64>,
-    /// The chosen MIS strategy (EMIS; null until the optimiser exists).
-    pub strategy: Option<String>,
+    /// The chosen MIS strategy (EMIS; null before the first update and for other integrators).
+    pub strategy: Option<StrategyView>,
     /// Why the job failed.
     pub error: Option<String>,
     /// Priority.
@@ -57,7 +58,7 @@ impl From<JobView> for JobDto {
             tiles_total: j.tiles_total,
             samples_done: j.samples_done,
             eta_s: j.eta_s,
-            strategy: None,
+            strategy: j.strategy,
             error: j.error,
             priority: j.priority,
             settings: j.settings,

@@ -7,7 +7,7 @@ use sha2::{Digest, Sha256};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
-use tessera_common::film::exr::{Attribute, ExrExtras};
+use tessera_common::film::exr::ExrExtras;
 
 /// Blob storage under one directory.
 #[derive(Clone, Debug)]
@@ -88,20 +88,22 @@ impl BlobStore {
         let _ = std::fs::remove_file(self.result_path(job, tile, epoch));
     }
 
-    /// Writes a checkpoint of `film` holding `tiles[..merged]`; returns its file name.
-    pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film) -> std::io::Result<String> {
+    /// Writes a checkpoint of `film` holding `tiles[..merged]`, followed by `trailer` (an EMIS
+    /// state, or nothing); returns its file name.
+    pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film, trailer: &[u8]) -> std::io::Result<String> {
         let name = format!("{job}.{merged}.film");
         let mut bytes = Vec::with_capacity(16 + film.sum.len() * tessera_proto::RESULT_BYTES_PER_PIXEL);
         bytes.extend_from_slice(&film.width.to_le_bytes());
         bytes.extend_from_slice(&film.height.to_le_bytes());
         bytes.extend_from_slice(&film.non_finite.to_le_bytes());
         bytes.extend_from_slice(&tessera_proto::encode_tile_payload(&film.sum, &film.count));
+        bytes.extend_from_slice(trailer);
         self.write_atomic(&self.root.join("checkpoints").join(&name), &bytes)?;
         Ok(name)
     }
 
-    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`].
-    pub fn get_checkpoint(&self, name: &str) -> std::io::Result<Film> {
+    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`]: the film and the trailer.
+    pub fn get_checkpoint(&self, name: &str) -> std::io::Result<(Film, Vec<u8>)> {
         let bytes = std::fs::read(self.root.join("checkpoints").join(name))?;
         let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt"));
         if bytes.len() < 16 {
@@ -110,9 +112,14 @@ impl BlobStore {
         let width = u32::from_le_bytes(bytes[0..4].try_into().map_err(|_| bad())?);
         let height = u32::from_le_bytes(bytes[4..8].try_into().map_err(|_| bad())?);
         let non_finite = u64::from_le_bytes(bytes[8..16].try_into().map_err(|_| bad())?);
-        let (sum, count) =
-            tessera_proto::decode_tile_payload(&bytes[16..], width as usize * height as usize).ok_or_else(bad)?;
-        Ok(Film { width, height, sum, count, non_finite })
+        let film_bytes = (width as usize * height as usize)
+            .checked_mul(tessera_proto::RESULT_BYTES_PER_PIXEL)
+            .and_then(|n| n.checked_add(16))
+            .filter(|&n| n <= bytes.len())
+            .ok_or_else(bad)?;
+        let (sum, count) = tessera_proto::decode_tile_payload(&bytes[16..film_bytes], width as usize * height as usize)
+            .ok_or_else(bad)?;
+        Ok((Film { width, height, sum, count, non_finite }, bytes[film_bytes..].to_vec()))
     }
 
     /// Deletes a superseded checkpoint.
@@ -125,29 +132,19 @@ impl BlobStore {
         self.root.join("tmp").join(format!("{}{suffix}", uuid::Uuid::new_v4()))
     }
 
-    /// Stores a finished film as an EXR (beauty plus sample counts, with `attributes`) and an
+    /// Stores a finished film as an EXR (beauty plus `extras`: counts, layers, attributes) and an
     /// sRGB PNG preview, exactly as `tessera render` writes them; returns both digests.
-    pub fn put_outputs(&self, film: &Film, attributes: &[(String, String)]) -> std::io::Result<(String, String)> {
+    pub fn put_outputs(&self, film: &Film, extras: &ExrExtras) -> std::io::Result<(String, String)> {
         let rgb = film.average();
         let exr_path = self.temp_path(".exr");
         let png_path = self.temp_path(".png");
-        let written = tessera_common::film::exr::write_exr(
-            &exr_path,
-            film.width,
-            film.height,
-            &rgb,
-            &ExrExtras {
-                counts: Some(&film.count),
-                layers: Vec::new(),
-                attributes: attributes.iter().map(|(k, v)| (k.clone(), Attribute::Text(v.clone()))).collect(),
-            },
-        )
-        .map_err(|e| std::io::Error::other(e.to_string()))
-        .and_then(|()| {
-            tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
-                .map_err(|e| std::io::Error::other(e.to_string()))
-        })
-        .and_then(|()| Ok((self.put(&std::fs::read(&exr_path)?)?, self.put(&std::fs::read(&png_path)?)?)));
+        let written = tessera_common::film::exr::write_exr(&exr_path, film.width, film.height, &rgb, extras)
+            .map_err(|e| std::io::Error::other(e.to_string()))
+            .and_then(|()| {
+                tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
+                    .map_err(|e| std::io::Error::other(e.to_string()))
+            })
+            .and_then(|()| Ok((self.put(&std::fs::read(&exr_path)?)?, self.put(&std::fs::read(&png_path)?)?)));
         let _ = std::fs::remove_file(exr_path);
         let _ = std::fs::remove_file(png_path);
         written
@@ -170,7 +167,9 @@ mod tests {
         film.sum[1] = [0.5, 1.5, -0.0];
         film.count[1] = 3;
         film.non_finite = 2;
-        let name = blobs.put_checkpoint("job", 1, &film).unwrap();
-        assert_eq!(blobs.get_checkpoint(&name).unwrap(), film);
+        let name = blobs.put_checkpoint("job", 1, &film, &[]).unwrap();
+        assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film.clone(), Vec::new()));
+        let name = blobs.put_checkpoint("job", 2, &film, b"emis").unwrap();
+        assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film, b"emis".to_vec()));
     }
 }

@@ -17,6 +17,7 @@
 //! local loop over both.
 
 mod state;
+mod wire;
 
 pub use state::{EmisState, UpdateReport};
 
@@ -66,6 +67,9 @@ pub struct EmisConfig {
 }
 
 impl EmisConfig {
+    /// The update schedule of decision 5.
+    pub const DEFAULT_UPDATES: [u32; 4] = [1, 4, 16, 64];
+
     /// The defaults of `method`.
     pub fn new(method: EmisMethod) -> Self {
         EmisConfig {
@@ -74,7 +78,7 @@ impl EmisConfig {
                 EmisMethod::Bdpt => CandidateConfig::bdpt(),
                 EmisMethod::Vcm => CandidateConfig::vcm(),
             },
-            updates: vec![1, 4, 16, 64],
+            updates: Self::DEFAULT_UPDATES.to_vec(),
             correlation_aware: true,
             moments: MomentSettings::default(),
             constants: CostConstants::default(),
@@ -217,6 +221,12 @@ pub fn render_emis(
     let mut film = Film::new(w, h);
     let start = Instant::now();
     let mut done = 0u32;
+    // iterations the budget allows at the rate so far (unknown before the first)
+    let expected_total = |done: u32| match opts.budget {
+        Budget::Samples(n) => n,
+        Budget::Time(_) if done == 0 => u32::MAX,
+        Budget::Time(t) => ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32).max(done),
+    };
     loop {
         let more = match opts.budget {
             Budget::Samples(n) => done < n,
@@ -228,6 +238,10 @@ pub fn render_emis(
         if !more {
             break;
         }
+        // moments are only worth collecting while another update can still come
+        if state.next_update().is_none_or(|u| u >= expected_total(done)) {
+            state.stop_collecting();
+        }
         let collect = state.collecting();
         let (accum, pilot) = pool.install(|| {
             render_iterations(scene, settings, config, &state.strategy, opts.seed, done..done + 1, collect)
@@ -237,19 +251,11 @@ pub fn render_emis(
             state.absorb(&p).expect("invariant: a local pilot has the state's shape");
         }
         done += 1;
-        // iterations the budget will allow at the rate so far
-        let expected_total = match opts.budget {
-            Budget::Samples(n) => n,
-            Budget::Time(t) => ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32).max(done),
-        };
-        progress(done as u64 * pixels, expected_total as u64 * pixels);
-        // an update is only worth it if iterations remain to use it, and moments are only worth
-        // collecting while another update can still come
-        if state.update_due(done) && done < expected_total {
+        let total = expected_total(done);
+        progress(done as u64 * pixels, total as u64 * pixels);
+        // an update is only worth it if iterations remain to use it
+        if state.update_due(done) && done < total {
             pool.install(|| state.update(&film.average(), done));
-        }
-        if state.next_update().is_none_or(|u| u >= expected_total) {
-            state.stop_collecting();
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done }, state })

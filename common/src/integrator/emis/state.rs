@@ -11,12 +11,12 @@ use crate::mis::denoise::{Guides, denoised_intensity};
 use crate::mis::filter::Image;
 use crate::mis::moments::MomentBuffer;
 use crate::mis::optimize::{ImageLevelScore, OptimizerInput, optimize};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::time::Instant;
 
 /// One update, as reported in the JSON report.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct UpdateReport {
     /// Iterations rendered before the update.
     pub iteration: u32,
@@ -39,7 +39,7 @@ pub struct UpdateReport {
 }
 
 /// One image-level candidate's prediction.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ScoreReport {
     /// ν (0: path tracing).
     pub nu: f32,

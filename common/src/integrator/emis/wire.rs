@@ -1,0 +1,315 @@
+//! Byte encodings of what crosses a process boundary in an EMIS render on the farm: the
+//! [`PilotData`] a worker uploads with a tile, and the [`EmisState`] the coordinator
+//! checkpoints. Little-endian and versioned; decoding checks every size against the job and
+//! every value's range, so a corrupt or hostile payload is refused with a reason instead of
+//! reaching the optimiser (or panicking).
+
+use super::{EmisConfig, EmisState, PilotData, Strategy, UpdateReport};
+use crate::integrator::guides::GuideBuffer;
+use crate::integrator::vcm::MergeMask;
+use crate::mis::cost::StatisticsSums;
+use crate::mis::filter::Image;
+use crate::mis::moments::MomentBuffer;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+const PILOT_MAGIC: &[u8; 4] = b"TPD1";
+const STATE_MAGIC: &[u8; 4] = b"TES1";
+
+/// Little-endian writer.
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f32s(&mut self, v: impl IntoIterator<Item = f32>) {
+        for x in v {
+            self.0.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+}
+
+/// Little-endian reader that names what ran out.
+struct Reader<'a>(&'a [u8]);
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        if self.0.len() < n {
+            return Err(format!("pilot data ends inside {what} ({} bytes left, {n} needed)", self.0.len()));
+        }
+        let (head, rest) = self.0.split_at(n);
+        self.0 = rest;
+        Ok(head)
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("invariant: 4 bytes")))
+    }
+    fn u64(&mut self, what: &str) -> Result<u64, String> {
+        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().expect("invariant: 8 bytes")))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, String> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().expect("invariant: 8 bytes")))
+    }
+    fn f32s(&mut self, n: usize, what: &str) -> Result<Vec<f32>, String> {
+        let bytes = n.checked_mul(4).ok_or_else(|| format!("{what} is too large"))?;
+        Ok(self
+            .take(bytes, what)?
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("invariant: 4 bytes")))
+            .collect())
+    }
+}
+
+fn triples(v: Vec<f32>) -> Vec<[f32; 3]> {
+    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+fn write_pilot(w: &mut Writer, moments: &MomentBuffer, statistics: &StatisticsSums, guides: &GuideBuffer) {
+    w.0.extend_from_slice(PILOT_MAGIC);
+    w.u32(moments.width);
+    w.u32(moments.height);
+    w.u32(moments.candidates as u32);
+    w.u32(moments.iterations);
+    w.f32s(moments.sums.iter().copied());
+    w.u64(statistics.iterations);
+    w.u64(statistics.camera_vertices);
+    w.u64(statistics.light_paths);
+    w.u64(statistics.light_vertices);
+    w.u64(statistics.merge_queries);
+    w.f64(statistics.photons_per_path);
+    w.u32(guides.samples);
+    w.f32s(guides.albedo.iter().flatten().copied());
+    w.f32s(guides.normal.iter().flatten().copied());
+    w.f32s(guides.depth.iter().copied());
+}
+
+fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
+    if r.take(4, "the header")? != PILOT_MAGIC {
+        return Err("pilot data has an unknown format".into());
+    }
+    let (w, h, c) = (r.u32("the width")?, r.u32("the height")?, r.u32("the candidate count")? as usize);
+    if (w, h, c) != (width, height, candidates) {
+        return Err(format!("pilot data is {w}×{h} with {c} candidates, expected {width}×{height} with {candidates}"));
+    }
+    let pixels = width as usize * height as usize;
+    let iterations = r.u32("the iteration count")?;
+    let sums = r.f32s(pixels * candidates, "the moment sums")?;
+    // +∞ flags a candidate that cannot sample some path; NaN or negative sums are corrupt
+    if let Some(i) = sums.iter().position(|s| s.is_nan() || *s < 0.0) {
+        return Err(format!("moment sum {i} (pixel {}) is {}", i / candidates.max(1), sums[i]));
+    }
+    let statistics = StatisticsSums {
+        iterations: r.u64("the statistics")?,
+        camera_vertices: r.u64("the statistics")?,
+        light_paths: r.u64("the statistics")?,
+        light_vertices: r.u64("the statistics")?,
+        merge_queries: r.u64("the statistics")?,
+        photons_per_path: r.f64("the statistics")?,
+    };
+    if !(statistics.photons_per_path >= 0.0 && statistics.photons_per_path.is_finite()) {
+        return Err(format!("photons per path {} is out of range", statistics.photons_per_path));
+    }
+    let samples = r.u32("the guide sample count")?;
+    let albedo = r.f32s(pixels * 3, "the albedo guide")?;
+    let normal = r.f32s(pixels * 3, "the normal guide")?;
+    let depth = r.f32s(pixels, "the depth guide")?;
+    if !albedo.iter().chain(&normal).chain(&depth).all(|v| v.is_finite()) {
+        return Err("a denoiser guide value is not finite".into());
+    }
+    Ok(PilotData {
+        moments: MomentBuffer { width, height, candidates, sums, iterations },
+        statistics,
+        guides: GuideBuffer { width, height, albedo: triples(albedo), normal: triples(normal), depth, samples },
+    })
+}
+
+impl PilotData {
+    /// The bytes a worker uploads after the image sums.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer(Vec::with_capacity(self.encoded_len()));
+        write_pilot(&mut w, &self.moments, &self.statistics, &self.guides);
+        w.0
+    }
+
+    /// Bytes of [`PilotData::encode`].
+    pub fn encoded_len(&self) -> usize {
+        let pixels = self.moments.width as usize * self.moments.height as usize;
+        20 + self.moments.sums.len() * 4 + 48 + 4 + pixels * 7 * 4
+    }
+
+    /// Decodes pilot data of a `width`×`height` image with `candidates` candidates; the error
+    /// says what is wrong (size, format, or a value out of range).
+    pub fn decode(bytes: &[u8], width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
+        let mut r = Reader(bytes);
+        let pilot = read_pilot(&mut r, width, height, candidates)?;
+        if !r.0.is_empty() {
+            return Err(format!("pilot data has {} bytes too many", r.0.len()));
+        }
+        Ok(pilot)
+    }
+}
+
+/// The small part of a checkpointed state.
+#[derive(Serialize, Deserialize)]
+struct StateMeta {
+    nu: f32,
+    connections: u32,
+    merge: MergeKind,
+    updates_done: usize,
+    collecting: bool,
+    relative_moment: bool,
+    reports: Vec<UpdateReport>,
+}
+
+#[derive(Serialize, Deserialize)]
+enum MergeKind {
+    None,
+    Constant(f32),
+    PerPixel,
+}
+
+impl EmisState {
+    /// A checkpoint of everything merged and decided so far.
+    pub fn encode(&self) -> Vec<u8> {
+        let meta = StateMeta {
+            nu: self.strategy.nu,
+            connections: self.strategy.connections,
+            merge: match &self.strategy.merge {
+                None => MergeKind::None,
+                Some(MergeMask::Constant(c)) => MergeKind::Constant(*c),
+                Some(MergeMask::PerPixel(_)) => MergeKind::PerPixel,
+            },
+            updates_done: self.updates_done,
+            collecting: self.collecting(),
+            relative_moment: self.relative_moment.is_some(),
+            reports: self.reports.clone(),
+        };
+        let json = serde_json::to_vec(&meta).expect("invariant: plain data serialises");
+        let mut w = Writer(Vec::new());
+        w.0.extend_from_slice(STATE_MAGIC);
+        w.u32(json.len() as u32);
+        w.0.extend_from_slice(&json);
+        write_pilot(&mut w, &self.moments, &self.statistics, &self.guides);
+        if let Some(MergeMask::PerPixel(mask)) = &self.strategy.merge {
+            w.f32s(mask.iter().copied());
+        }
+        if let Some(image) = &self.relative_moment {
+            w.f32s(image.data.iter().copied());
+        }
+        w.0
+    }
+
+    /// Restores a state written by [`EmisState::encode`] for an image of `width`×`height`.
+    pub fn decode(config: EmisConfig, width: u32, height: u32, bytes: &[u8]) -> Result<EmisState, String> {
+        let mut r = Reader(bytes);
+        if r.take(4, "the header")? != STATE_MAGIC {
+            return Err("EMIS checkpoint has an unknown format".into());
+        }
+        let len = r.u32("the header")? as usize;
+        let meta: StateMeta =
+            serde_json::from_slice(r.take(len, "the header")?).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+        let mut state = EmisState::new(config, width, height);
+        let pilot = read_pilot(&mut r, width, height, state.candidates.len())?;
+        let pixels = width as usize * height as usize;
+        let merge = match meta.merge {
+            MergeKind::None => None,
+            MergeKind::Constant(c) => Some(MergeMask::Constant(c)),
+            MergeKind::PerPixel => Some(MergeMask::PerPixel(Arc::new(r.f32s(pixels, "the merge mask")?))),
+        };
+        if meta.relative_moment {
+            let data = r.f32s(pixels, "the relative moment")?;
+            state.relative_moment = Some(Image { width: width as usize, height: height as usize, data });
+        }
+        if !r.0.is_empty() {
+            return Err(format!("EMIS checkpoint has {} bytes too many", r.0.len()));
+        }
+        state.strategy = Strategy { nu: meta.nu, connections: meta.connections, merge };
+        state.moments = pilot.moments;
+        state.statistics = pilot.statistics;
+        state.guides = pilot.guides;
+        state.updates_done = meta.updates_done;
+        if !meta.collecting {
+            state.stop_collecting();
+        }
+        state.reports = meta.reports;
+        Ok(state)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrator::emis::EmisMethod;
+
+    fn pilot(width: u32, height: u32, candidates: usize) -> PilotData {
+        let pixels = (width * height) as usize;
+        let mut moments = MomentBuffer::new(width, height, candidates);
+        for (i, s) in moments.sums.iter_mut().enumerate() {
+            *s = if i % 7 == 3 { f32::INFINITY } else { i as f32 * 0.25 };
+        }
+        moments.iterations = 2;
+        let mut guides = GuideBuffer::new(width, height);
+        guides.samples = 2;
+        guides.albedo = (0..pixels).map(|i| [i as f32, 0.5, 0.25]).collect();
+        guides.depth = (0..pixels).map(|i| i as f32 * 3.0).collect();
+        let statistics = StatisticsSums {
+            iterations: 2,
+            camera_vertices: 10,
+            light_paths: 12,
+            light_vertices: 30,
+            merge_queries: 8,
+            photons_per_path: 0.75,
+        };
+        PilotData { moments, statistics, guides }
+    }
+
+    #[test]
+    fn pilot_data_round_trips_and_refuses_bad_sizes_and_values() {
+        let p = pilot(3, 2, 5);
+        let bytes = p.encode();
+        assert_eq!(bytes.len(), p.encoded_len());
+        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
+        assert!(PilotData::decode(&bytes, 2, 3, 5).unwrap_err().contains("expected 2×3"));
+        assert!(PilotData::decode(&bytes[..bytes.len() - 1], 3, 2, 5).unwrap_err().contains("depth guide"));
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(PilotData::decode(&longer, 3, 2, 5).unwrap_err().contains("too many"));
+        let mut nan = p.clone();
+        nan.moments.sums[7] = f32::NAN;
+        assert!(PilotData::decode(&nan.encode(), 3, 2, 5).unwrap_err().contains("moment sum 7 (pixel 1)"));
+        let mut guide = p;
+        guide.guides.normal[0][1] = f32::INFINITY;
+        assert!(PilotData::decode(&guide.encode(), 3, 2, 5).unwrap_err().contains("guide"));
+    }
+
+    #[test]
+    fn emis_state_checkpoint_round_trips() {
+        let config = EmisConfig::new(EmisMethod::Vcm);
+        let mut state = EmisState::new(config.clone(), 3, 2);
+        state.absorb(&pilot(3, 2, state.candidates.len())).unwrap();
+        state.strategy = Strategy {
+            nu: 0.5,
+            connections: 2,
+            merge: Some(MergeMask::PerPixel(Arc::new(vec![0.0, 1.0, 0.5, 0.25, 1.0, 0.0]))),
+        };
+        state.relative_moment = Some(Image { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] });
+        state.updates_done = 2;
+        state.stop_collecting();
+        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
+        assert_eq!(back.strategy, state.strategy);
+        assert_eq!(back.moments, state.moments);
+        assert_eq!(back.statistics, state.statistics);
+        assert_eq!(back.guides, state.guides);
+        assert_eq!(back.updates_done, 2);
+        assert!(!back.collecting());
+        assert_eq!(back.relative_moment.as_ref().map(|i| &i.data), state.relative_moment.as_ref().map(|i| &i.data));
+        assert!(EmisState::decode(config, 2, 3, &state.encode()).is_err());
+    }
+}

@@ -1,0 +1,130 @@
+//! The coordinator's side of an EMIS job: the merged pilot data and decisions (an
+//! [`EmisState`] from `common`, the same one `tessera render` drives locally), the strategy
+//! each lease carries to its worker, the checks on the pilot data that comes back, and the
+//! update run at each optimisation barrier. The job model decides *when* (passes and
+//! barriers); this decides *what* the next pass renders with.
+
+use super::model::{JobSpec, TileSpec};
+use super::view::StrategyView;
+use crate::storage::BlobStore;
+use tessera_common::film::Film;
+use tessera_common::integrator::emis::{EmisState, PilotData};
+use tessera_common::integrator::vcm::MergeMask;
+
+/// Where a tile's merge probability comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MergeSpec {
+    /// No merging (emis-bdpt).
+    None,
+    /// The same χ everywhere (the pilot's).
+    Constant(f32),
+    /// A per-pixel mask stored as a blob (width·height little-endian f32).
+    Mask(String),
+}
+
+/// The counts an EMIS tile renders with, as a lease carries them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileStrategy {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Merge probability.
+    pub merge: MergeSpec,
+    /// Record and return pilot data.
+    pub collect: bool,
+}
+
+/// An EMIS job's state on the coordinator.
+pub struct EmisJob {
+    /// Merged pilot data, current strategy, reports.
+    pub state: EmisState,
+    /// Digest of the current per-pixel mask blob, once stored.
+    mask_digest: Option<String>,
+}
+
+impl EmisJob {
+    /// The state before the pilot of an `emis-*` job; `None` for other integrators.
+    pub fn new(spec: &JobSpec) -> Option<EmisJob> {
+        spec.settings.integrator.emis_method()?;
+        Some(EmisJob { state: EmisState::new(spec.settings.emis_config(), spec.width, spec.height), mask_digest: None })
+    }
+
+    /// Restores a checkpointed state ([`EmisJob::checkpoint`]).
+    pub fn restore(spec: &JobSpec, bytes: &[u8]) -> Result<EmisJob, String> {
+        let state = EmisState::decode(spec.settings.emis_config(), spec.width, spec.height, bytes)?;
+        Ok(EmisJob { state, mask_digest: None })
+    }
+
+    /// The bytes to checkpoint beside the film.
+    pub fn checkpoint(&self) -> Vec<u8> {
+        self.state.encode()
+    }
+
+    /// The strategy of the current pass; stores the per-pixel mask as a blob the first time.
+    pub fn strategy(&mut self, blobs: &BlobStore, collect: bool) -> std::io::Result<TileStrategy> {
+        let s = &self.state.strategy;
+        let merge = match &s.merge {
+            None => MergeSpec::None,
+            Some(MergeMask::Constant(c)) => MergeSpec::Constant(*c),
+            Some(MergeMask::PerPixel(mask)) => {
+                let digest = match &self.mask_digest {
+                    Some(d) => d.clone(),
+                    None => {
+                        let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
+                        let d = blobs.put(&bytes)?;
+                        self.mask_digest = Some(d.clone());
+                        d
+                    }
+                };
+                MergeSpec::Mask(digest)
+            }
+        };
+        Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect })
+    }
+
+    /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
+    /// tile collects, the job's size and candidate count, one iteration per tile iteration.
+    pub fn decode_pilot(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        match (collect, bytes.is_empty()) {
+            (false, true) => return Ok(None),
+            (false, false) => return Err("result has pilot data but the tile does not collect moments".into()),
+            (true, true) => return Err("result has no pilot data but the tile collects moments".into()),
+            (true, false) => {}
+        }
+        let m = &self.state.moments;
+        let pilot = PilotData::decode(bytes, m.width, m.height, self.state.candidates.len())?;
+        let iterations = tile.samples.len() as u32;
+        if pilot.moments.iterations != iterations || pilot.statistics.iterations != iterations as u64 {
+            return Err(format!(
+                "pilot data covers {} iterations ({} in the statistics), the tile {iterations}",
+                pilot.moments.iterations, pilot.statistics.iterations
+            ));
+        }
+        Ok(Some(pilot))
+    }
+
+    /// Adds a tile's pilot data (tiles are merged in order, so the sums are those of a local
+    /// render).
+    pub fn absorb(&mut self, pilot: &PilotData) -> Result<(), String> {
+        self.state.absorb(pilot)
+    }
+
+    /// The update at a barrier after `iterations` iterations: denoise the film's image,
+    /// optimise, switch the strategy.
+    pub fn update(&mut self, film: &Film, iterations: u32) {
+        self.state.update(&film.average(), iterations);
+        self.mask_digest = None;
+    }
+
+    /// The decisions so far, for status views (`None` before the first update).
+    pub fn view(&self) -> Option<StrategyView> {
+        let last = self.state.reports.last()?;
+        Some(StrategyView {
+            nu: self.state.strategy.nu,
+            connections: self.state.strategy.connections,
+            mean_merge_probability: last.mean_merge_probability,
+            updates: self.state.reports.clone(),
+        })
+    }
+}

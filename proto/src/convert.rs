@@ -1,0 +1,106 @@
+//! Conversions between the wire messages and the renderer's types that both ends use (settings
+//! and rectangles), so the coordinator and the worker cannot disagree on defaults. Errors name
+//! the field at fault.
+
+use crate::v1 as pb;
+use tessera_common::film::Rect;
+use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::settings::RenderSettings;
+
+fn parse_json_name<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> Result<T, String> {
+    serde_json::from_value(serde_json::Value::String(value.to_string()))
+        .map_err(|_| format!("settings field \"{field}\": unknown value \"{value}\""))
+}
+
+fn json_name<T: serde::Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => unreachable!("invariant: unit enum variants serialise as strings"),
+    }
+}
+
+/// Wire settings → render settings: unset fields take the renderer's defaults; the error
+/// names the field.
+pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String> {
+    let d = RenderSettings::default();
+    let integrator = if s.integrator.is_empty() {
+        d.integrator
+    } else {
+        s.integrator.parse().map_err(|e: tessera_common::settings::SettingsError| e.to_string())?
+    };
+    Ok(RenderSettings {
+        integrator,
+        spp: s.spp,
+        time_s: s.time_s,
+        seed: s.seed,
+        max_depth: s.max_depth,
+        light_paths_per_pixel: s.light_paths_per_pixel.unwrap_or(d.light_paths_per_pixel),
+        connections: s.connections.unwrap_or(d.connections),
+        merge: s.merge.unwrap_or(d.merge),
+        correlation_aware: s.correlation_aware.unwrap_or(d.correlation_aware),
+        defines: s.defines.clone().into_iter().collect(),
+        emis_updates: s.emis_updates.as_ref().map_or(d.emis_updates, |u| u.iterations.clone()),
+        merge_ratio: match &s.merge_ratio {
+            Some(v) => parse_json_name::<MergeRatio>("merge_ratio", v)?,
+            None => d.merge_ratio,
+        },
+        merge_kernel: match &s.merge_kernel {
+            Some(v) => parse_json_name::<MergeKernel>("merge_kernel", v)?,
+            None => d.merge_kernel,
+        },
+    })
+}
+
+/// Render settings → wire settings (every field set).
+pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
+    pb::RenderSettings {
+        integrator: s.integrator.to_string(),
+        spp: s.spp,
+        time_s: s.time_s,
+        seed: s.seed,
+        max_depth: s.max_depth,
+        light_paths_per_pixel: Some(s.light_paths_per_pixel),
+        connections: Some(s.connections),
+        merge: Some(s.merge),
+        correlation_aware: Some(s.correlation_aware),
+        defines: s.defines.clone().into_iter().collect(),
+        emis_updates: Some(pb::EmisUpdates { iterations: s.emis_updates.clone() }),
+        merge_ratio: Some(json_name(&s.merge_ratio)),
+        merge_kernel: Some(json_name(&s.merge_kernel)),
+    }
+}
+
+/// Wire rect → rect; refuses an empty one.
+pub fn rect_from_pb(r: Option<&pb::Rect>) -> Result<Rect, String> {
+    let r = r.ok_or("field \"rect\" is missing")?;
+    if r.x0 >= r.x1 || r.y0 >= r.y1 {
+        return Err(format!("field \"rect\" is empty: {r:?}"));
+    }
+    Ok(Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 })
+}
+
+/// Rect → wire rect.
+pub fn rect_to_pb(r: Rect) -> pb::Rect {
+    pb::Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessera_common::settings::IntegratorName;
+
+    #[test]
+    fn settings_round_trip_and_name_bad_fields() {
+        let s = RenderSettings {
+            integrator: IntegratorName::EmisVcm,
+            spp: Some(9),
+            emis_updates: vec![2, 5],
+            merge_ratio: MergeRatio::Reference,
+            ..RenderSettings::default()
+        };
+        assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);
+        assert_eq!(settings_from_pb(&pb::RenderSettings::default()).unwrap(), RenderSettings::default());
+        let bad = pb::RenderSettings { merge_kernel: Some("cubic".into()), ..Default::default() };
+        assert!(settings_from_pb(&bad).unwrap_err().contains("merge_kernel"));
+    }
+}
