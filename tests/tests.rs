@@ -215,8 +215,10 @@ fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
     assert_eq!(workers[0]["leases"], 0, "the worker left a lease behind: {workers}");
 }
 
-#[test]
-fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
+/// Kills the coordinator once `kill_after` (but fewer than `kill_before`) tiles are done,
+/// restarts it on the same data dir and checks that the job completes with every sample merged
+/// once and the local image.
+fn coordinator_killed_mid_job(integrator: &str, spp: u32, kill_after: u64, kill_before: u64) {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     // checkpoint after every merge, so that tiles are merged both before and after the crash
@@ -226,8 +228,8 @@ fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
     // `tessera submit --wait` follows the job across the crash and downloads the result
     let out = dir.path().join("farm.exr");
     let mut submit = std::process::Command::new(tessera_tests::bin("tessera"))
-        .args(["submit", scene("cornell-box").to_str().unwrap(), "--server", &c.url, "--spp", "24", "--seed", "8"])
-        .args(["--wait", "-o", out.to_str().unwrap()])
+        .args(["submit", scene("cornell-box").to_str().unwrap(), "--server", &c.url, "--integrator", integrator])
+        .args(["--spp", &spp.to_string(), "--seed", "8", "--wait", "-o", out.to_str().unwrap()])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -237,9 +239,9 @@ fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
     let id = id.trim().to_string();
     let before = wait_for(TIMEOUT, "some tiles", || {
         let t = rest::get_json(&job_url(&c, &id), None).1["tiles_done"].as_u64().unwrap_or(0);
-        (t >= 3).then_some(t)
+        (t >= kill_after).then_some(t)
     });
-    assert!(before < 16, "the job finished before the crash; make it longer");
+    assert!(before < kill_before, "the job went too far before the crash ({before} tiles); make it longer");
     c.kill();
     let listen = format!("127.0.0.1:{}", c.port());
     let c = wait_for(Duration::from_secs(20), "port to be free", || {
@@ -249,10 +251,22 @@ fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
     let (_, resumed) = rest::get_json(&job_url(&c, &id), None);
     assert!(resumed["tiles_done"].as_u64().unwrap() >= before, "accepted tiles were lost: {resumed}");
     let done = wait_done(&c, &id, None);
-    assert_eq!(done["samples_done"], 256 * 256 * 24, "every pixel sample merged exactly once: {done}");
+    assert_eq!(done["samples_done"], 256 * 256 * spp as u64, "every pixel sample merged exactly once: {done}");
     let status = wait_for(TIMEOUT, "tessera submit --wait to finish", || submit.try_wait().unwrap());
     assert!(status.success(), "submit --wait did not survive the restart: {status:?}");
-    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 24, 8));
+    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), integrator, spp, 8));
+}
+
+#[test]
+fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
+    coordinator_killed_mid_job("pt", 24, 3, 16);
+}
+
+/// The EMIS state (merged moments, statistics, guides, strategy) survives the crash too: killed
+/// after the updates at 1 and 4, inside the pass that collects moments for the update at 16.
+#[test]
+fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
+    coordinator_killed_mid_job("emis-vcm", 20, 6, 16);
 }
 
 #[test]
