@@ -128,3 +128,48 @@ impl EmisJob {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessera_common::film::Rect;
+    use tessera_common::integrator::guides::GuideBuffer;
+    use tessera_common::mis::cost::StatisticsSums;
+    use tessera_common::mis::moments::MomentBuffer;
+    use tessera_common::settings::{IntegratorName, RenderSettings};
+
+    fn spec() -> JobSpec {
+        JobSpec {
+            name: "j".into(),
+            priority: 0,
+            settings: RenderSettings { integrator: IntegratorName::EmisVcm, spp: Some(8), ..Default::default() },
+            width: 4,
+            height: 2,
+            full_frame: true,
+            bundle_digest: "d".into(),
+            scene_path: "scene.xml".into(),
+        }
+    }
+
+    fn pilot(job: &EmisJob, iterations: u32) -> PilotData {
+        let mut moments = MomentBuffer::new(4, 2, job.state.candidates.len());
+        moments.iterations = iterations;
+        let statistics = StatisticsSums { iterations: iterations as u64, ..Default::default() };
+        PilotData { moments, statistics, guides: GuideBuffer::new(4, 2) }
+    }
+
+    #[test]
+    fn pilot_data_must_match_the_tile_and_whether_it_collects() {
+        let job = EmisJob::new(&spec()).unwrap();
+        assert!(EmisJob::new(&JobSpec { settings: RenderSettings::default(), ..spec() }).is_none());
+        let tile = TileSpec { rect: Rect::full(4, 2), samples: 1..2 };
+        let good = pilot(&job, 1).encode();
+        assert!(job.decode_pilot(&tile, true, &good).unwrap().is_some());
+        assert!(job.decode_pilot(&tile, false, &[]).unwrap().is_none());
+        assert!(job.decode_pilot(&tile, true, &[]).unwrap_err().contains("no pilot data"));
+        assert!(job.decode_pilot(&tile, false, &good).unwrap_err().contains("does not collect"));
+        let two = pilot(&job, 2).encode();
+        assert!(job.decode_pilot(&tile, true, &two).unwrap_err().contains("covers 2 iterations"));
+        assert!(job.decode_pilot(&tile, true, &good[..good.len() - 4]).is_err());
+    }
+}
