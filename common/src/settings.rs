@@ -17,6 +17,7 @@
 use crate::integrator::emis::{EmisConfig, EmisMethod, EmisState, render_emis};
 use crate::integrator::vcm::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
+use crate::mis::cost::CostModel;
 use crate::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
 use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
@@ -126,6 +127,8 @@ pub struct RenderSettings {
     pub merge_ratio: MergeRatio,
     /// EMIS: how merge samples enter the moments (decision 3b).
     pub merge_kernel: MergeKernel,
+    /// EMIS: the cost heuristic's constants (decision 8).
+    pub cost_model: CostModel,
 }
 
 impl Default for RenderSettings {
@@ -144,6 +147,7 @@ impl Default for RenderSettings {
             emis_updates: EmisConfig::DEFAULT_UPDATES.to_vec(),
             merge_ratio: MomentSettings::default().merge_ratio,
             merge_kernel: MomentSettings::default().merge_kernel,
+            cost_model: CostModel::default(),
         }
     }
 }
@@ -288,6 +292,7 @@ impl RenderSettings {
         config.updates = self.emis_updates.clone();
         config.correlation_aware = self.correlation_aware;
         config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
+        config.constants = self.cost_model.constants();
         config
     }
 }

@@ -64,6 +64,11 @@ pub struct BenchArgs {
     /// Pilot iterations of the ground-truth mode.
     #[arg(long, default_value_t = 4)]
     pub ground_truth_pilot: u32,
+    /// Calibrate the EMIS cost heuristic (decision 8): time path tracing, light tracing,
+    /// connections and merging on every scene (`--spp` iterations each, `--repeats` rounds),
+    /// fit the constants and report the predicted costs' errors.
+    #[arg(long)]
+    pub calibrate_costs: bool,
     /// Measure photon-map build and query rates for this many photons instead.
     #[arg(long)]
     pub photon_map: Option<u32>,
@@ -198,6 +203,9 @@ pub fn bench_command(args: &BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(k) = args.ground_truth {
         return crate::ground_truth::ground_truth(args, &scenes, k);
+    }
+    if args.calibrate_costs {
+        return crate::calibrate::calibrate_costs(args, &scenes);
     }
     if args.emis_overheads {
         return crate::bench_emis::overheads(args, &scenes);

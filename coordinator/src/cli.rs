@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
+use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
@@ -83,6 +84,18 @@ pub struct MisArgs {
     /// emis-*: merge moments with the kernel squared or (as the reference) once.
     #[arg(long, value_enum, default_value = "squared")]
     pub merge_kernel: MergeKernelArg,
+    /// emis-*: cost heuristic constants, calibrated on this renderer or the reference's.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub cost_model: CostModelArg,
+}
+
+/// The cost heuristic's constants (decision 8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CostModelArg {
+    /// Fitted to this renderer's measured times (`tessera bench --calibrate-costs`).
+    Calibrated,
+    /// The reference implementation's constants (emis-spec §2).
+    Reference,
 }
 
 impl MisArgs {
@@ -98,6 +111,10 @@ impl MisArgs {
         settings.merge_kernel = match self.merge_kernel {
             MergeKernelArg::Squared => MergeKernel::Squared,
             MergeKernelArg::Reference => MergeKernel::Reference,
+        };
+        settings.cost_model = match self.cost_model {
+            CostModelArg::Calibrated => CostModel::Calibrated,
+            CostModelArg::Reference => CostModel::Reference,
         };
     }
 }

@@ -4,6 +4,7 @@
 
 use crate::v1 as pb;
 use tessera_common::film::Rect;
+use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::settings::RenderSettings;
 
@@ -48,6 +49,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<MergeKernel>("merge_kernel", v)?,
             None => d.merge_kernel,
         },
+        cost_model: match &s.cost_model {
+            Some(v) => parse_json_name::<CostModel>("cost_model", v)?,
+            None => d.cost_model,
+        },
     })
 }
 
@@ -67,6 +72,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         emis_updates: Some(pb::EmisUpdates { iterations: s.emis_updates.clone() }),
         merge_ratio: Some(json_name(&s.merge_ratio)),
         merge_kernel: Some(json_name(&s.merge_kernel)),
+        cost_model: Some(json_name(&s.cost_model)),
     }
 }
 
@@ -96,6 +102,7 @@ mod tests {
             spp: Some(9),
             emis_updates: vec![2, 5],
             merge_ratio: MergeRatio::Reference,
+            cost_model: CostModel::Reference,
             ..RenderSettings::default()
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);

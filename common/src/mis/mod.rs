@@ -4,6 +4,7 @@
 //! uses. Everything here is pure: no rendering, no IO, so the coordinator can run it between
 //! passes.
 
+pub mod calibrate;
 pub mod candidate;
 pub mod cost;
 pub mod delta;

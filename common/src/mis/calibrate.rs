@@ -1,0 +1,192 @@
+//! Calibration of the cost heuristic's constants from measured render times (emis-spec
+//! decision 8, "calibrate the constants from measured per-technique time").
+//!
+//! Every term of [`pixel_cost`](super::cost::pixel_cost) is a constant times a feature of the
+//! candidate and the scene's statistics, so a measured cost (a configuration's time per
+//! iteration divided by the time of one camera vertex) is linear in the constants. Given such
+//! measurements over several scenes and configurations, [`fit_constants`] finds the
+//! constants (the camera vertex stays the unit) that minimise the squared *relative* error,
+//! keeping every constant non-negative.
+
+use super::candidate::Candidate;
+use super::cost::{CostConstants, PathStatistics, pixel_cost};
+
+/// The five fitted terms' features of a candidate on a scene, in the order light vertex,
+/// connection, build, query, photon shading (the camera-vertex term is the unit).
+pub fn cost_features(s: &PathStatistics, candidate: &Candidate, pixels: u32) -> [f64; 5] {
+    let unit = |pick: usize| {
+        let mut k = CostConstants {
+            camera_vertex: 0.0,
+            light_vertex: 0.0,
+            connection: 0.0,
+            photon_shading: 0.0,
+            query: 0.0,
+            build: 0.0,
+        };
+        match pick {
+            0 => k.light_vertex = 1.0,
+            1 => k.connection = 1.0,
+            2 => k.build = 1.0,
+            3 => k.query = 1.0,
+            _ => k.photon_shading = 1.0,
+        }
+        let chi = if candidate.merge { 1.0 } else { 0.0 };
+        pixel_cost(&k, s, candidate, chi, candidate.merge, pixels)
+    };
+    [unit(0), unit(1), unit(2), unit(3), unit(4)]
+}
+
+/// The configurations to time on every scene (emis-spec §2's timing runs): path tracing first
+/// (the unit), light tracing at ν = 1 and 2, connections c = 1 and 4, merging at ν = 0.5, 1 and
+/// 2, and connections with merging.
+pub fn calibration_configurations() -> Vec<Candidate> {
+    let c = |nu: f32, connections: u32, merge: bool| Candidate { nu, connections, merge };
+    vec![
+        c(0.0, 0, false),
+        c(1.0, 0, false),
+        c(2.0, 0, false),
+        c(1.0, 1, false),
+        c(1.0, 4, false),
+        c(0.5, 0, true),
+        c(1.0, 0, true),
+        c(2.0, 0, true),
+        c(1.0, 1, true),
+    ]
+}
+
+/// One measurement: the scene's statistics, the candidate, and its measured cost per pixel in
+/// camera-vertex units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CostSample {
+    /// The scene's path statistics.
+    pub statistics: PathStatistics,
+    /// What was rendered.
+    pub candidate: Candidate,
+    /// Pixels of the image.
+    pub pixels: u32,
+    /// Measured cost per pixel, in units of one camera vertex.
+    pub measured: f64,
+}
+
+/// Least-squares fit of the non-unit constants to `samples`, weighting every residual by the
+/// measured cost (relative errors). Constants that would come out negative are fixed at 0
+/// and the rest refitted. `None` without samples or with a singular system.
+pub fn fit_constants(samples: &[CostSample]) -> Option<CostConstants> {
+    let mut active = [true; 5];
+    loop {
+        let k = solve(samples, &active)?;
+        match (0..5).find(|&i| active[i] && k[i] < 0.0) {
+            Some(i) => active[i] = false,
+            None => {
+                return Some(CostConstants {
+                    camera_vertex: 1.0,
+                    light_vertex: k[0],
+                    connection: k[1],
+                    build: k[2],
+                    query: k[3],
+                    photon_shading: k[4],
+                });
+            }
+        }
+    }
+}
+
+/// Solves the weighted normal equations over the active constants (inactive ones are 0).
+fn solve(samples: &[CostSample], active: &[bool; 5]) -> Option<[f64; 5]> {
+    let idx: Vec<usize> = (0..5).filter(|&i| active[i]).collect();
+    let n = idx.len();
+    let mut a = vec![vec![0.0; n + 1]; n];
+    for s in samples.iter().filter(|s| s.measured > 0.0) {
+        let f = cost_features(&s.statistics, &s.candidate, s.pixels);
+        // residual (L̄c + f·k − m) / m: regress f/m on (m − L̄c)/m
+        let w = 1.0 / s.measured;
+        let target = (s.measured - s.statistics.camera_vertices) * w;
+        for (r, &i) in idx.iter().enumerate() {
+            for (c, &j) in idx.iter().enumerate() {
+                a[r][c] += f[i] * w * f[j] * w;
+            }
+            a[r][n] += f[i] * w * target;
+        }
+    }
+    // Gauss–Jordan elimination with partial pivoting
+    for col in 0..n {
+        let pivot = (col..n).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))?;
+        if a[pivot][col].abs() < 1e-12 {
+            return None;
+        }
+        a.swap(col, pivot);
+        for row in 0..n {
+            if row != col {
+                let factor = a[row][col] / a[col][col];
+                for c in col..=n {
+                    a[row][c] -= factor * a[col][c];
+                }
+            }
+        }
+    }
+    let mut k = [0.0; 5];
+    for (r, &i) in idx.iter().enumerate() {
+        k[i] = a[r][n] / a[r][r];
+    }
+    Some(k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenes() -> Vec<PathStatistics> {
+        vec![
+            PathStatistics { camera_vertices: 3.0, light_vertices: 4.0, photons_per_query_per_path: 2e-5 },
+            PathStatistics { camera_vertices: 6.0, light_vertices: 2.5, photons_per_query_per_path: 1e-4 },
+            PathStatistics { camera_vertices: 4.5, light_vertices: 6.0, photons_per_query_per_path: 5e-6 },
+        ]
+    }
+
+    #[test]
+    fn fit_recovers_the_constants_that_made_the_measurements() {
+        let truth = CostConstants {
+            camera_vertex: 1.0,
+            light_vertex: 0.7,
+            connection: 0.45,
+            photon_shading: 0.3,
+            query: 0.08,
+            build: 0.12,
+        };
+        let pixels = 4096;
+        let samples: Vec<CostSample> = scenes()
+            .iter()
+            .flat_map(|s| {
+                calibration_configurations().into_iter().map(move |c| CostSample {
+                    statistics: *s,
+                    candidate: c,
+                    pixels,
+                    measured: pixel_cost(&truth, s, &c, if c.merge { 1.0 } else { 0.0 }, c.merge, pixels),
+                })
+            })
+            .collect();
+        let fit = fit_constants(&samples).unwrap();
+        for (a, b) in [
+            (fit.light_vertex, truth.light_vertex),
+            (fit.connection, truth.connection),
+            (fit.photon_shading, truth.photon_shading),
+            (fit.query, truth.query),
+            (fit.build, truth.build),
+        ] {
+            assert!((a - b).abs() < 1e-6, "fitted {a}, true {b}");
+        }
+        // a term the data say is free comes out 0, not negative
+        let free = CostConstants { connection: 0.0, ..truth };
+        let samples: Vec<CostSample> = samples
+            .iter()
+            .map(|s| {
+                let chi = if s.candidate.merge { 1.0 } else { 0.0 };
+                let measured = pixel_cost(&free, &s.statistics, &s.candidate, chi, s.candidate.merge, pixels) * 0.98;
+                CostSample { measured, ..s.clone() }
+            })
+            .collect();
+        let fit = fit_constants(&samples).unwrap();
+        assert!(fit.connection >= 0.0 && fit.connection < 0.05, "{fit:?}");
+        assert!(fit_constants(&[]).is_none());
+    }
+}

@@ -1,0 +1,145 @@
+//! `tessera bench --calibrate-costs`: the timing runs of emis-spec §2 on our renderer. On each
+//! scene it times path tracing, light tracing at ν = 1 and 2, connections c = 1 and 4, and
+//! merging at ν = 0.5, 1 and 2 through the same bidirectional engine, interleaved and the
+//! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units
+//! (time ÷ the path tracer's time × L̄c); fits the heuristic's constants to all scenes at once
+//! (`tessera_common::mis::calibrate`); and reports each configuration's error with the default
+//! and the fitted constants against the ±30 % the authors report for theirs.
+
+use crate::bench::BenchArgs;
+use crate::local::scene_name;
+use std::path::PathBuf;
+use std::time::Instant;
+use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::mis::calibrate::{CostSample, calibration_configurations, fit_constants};
+use tessera_common::mis::candidate::Candidate;
+use tessera_common::mis::cost::{CostConstants, pixel_cost};
+use tessera_common::scene::Scene;
+
+fn label(c: &Candidate) -> String {
+    match (c.nu, c.merge) {
+        (nu, _) if nu == 0.0 => "pt".into(),
+        (nu, false) => format!("nu={nu} c={}", c.connections),
+        (nu, true) => format!("nu={nu} c={} merge", c.connections),
+    }
+}
+
+fn predicted(k: &CostConstants, s: &CostSample) -> f64 {
+    let chi = if s.candidate.merge { 1.0 } else { 0.0 };
+    pixel_cost(k, &s.statistics, &s.candidate, chi, s.candidate.merge, s.pixels)
+}
+
+/// Times every configuration on one scene; returns the samples with measured costs.
+fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::ThreadPool) -> Vec<CostSample> {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let pixels = w * h;
+    let settings = PathSettings::from_scene(scene, None);
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    // the statistics of the pilot (two iterations), as the optimiser would see them
+    let (_, pilot) =
+        pool.install(|| render_iterations(scene, settings, &config, &Strategy::pilot(EmisMethod::Vcm), 1, 0..2, true));
+    let statistics = pilot.expect("invariant: collected").statistics.statistics(pixels);
+    let configs = calibration_configurations();
+    let integrators: Vec<_> = configs
+        .iter()
+        .map(|c| {
+            let merge = c.merge.then_some(MergeMask::Constant(1.0));
+            Strategy { nu: c.nu, connections: c.connections, merge }.integrator(settings, true)
+        })
+        .collect();
+    let mut best = vec![f64::INFINITY; configs.len()];
+    // one warm-up round, then `repeats` timed rounds, configurations interleaved so that a
+    // change in machine load hits them alike
+    for round in 0..=repeats {
+        for (i, integrator) in integrators.iter().enumerate() {
+            let samples = 2 + round * iterations..2 + (round + 1) * iterations;
+            let request = TileRequest { rect: Rect::full(w, h), samples, seed: 7 };
+            let t = Instant::now();
+            pool.install(|| integrator.render_tile(scene, &request, &mut TileAccum::new(request.rect)));
+            if round > 0 {
+                best[i] = best[i].min(t.elapsed().as_secs_f64());
+            }
+        }
+    }
+    configs
+        .iter()
+        .zip(&best)
+        .map(|(c, t)| CostSample {
+            statistics,
+            candidate: *c,
+            pixels,
+            measured: t / best[0] * statistics.camera_vertices,
+        })
+        .collect()
+}
+
+/// Runs `--calibrate-costs`.
+pub fn calibrate_costs(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<()> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads.unwrap_or(0)).build()?;
+    let iterations = args.spp.max(1);
+    let mut all = Vec::new();
+    let mut names = Vec::new();
+    for path in scenes {
+        let scene = Scene::load(path)?;
+        let samples = measure_scene(&scene, iterations, args.repeats.max(1), &pool);
+        let s = samples[0].statistics;
+        eprintln!(
+            "{}: L̄c {:.2}, L̄l {:.2}, φ {:.3e}",
+            scene_name(path),
+            s.camera_vertices,
+            s.light_vertices,
+            s.photons_per_query_per_path
+        );
+        names.extend(std::iter::repeat_n(scene_name(path), samples.len()));
+        all.extend(samples);
+    }
+    let default = CostConstants::reference();
+    let fitted =
+        fit_constants(&all).ok_or_else(|| anyhow::anyhow!("the measurements do not determine the constants"))?;
+    println!(
+        "{:<18} {:<18} {:>9} {:>9} {:>7} {:>9} {:>7}",
+        "scene", "config", "measured", "reference", "err", "fitted", "err"
+    );
+    let (mut worst_default, mut worst_fitted, mut sq_default, mut sq_fitted) = (0.0f64, 0.0f64, 0.0, 0.0);
+    for (name, s) in names.iter().zip(&all) {
+        let (d, f) = (predicted(&default, s), predicted(&fitted, s));
+        let (ed, ef) = (d / s.measured - 1.0, f / s.measured - 1.0);
+        (worst_default, worst_fitted) = (worst_default.max(ed.abs()), worst_fitted.max(ef.abs()));
+        (sq_default, sq_fitted) = (sq_default + ed * ed, sq_fitted + ef * ef);
+        println!(
+            "{:<18} {:<18} {:>9.2} {:>9.2} {:>+6.0}% {:>9.2} {:>+6.0}%",
+            name,
+            label(&s.candidate),
+            s.measured,
+            d,
+            ed * 100.0,
+            f,
+            ef * 100.0
+        );
+    }
+    let n = all.len().max(1) as f64;
+    println!(
+        "relative error of the predicted cost: reference constants rms {:.0}% max {:.0}%; fitted rms {:.0}% max {:.0}% (the authors report ±30% for theirs)",
+        (sq_default / n).sqrt() * 100.0,
+        worst_default * 100.0,
+        (sq_fitted / n).sqrt() * 100.0,
+        worst_fitted * 100.0
+    );
+    println!(
+        "fitted constants: light_vertex {:.3}, connection {:.3}, build {:.3}, query {:.3}, photon_shading {:.3} (reference {:.3}, {:.3}, {:.3}, {:.3}, {:.3})",
+        fitted.light_vertex,
+        fitted.connection,
+        fitted.build,
+        fitted.query,
+        fitted.photon_shading,
+        default.light_vertex,
+        default.connection,
+        default.build,
+        default.query,
+        default.photon_shading
+    );
+    Ok(())
+}
