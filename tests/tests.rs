@@ -280,10 +280,15 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
     );
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     let settings = json!({"integrator": "pt", "spp": 1});
-    // no token: 401 on REST, UNAUTHENTICATED on gRPC; /healthz stays open
+    // no token: 401 on REST, UNAUTHENTICATED on gRPC; /healthz and the dashboard page stay open
     let (status, _) = rest::submit(&c.url, None, ("scene.xml", xml.clone()), vec![], settings.clone());
     assert_eq!(status, 401);
     assert_eq!(rest::get(&format!("{}/healthz", c.url), None).0, 200);
+    assert_eq!(rest::get(&format!("{}/api/v1/jobs", c.url), None).0, 401);
+    // the dashboard page carries no data and stays open; the API it calls does not
+    let (status, page) = rest::get(&format!("{}/", c.url), None);
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&page).contains("/api/v1/jobs"), "the dashboard polls the jobs API");
     let (ok, _, err) = tessera(&["status", "--server", &c.url]);
     assert!(!ok && err.contains("Unauthenticated"), "{err}");
     let (ok, _, _) = tessera(&["status", "--server", &c.url, "--token", "client-secret"]);

@@ -8,6 +8,7 @@
 //! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job |
 //! | `GET /api/v1/workers` | registered workers |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
+//! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
 
 pub mod dto;
 pub mod jobs;
@@ -27,6 +28,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
         .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
         .route("/api/v1/workers", get(jobs::workers))
+        .route("/", get(dashboard))
+        .route("/dashboard", get(dashboard))
         .route("/healthz", get(|| async { "ok" }))
         .route("/api/v1/healthz", get(|| async { "ok" }))
         .route("/metrics", get(jobs::metrics))
@@ -34,6 +37,12 @@ pub fn router(state: Arc<AppState>) -> Router {
         .layer(DefaultBodyLimit::max(limit))
         .layer(axum::middleware::from_fn_with_state(limit, refuse_oversized))
         .with_state(state)
+}
+
+/// The dashboard page. It holds no data (it fetches the API with the token the user types in),
+/// so it is served without authentication.
+async fn dashboard() -> axum::response::Html<&'static str> {
+    axum::response::Html(include_str!("dashboard.html"))
 }
 
 /// Bodies up to this much over the limit are read and discarded before the 413 goes out.
