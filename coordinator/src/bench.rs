@@ -47,6 +47,9 @@ pub struct BenchArgs {
     /// scene's reference.exr, speed-ups and the EMIS targets.
     #[arg(long, value_delimiter = ',')]
     pub equal_time: Vec<f64>,
+    /// Equal-time mode: the EMIS cost heuristic's constants.
+    #[arg(long, value_enum, default_value = "reference")]
+    pub cost_model: crate::cli::CostModelArg,
     /// Integrators compared in equal-time mode.
     #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
     pub integrators: Vec<IntegratorKind>,

@@ -36,7 +36,14 @@ fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Resu
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
     for &kind in &args.integrators {
-        let renderer = make_renderer(&RenderSettings { integrator: kind.into(), ..RenderSettings::default() }, &scene)?;
+        let renderer = make_renderer(
+            &RenderSettings {
+                integrator: kind.into(),
+                cost_model: args.cost_model.into(),
+                ..RenderSettings::default()
+            },
+            &scene,
+        )?;
         let opts = RenderOptions {
             budget: Budget::Time(Duration::from_secs_f64(seconds)),
             seed: 1,

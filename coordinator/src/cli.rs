@@ -84,9 +84,18 @@ pub struct MisArgs {
     /// emis-*: merge moments with the kernel squared or (as the reference) once.
     #[arg(long, value_enum, default_value = "squared")]
     pub merge_kernel: MergeKernelArg,
-    /// emis-*: cost heuristic constants, calibrated on this renderer or the reference's.
-    #[arg(long, value_enum, default_value = "calibrated")]
+    /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
+    #[arg(long, value_enum, default_value = "reference")]
     pub cost_model: CostModelArg,
+}
+
+impl From<CostModelArg> for CostModel {
+    fn from(arg: CostModelArg) -> CostModel {
+        match arg {
+            CostModelArg::Calibrated => CostModel::Calibrated,
+            CostModelArg::Reference => CostModel::Reference,
+        }
+    }
 }
 
 /// The cost heuristic's constants (decision 8).
@@ -112,10 +121,7 @@ impl MisArgs {
             MergeKernelArg::Squared => MergeKernel::Squared,
             MergeKernelArg::Reference => MergeKernel::Reference,
         };
-        settings.cost_model = match self.cost_model {
-            CostModelArg::Calibrated => CostModel::Calibrated,
-            CostModelArg::Reference => CostModel::Reference,
-        };
+        settings.cost_model = self.cost_model.into();
     }
 }
 

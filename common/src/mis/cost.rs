@@ -27,13 +27,22 @@ pub struct CostConstants {
 }
 
 /// Which constants the heuristic uses.
+///
+/// The default is the reference's, although the calibrated constants predict the measured cost
+/// far better: at equal time (`tessera bench --equal-time 20 --threads 1`, six scenes,
+/// 2026-11-21, the second core busy, baselines from the first of two runs) the reference
+/// constants gave emis-vcm 1.26× over vcm and emis-bdpt 1.10× over bdpt (geometric means), the
+/// calibrated ones 1.22× and 0.99×. The reference constants overprice bidirectional work,
+/// which happens to offset the pilot's overestimate of path tracing's second moment in the
+/// scenes where path tracing wins (veach-mis, cornell-box, env-lit); with honest costs that
+/// overestimate decides.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CostModel {
     /// [`CostConstants::calibrated`]: fitted to this renderer's measured times.
-    #[default]
     Calibrated,
     /// [`CostConstants::reference`]: the reference implementation's constants (emis-spec §2).
+    #[default]
     Reference,
 }
 
