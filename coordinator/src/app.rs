@@ -134,6 +134,13 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("cannot listen on {}", args.listen))?;
         let addr = listener.local_addr()?;
+        // small gRPC answers (upload outcomes, leases) must not wait for Nagle's algorithm to
+        // see the ACK of the previous segment: that costs tens of milliseconds per request
+        let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::warn!(error = %e, "cannot set TCP_NODELAY");
+            }
+        });
         // the one line of stdout: scripts and tests read the address from it
         println!("tessera serve: listening on http://{addr}");
         tracing::info!(%addr, data_dir = %args.data_dir.display(), "coordinator started");
