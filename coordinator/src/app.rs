@@ -38,7 +38,8 @@ pub struct ServeArgs {
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
-    /// Least seconds between film checkpoints of a job.
+    /// Least seconds between film checkpoints of a job (big films wait longer: at least 20 times
+    /// the last checkpoint's write time).
     #[arg(long, default_value_t = 2.0)]
     pub checkpoint_interval: f64,
     /// Largest accepted upload (scene bundle) in MiB.

@@ -1,5 +1,5 @@
 //! `JobService`: the coordinator's only domain API. Each call applies an event to the pure
-//! [`JobsModel`], persists what changed (SQLite rows, result files, film checkpoints), and only
+//! [`JobsModel`], persists what changed (SQLite rows and results, film checkpoints), and only
 //! then answers; merging of accepted results into the in-memory films happens here, strictly
 //! in tile order. On start-up it rebuilds the model and films from storage and merges again
 //! whatever was accepted after the last checkpoint, so a restart resumes every unfinished job.
@@ -11,9 +11,9 @@
 //! upload, results) on blocking threads.
 
 use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, ResultOutcome, TileSpec, TileState};
-use super::plan::BarrierAction;
 use super::validate::{ResultClaim, validate_result};
-use crate::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow};
+use crate::storage::commit::{Committer, Ticket};
+use crate::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow, sqlite::Batch};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -22,13 +22,19 @@ use tessera_common::scene::Scene;
 use tessera_common::settings::RenderSettings;
 
 pub use super::view::{JobView, WorkerView};
+pub use merge::CHECKPOINT_SPACING;
+use merge::CheckpointState;
+
+mod merge;
 
 /// Tunables of the service.
 #[derive(Clone, Debug)]
 pub struct ServiceConfig {
     /// A lease lives this long without a heartbeat.
     pub lease_timeout_ms: u64,
-    /// Least time between film checkpoints of a job (one is always written at the end).
+    /// Least time between film checkpoints of a job. The interval also grows with the
+    /// checkpoint's cost (see [`CHECKPOINT_SPACING`]); a finished job's outputs replace its last
+    /// checkpoint.
     pub checkpoint_interval_ms: u64,
 }
 
@@ -102,11 +108,12 @@ pub struct Counters {
 
 struct Inner {
     model: JobsModel,
-    store: Store,
+    /// The last commit ticket handed out (see [`JobService::persist`]).
+    ticket: Ticket,
     films: HashMap<String, Film>,
     held: HashMap<(String, usize), TileAccum>,
     files: HashMap<String, JobFiles>,
-    last_checkpoint_ms: HashMap<String, u64>,
+    checkpoints: HashMap<String, CheckpointState>,
     workers: BTreeMap<String, WorkerRow>,
     counters: Counters,
 }
@@ -117,6 +124,7 @@ pub struct JobService {
     blobs: BlobStore,
     scenes_dir: PathBuf,
     inner: Mutex<Inner>,
+    commits: Committer,
     /// Signalled when tiles become available (for long-polling workers).
     pub work: tokio::sync::Notify,
     /// Bumped on every job change (for watchers).
@@ -131,18 +139,18 @@ impl JobService {
         let blobs = BlobStore::open(&data_dir.join("blobs"))?;
         let mut inner = Inner {
             model: JobsModel::default(),
-            store,
+            ticket: 0,
             films: HashMap::new(),
             held: HashMap::new(),
             files: HashMap::new(),
-            last_checkpoint_ms: HashMap::new(),
+            checkpoints: HashMap::new(),
             workers: BTreeMap::new(),
             counters: Counters::default(),
         };
-        for w in inner.store.load_workers()? {
+        for w in store.load_workers()? {
             inner.workers.insert(w.id.clone(), w);
         }
-        let jobs = inner.store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
+        let jobs = store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
         let svc_ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
         for (job, files) in jobs {
             if !job.state.is_terminal() {
@@ -160,14 +168,19 @@ impl JobService {
             blobs,
             scenes_dir: data_dir.join("scenes"),
             inner: Mutex::new(inner),
+            commits: Committer::new(store),
             work: tokio::sync::Notify::new(),
             changed: tokio::sync::watch::channel(0).0,
         };
         {
-            let mut inner = svc.lock();
             for id in svc_ids {
-                svc.merge_ready(&mut inner, &id, now_ms)?;
+                let finishing = svc.merge_ready(&mut svc.lock(), &id, now_ms, Changes::new(), Vec::new())?;
+                if let Some(f) = finishing {
+                    svc.finish(f)?;
+                }
             }
+            let ticket = svc.lock().ticket;
+            svc.commits.wait(ticket)?;
         }
         Ok(svc)
     }
@@ -178,13 +191,22 @@ impl JobService {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// Queues what changed for the database (in the order of the transitions, since the caller
+    /// holds the lock). It is durable once [`JobService::sync`] or `commits.wait(inner.ticket)`
+    /// returns: every public method does one of the two before it answers.
     fn persist(&self, inner: &mut Inner, changes: &Changes, extras: &[Extra]) -> Result<(), ServiceError> {
         if changes.is_empty() && extras.is_empty() {
             return Ok(());
         }
-        inner.store.persist(&inner.model, changes, extras)?;
+        inner.ticket = self.commits.enqueue(Batch::of(&inner.model, changes, extras));
         self.changed.send_modify(|v| *v += 1);
         Ok(())
+    }
+
+    /// Waits, holding the lock, until everything queued so far is committed (the calls off the
+    /// hot path; `upload` and `lease` wait after releasing the lock, so their commits group).
+    fn sync(&self, inner: &Inner) -> Result<(), ServiceError> {
+        Ok(self.commits.wait(inner.ticket)?)
     }
 
     /// Validates and stores a scene bundle and settings, and queues the job.
@@ -217,6 +239,7 @@ impl JobService {
             inner.model.submit(&id, spec.clone(), now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
         inner.films.insert(id.clone(), Film::new(spec.width, spec.height));
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
         self.work.notify_waiters();
         Ok(JobView::of(&inner.model.jobs[&id], now_ms))
@@ -277,7 +300,7 @@ impl JobService {
             last_seen_ms: now_ms,
         };
         let mut inner = self.lock();
-        inner.store.save_worker(&row)?;
+        self.commits.store().save_worker(&row)?;
         tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
@@ -298,13 +321,17 @@ impl JobService {
         self.seen(&mut inner, worker, now_ms)?;
         let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
         self.persist(&mut inner, &changes, &[])?;
-        Ok(leases
+        let grants = leases
             .into_iter()
             .map(|l| {
                 let job = &inner.model.jobs[&l.job];
                 LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l }
             })
-            .collect())
+            .collect();
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(grants)
     }
 
     /// The tile a lease refers to.
@@ -328,6 +355,7 @@ impl JobService {
             inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
             tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
             self.persist(&mut inner, &changes, &[])?;
+            self.sync(&inner)?;
             self.work.notify_waiters();
         }
         Ok(())
@@ -345,6 +373,7 @@ impl JobService {
         let changes = inner.model.report_failure(worker, lease, message, now_ms);
         tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, message, "worker reported a failure");
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         self.work.notify_waiters();
         Ok(())
     }
@@ -375,135 +404,47 @@ impl JobService {
             return Ok(outcome);
         };
         let verdict = validate_result(&tile, claim, payload);
-        if let Ok(accum) = &verdict {
-            let mut stored = accum.non_finite.to_le_bytes().to_vec();
-            stored.extend_from_slice(payload);
-            self.blobs.put_result(&lease.job, lease.tile, lease.epoch, &stored)?;
-        }
+        let stored = verdict.as_ref().ok().map(|accum| Extra::Result {
+            job: lease.job.clone(),
+            tile: lease.tile,
+            epoch: lease.epoch,
+            non_finite: accum.non_finite,
+            payload: payload.to_vec(),
+        });
         let mut inner = self.lock();
         let (outcome, changes) =
             inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
-        self.persist(&mut inner, &changes, &[])?;
         match (&outcome, verdict) {
             (ResultOutcome::Accepted, Ok(accum)) => {
                 inner.counters.results_accepted += 1;
                 inner.held.insert((lease.job.clone(), lease.tile), accum);
-                self.merge_ready(&mut inner, &lease.job, now_ms)?;
+                // the result and its acceptance are committed in the merge's transaction: one
+                // commit (one fsync) per result, still before anyone is answered
+                let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());
+                let ticket = inner.ticket;
+                drop(inner);
+                // outside the lock, so that concurrent uploads share a commit
+                self.commits.wait(ticket)?;
+                if let Some(f) = finishing? {
+                    self.finish(f)?;
+                }
                 Ok(outcome)
             }
             (ResultOutcome::Refused(reason), _) => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
                 inner.counters.results_refused += 1;
                 tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, reason = %reason, "tile result refused");
                 self.work.notify_waiters();
                 Err(ServiceError::InvalidResult(reason.clone()))
             }
             _ => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
                 inner.counters.results_ignored += 1;
                 Ok(outcome)
             }
         }
-    }
-
-    /// Merges the accepted tiles that are next in order, runs barriers, checkpoints.
-    fn merge_ready(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
-        let range = inner.model.mergeable(job);
-        if range.is_empty() {
-            return Ok(());
-        }
-        let Some(mut film) = inner.films.remove(job) else { return Ok(()) };
-        let merged = self.merge_range(inner, job, range.clone(), &mut film);
-        let merged = match merged {
-            Ok(()) => film,
-            Err(e) => {
-                inner.films.insert(job.to_string(), film);
-                return Err(e);
-            }
-        };
-        inner.counters.tiles_merged += range.len() as u64;
-        let (action, changes) = inner.model.merged(job, range.end, now_ms);
-        let upto = inner.model.jobs[job].merged;
-        let mut extras = Vec::new();
-        let due =
-            now_ms.saturating_sub(*inner.last_checkpoint_ms.get(job).unwrap_or(&0)) >= self.cfg.checkpoint_interval_ms;
-        let done = action == Some(BarrierAction::Finish);
-        if done || due || matches!(action, Some(BarrierAction::NextPass(_))) {
-            let old = inner.files.get(job).and_then(|f| f.checkpoint.clone());
-            let file = self.blobs.put_checkpoint(job, upto, &merged)?;
-            extras.push(Extra::Checkpoint { job: job.to_string(), merged: upto, file: file.clone() });
-            if done {
-                let (exr, png) = self.write_outputs(&inner.model.jobs[job].spec, job, &merged)?;
-                extras.push(Extra::Outputs { job: job.to_string(), exr: exr.clone(), png: png.clone() });
-                let f = inner.files.entry(job.to_string()).or_default();
-                (f.result_exr, f.preview_png) = (Some(exr), Some(png));
-            }
-            self.persist(inner, &changes, &extras)?;
-            inner.last_checkpoint_ms.insert(job.to_string(), now_ms);
-            inner.files.entry(job.to_string()).or_default().checkpoint = Some(file.clone());
-            if let Some(old) = old.filter(|o| *o != file) {
-                self.blobs.remove_checkpoint(&old);
-            }
-            let j = &inner.model.jobs[job];
-            for (i, t) in j.tiles[..upto].iter().enumerate() {
-                self.blobs.remove_result(job, i, t.epoch);
-            }
-        } else {
-            self.persist(inner, &changes, &[])?;
-        }
-        match action {
-            Some(BarrierAction::Finish) => tracing::info!(job_id = %job, "job done"),
-            Some(BarrierAction::NextPass(_)) => self.work.notify_waiters(),
-            Some(BarrierAction::Optimize) => {
-                // EMIS hook: run the optimiser on the merged pilot film and moments here, then
-                // call `JobsModel::optimized` with the final pass. No integrator plans a pilot
-                // pass yet, so reaching this is a planning bug: fail the job loudly.
-                let changes = inner.model.fail(job, "no optimiser is available for this job".into(), now_ms);
-                self.persist(inner, &changes, &[])?;
-            }
-            None => {}
-        }
-        if !inner.model.jobs[job].state.is_terminal() {
-            inner.films.insert(job.to_string(), merged);
-        }
-        Ok(())
-    }
-
-    fn merge_range(
-        &self,
-        inner: &mut Inner,
-        job: &str,
-        range: std::ops::Range<usize>,
-        film: &mut Film,
-    ) -> Result<(), ServiceError> {
-        for i in range {
-            let accum = match inner.held.remove(&(job.to_string(), i)) {
-                Some(a) => a,
-                None => {
-                    let t = &inner.model.jobs[job].tiles[i];
-                    let bytes = self.blobs.get_result(job, i, t.epoch)?;
-                    let corrupt =
-                        || ServiceError::Io(std::io::Error::other(format!("stored result of tile {i} is corrupt")));
-                    let non_finite =
-                        u64::from_le_bytes(bytes.get(..8).ok_or_else(corrupt)?.try_into().map_err(|_| corrupt())?);
-                    let (sum, count) =
-                        tessera_proto::decode_tile_payload(&bytes[8..], t.spec.rect.area()).ok_or_else(corrupt)?;
-                    TileAccum { rect: t.spec.rect, sum, count, non_finite }
-                }
-            };
-            film.merge_tile(&accum);
-        }
-        Ok(())
-    }
-
-    /// Writes the result EXR and PNG preview as blobs; returns their digests.
-    fn write_outputs(&self, spec: &JobSpec, job: &str, film: &Film) -> Result<(String, String), ServiceError> {
-        let attributes = vec![
-            ("tessera/integrator".to_string(), spec.settings.integrator.to_string()),
-            ("tessera/spp".to_string(), film.count.iter().max().copied().unwrap_or(0).to_string()),
-            ("tessera/seed".to_string(), spec.settings.seed.unwrap_or(0).to_string()),
-            ("tessera/scene".to_string(), spec.name.clone()),
-            ("tessera/job".to_string(), job.to_string()),
-        ];
-        Ok(self.blobs.put_outputs(film, &attributes)?)
     }
 
     /// Cancels a job.
@@ -511,6 +452,7 @@ impl JobService {
         let mut inner = self.lock();
         let changes = inner.model.cancel(job, now_ms).map_err(|e| ServiceError::NotFound(e.to_string()))?;
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         inner.films.remove(job);
         tracing::info!(job_id = %job, "job cancelled");
         Ok(JobView::of(&inner.model.jobs[job], now_ms))
