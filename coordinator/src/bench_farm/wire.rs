@@ -114,9 +114,12 @@ pub struct Phase {
 
 impl Phase {
     fn print(&self) {
-        let per_px = |b: u64| if self.pixels > 0 { b as f64 / self.pixels as f64 } else { f64::NAN };
+        let per_px = |b: u64| match self.pixels {
+            0 => "-".to_string(),
+            n => format!("{:.4}", b as f64 / n as f64),
+        };
         println!(
-            "{:<34} {:>4} rpcs {:>10} B computed {:>10} B measured ({:>+6.2} %, {:>5.0} B/rpc HTTP/2) {:>9.4} B/px computed {:>9.4} B/px measured",
+            "{:<34} {:>4} rpcs {:>10} B computed {:>10} B measured ({:>+6.2} %, {:>5.0} B/rpc HTTP/2) {:>9} B/px computed {:>9} B/px measured",
             self.name,
             self.rpcs,
             self.computed,
