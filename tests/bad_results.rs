@@ -17,16 +17,7 @@ async fn upload(
     payload: Vec<u8>,
 ) -> Result<pb::UploadResultResponse, tonic::Status> {
     use pb::upload_result_request::Part;
-    let header = pb::TileResultHeader {
-        worker_id: worker.to_string(),
-        lease: lease.lease.clone(),
-        rect: lease.rect,
-        sample_begin: lease.sample_begin,
-        sample_end: lease.sample_end,
-        non_finite: 0,
-        render_seconds: 0.0,
-        pilot_bytes: 0,
-    };
+    let header = tessera_proto::result_header(worker, lease, 0, 0.0, 0);
     let messages = vec![
         pb::UploadResultRequest { part: Some(Part::Header(header)) },
         pb::UploadResultRequest { part: Some(Part::Data(payload.into())) },

@@ -38,7 +38,8 @@ pub struct ServeArgs {
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
-    /// Least seconds between film checkpoints of a job.
+    /// Least seconds between film checkpoints of a job (big films wait longer: at least 20 times
+    /// the last checkpoint's write time).
     #[arg(long, default_value_t = 2.0)]
     pub checkpoint_interval: f64,
     /// Largest accepted upload (scene bundle) in MiB.
@@ -134,6 +135,13 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("cannot listen on {}", args.listen))?;
         let addr = listener.local_addr()?;
+        // small gRPC answers (upload outcomes, leases) must not wait for Nagle's algorithm to
+        // see the ACK of the previous segment: that costs tens of milliseconds per request
+        let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::warn!(error = %e, "cannot set TCP_NODELAY");
+            }
+        });
         // the one line of stdout: scripts and tests read the address from it
         println!("tessera serve: listening on http://{addr}");
         tracing::info!(%addr, data_dir = %args.data_dir.display(), "coordinator started");

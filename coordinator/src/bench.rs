@@ -78,7 +78,7 @@ pub struct BenchArgs {
 }
 
 /// Process CPU time (user + system) in seconds.
-fn cpu_seconds() -> f64 {
+pub fn cpu_seconds() -> f64 {
     // SAFETY: getrusage only writes into the struct we pass
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };

@@ -159,6 +159,8 @@ pub enum Command {
     Render(RenderArgs),
     /// Measure rendering speed (samples per second) on scenes.
     Bench(crate::bench::BenchArgs),
+    /// Measure the farm coordinator: result ingest, scaling with real workers, bytes on the wire.
+    BenchFarm(crate::bench_farm::BenchFarmArgs),
     /// Run the farm coordinator: gRPC and REST on one port, jobs kept in --data-dir.
     Serve(crate::app::ServeArgs),
     /// Submit a scene (and every file it references) to a coordinator.
@@ -216,6 +218,7 @@ pub fn run() -> anyhow::Result<()> {
     match cli.command {
         Command::Render(args) => crate::local::render_command(&args),
         Command::Bench(args) => crate::bench::bench_command(&args),
+        Command::BenchFarm(args) => crate::bench_farm::bench_farm_command(&args),
         Command::Serve(args) => crate::app::serve_command(&args),
         Command::Submit(args) => crate::client::submit::submit_command(&args),
         Command::Status(args) => crate::client::status_command(&args),

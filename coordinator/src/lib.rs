@@ -6,6 +6,7 @@ pub mod app;
 pub mod auth;
 pub mod bench;
 pub mod bench_emis;
+pub mod bench_farm;
 pub mod calibrate;
 pub mod chart;
 pub mod cli;

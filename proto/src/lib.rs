@@ -41,6 +41,27 @@ pub const CHUNK_BYTES: usize = 1 << 20;
 /// Largest gRPC message either side accepts: a chunk plus headers, or an inline scene bundle.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
 
+/// The header of an upload answering `lease` with exactly the leased rectangle and samples
+/// (what an honest worker sends).
+pub fn result_header(
+    worker_id: &str,
+    lease: &v1::TileLease,
+    non_finite: u64,
+    render_seconds: f64,
+    pilot_bytes: u64,
+) -> v1::TileResultHeader {
+    v1::TileResultHeader {
+        worker_id: worker_id.to_string(),
+        lease: lease.lease.clone(),
+        rect: lease.rect,
+        sample_begin: lease.sample_begin,
+        sample_end: lease.sample_end,
+        non_finite,
+        render_seconds,
+        pilot_bytes,
+    }
+}
+
 /// Encodes a tile result payload: every pixel's three sums, then every pixel's count, all
 /// little-endian (the layout `TileResultHeader` documents).
 pub fn encode_tile_payload(sum: &[[f64; 3]], count: &[u32]) -> Vec<u8> {

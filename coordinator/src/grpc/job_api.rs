@@ -32,11 +32,13 @@ impl pb::job_service_server::JobService for JobApi {
     }
 
     async fn get_job(&self, req: Request<pb::GetJobRequest>) -> Result<Response<pb::Job>, Status> {
-        Ok(Response::new(job_to_pb(&self.0.svc.get(&req.into_inner().id, now_ms())?)))
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(job_to_pb(&blocking(move || svc.get(&id, now_ms())).await?)))
     }
 
     async fn list_jobs(&self, _: Request<pb::ListJobsRequest>) -> Result<Response<pb::ListJobsResponse>, Status> {
-        let jobs = self.0.svc.list(now_ms()).iter().map(job_to_pb).collect();
+        let svc = self.0.svc.clone();
+        let jobs = blocking(move || svc.list(now_ms())).await?.iter().map(job_to_pb).collect();
         Ok(Response::new(pb::ListJobsResponse { jobs }))
     }
 

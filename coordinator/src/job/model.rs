@@ -467,6 +467,18 @@ impl JobsModel {
         j.merged..end
     }
 
+    /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
+    pub fn merge_finishes(&self, job: &str, upto: usize, now_ms: u64) -> bool {
+        let Some(j) = self.jobs.get(job) else { return false };
+        if j.state.is_terminal() || upto < j.tiles.len() {
+            return false;
+        }
+        let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let collected = j.passes.last().is_some_and(|p| p.collect);
+        plan::after_pass(&j.spec, spp, elapsed_s, collected) == BarrierAction::Finish
+    }
+
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
     /// every pass that is now complete. Returns the barrier's action when one ran.
     pub fn merged(&mut self, job: &str, upto: usize, now_ms: u64) -> (Option<BarrierAction>, Changes) {

@@ -56,7 +56,7 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
         assert_eq!((view.tiles_done, view.samples_done), (2, 0));
         (job.id, worker, leases)
     };
-    // restart: the held results come back from the result files, tile 0 is still leased
+    // restart: the held results come back from the database, tile 0 is still leased
     let svc = JobService::open(dir.path(), CFG, 50_000).unwrap();
     assert_eq!(svc.get(&job, 50_000).unwrap().tiles_done, 2);
     assert_eq!(svc.heartbeat(&worker, &leases[..1], 50_000).unwrap(), vec![], "the lease survives the restart");

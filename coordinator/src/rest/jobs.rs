@@ -76,13 +76,16 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
 }
 
 /// `GET /api/v1/jobs`.
-pub async fn list(State(st): St) -> Json<Vec<JobDto>> {
-    Json(st.svc.list(now_ms()).into_iter().map(JobDto::from).collect())
+pub async fn list(State(st): St) -> Result<Json<Vec<JobDto>>, ApiError> {
+    let svc = st.svc.clone();
+    let jobs = blocking(move || svc.list(now_ms())).await?;
+    Ok(Json(jobs.into_iter().map(JobDto::from).collect()))
 }
 
 /// `GET /api/v1/jobs/{id}`.
 pub async fn get_one(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
-    Ok(Json(st.svc.get(&id, now_ms())?.into()))
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.get(&id, now_ms())).await?.into()))
 }
 
 /// `DELETE /api/v1/jobs/{id}`.

@@ -1,6 +1,6 @@
 //! The blob directory: content-addressed blobs (scene bundles, result EXRs and PNGs, keyed by
-//! the SHA-256 of their bytes), per-lease tile results waiting to be merged, and checkpoints of
-//! merged films. Every file is written to a temporary name and renamed into place, so a crash
+//! the SHA-256 of their bytes) and checkpoints of merged films. (Accepted tile results live in
+//! the database; [`BlobStore::get_result`] reads those that earlier versions kept as files.) Every file is written to a temporary name and renamed into place, so a crash
 //! never leaves a half-written blob under a real name.
 
 use sha2::{Digest, Sha256};
@@ -34,13 +34,22 @@ impl BlobStore {
     }
 
     fn write_atomic(&self, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+        self.write_atomic_with(path, |w| w.write_all(bytes))
+    }
+
+    /// [`BlobStore::write_atomic`] with the bytes produced by `write` (no copy in memory).
+    fn write_atomic_with(
+        &self,
+        path: &Path,
+        write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)?;
         }
         let tmp = self.root.join("tmp").join(uuid::Uuid::new_v4().to_string());
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
+        let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
+        write(&mut f)?;
+        f.into_inner().map_err(|e| e.into_error())?.sync_all()?;
         std::fs::rename(&tmp, path)
     }
 
@@ -73,32 +82,32 @@ impl BlobStore {
         self.root.join("results").join(job).join(format!("{tile}-{epoch}.bin"))
     }
 
-    /// Stores an accepted tile result's payload.
-    pub fn put_result(&self, job: &str, tile: usize, epoch: u64, payload: &[u8]) -> std::io::Result<()> {
-        self.write_atomic(&self.result_path(job, tile, epoch), payload)
-    }
-
-    /// An accepted tile result's payload.
+    /// An accepted tile result's payload as earlier versions stored it (non-finite count, then
+    /// the payload).
     pub fn get_result(&self, job: &str, tile: usize, epoch: u64) -> std::io::Result<Vec<u8>> {
         std::fs::read(self.result_path(job, tile, epoch))
-    }
-
-    /// Deletes a merged tile result (it is in a checkpoint now).
-    pub fn remove_result(&self, job: &str, tile: usize, epoch: u64) {
-        let _ = std::fs::remove_file(self.result_path(job, tile, epoch));
     }
 
     /// Writes a checkpoint of `film` holding `tiles[..merged]`, followed by `trailer` (an EMIS
     /// state, or nothing); returns its file name.
     pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film, trailer: &[u8]) -> std::io::Result<String> {
         let name = format!("{job}.{merged}.film");
-        let mut bytes = Vec::with_capacity(16 + film.sum.len() * tessera_proto::RESULT_BYTES_PER_PIXEL);
-        bytes.extend_from_slice(&film.width.to_le_bytes());
-        bytes.extend_from_slice(&film.height.to_le_bytes());
-        bytes.extend_from_slice(&film.non_finite.to_le_bytes());
-        bytes.extend_from_slice(&tessera_proto::encode_tile_payload(&film.sum, &film.count));
-        bytes.extend_from_slice(trailer);
-        self.write_atomic(&self.root.join("checkpoints").join(&name), &bytes)?;
+        // streamed in the payload layout (`tessera_proto::encode_tile_payload`): a 4K film is
+        // 230 MB, which is not worth copying in memory first
+        self.write_atomic_with(&self.root.join("checkpoints").join(&name), |w| {
+            w.write_all(&film.width.to_le_bytes())?;
+            w.write_all(&film.height.to_le_bytes())?;
+            w.write_all(&film.non_finite.to_le_bytes())?;
+            for s in &film.sum {
+                for c in s {
+                    w.write_all(&c.to_le_bytes())?;
+                }
+            }
+            for c in &film.count {
+                w.write_all(&c.to_le_bytes())?;
+            }
+            w.write_all(trailer)
+        })?;
         Ok(name)
     }
 
@@ -140,15 +149,25 @@ impl BlobStore {
         let png_path = self.temp_path(".png");
         let written = tessera_common::film::exr::write_exr(&exr_path, film.width, film.height, &rgb, extras)
             .map_err(|e| std::io::Error::other(e.to_string()))
-            .and_then(|()| {
-                tessera_common::film::png::write_png(&png_path, film.width, film.height, &rgb)
-                    .map_err(|e| std::io::Error::other(e.to_string()))
-            })
+            .and_then(|()| write_preview_png(&png_path, film.width, film.height, &rgb))
             .and_then(|()| Ok((self.put(&std::fs::read(&exr_path)?)?, self.put(&std::fs::read(&png_path)?)?)));
         let _ = std::fs::remove_file(exr_path);
         let _ = std::fs::remove_file(png_path);
         written
     }
+}
+
+/// The sRGB preview as `tessera render` writes it, but with fast deflate: the coordinator
+/// writes it while uploads wait, and the default level costs about 0.2 s per megapixel.
+fn write_preview_png(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> std::io::Result<()> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use tessera_common::film::png::linear_to_srgb;
+    let bytes: Vec<u8> = rgb.iter().flat_map(|p| p.map(|c| (linear_to_srgb(c) * 255.0 + 0.5) as u8)).collect();
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    PngEncoder::new_with_quality(file, CompressionType::Fast, FilterType::Adaptive)
+        .write_image(&bytes, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| std::io::Error::other(e.to_string()))
 }
 
 #[cfg(test)]

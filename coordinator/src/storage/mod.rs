@@ -1,8 +1,9 @@
 //! Durable state of the coordinator under `--data-dir`: `tessera.sqlite` (jobs, tiles,
-//! workers; see [`sqlite`]) and `blobs/` (scene bundles, tile results, film checkpoints,
-//! outputs; see [`blobs`]).
+//! workers, accepted results; see [`sqlite`], written through the group commit of [`commit`])
+//! and `blobs/` (scene bundles, film checkpoints, outputs; see [`blobs`]).
 
 pub mod blobs;
+pub mod commit;
 pub mod sqlite;
 
 pub use blobs::BlobStore;

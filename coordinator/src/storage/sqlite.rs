@@ -6,7 +6,9 @@
 //! tile. The merged-prefix length `merged` is written only together with the film checkpoint
 //! that contains exactly those tiles, in one transaction: that pairing is what makes merging
 //! exactly-once across restarts. Tiles merged after the last checkpoint are stored as
-//! `accepted` and merged again from their result files on start-up.
+//! `accepted` and merged again on start-up from their results, which the `results` table keeps
+//! (written in the transaction that accepts them, deleted in the one that records the
+//! checkpoint covering them: one commit per result, and no file per result).
 
 use crate::job::model::{Changes, Job, JobSpec, JobState, JobsModel, Pass, Tile, TileSpec, TileState};
 use rusqlite::{Connection, OptionalExtension, params};
@@ -20,6 +22,9 @@ pub enum StoreError {
     /// SQLite reported an error.
     #[error("database: {0}")]
     Sqlite(#[from] rusqlite::Error),
+    /// A group commit that held this change failed (the first error is logged).
+    #[error("database commit failed: {0}")]
+    Commit(String),
     /// A stored row could not be decoded.
     #[error("database row of job {job}: {message}")]
     Corrupt {
@@ -53,7 +58,22 @@ pub enum Extra {
         /// Its file name.
         file: String,
     },
-    /// The job's outputs were written.
+    /// An accepted result's payload (`TileResultHeader`'s layout), kept until a checkpoint or the
+    /// outputs cover its tile.
+    Result {
+        /// The job.
+        job: String,
+        /// Tile index.
+        tile: usize,
+        /// Lease epoch.
+        epoch: u64,
+        /// Non-finite samples the worker counted.
+        non_finite: u64,
+        /// The payload.
+        payload: Vec<u8>,
+    },
+    /// The job's outputs were written from a film holding `tiles[..merged]`; they replace its
+    /// checkpoint.
     Outputs {
         /// The job.
         job: String,
@@ -61,6 +81,8 @@ pub enum Extra {
         exr: String,
         /// PNG digest.
         png: String,
+        /// Tiles in them.
+        merged: usize,
     },
 }
 
@@ -95,10 +117,120 @@ CREATE TABLE IF NOT EXISTS tiles (
     x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, s0 INTEGER NOT NULL, s1 INTEGER NOT NULL,
     epoch INTEGER NOT NULL, state TEXT NOT NULL, worker TEXT, failures INTEGER NOT NULL,
     PRIMARY KEY (job_id, idx));
+CREATE TABLE IF NOT EXISTS results (
+    job_id TEXT NOT NULL, idx INTEGER NOT NULL, epoch INTEGER NOT NULL, non_finite INTEGER NOT NULL,
+    payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
 CREATE TABLE IF NOT EXISTS workers (
     id TEXT PRIMARY KEY, name TEXT NOT NULL, threads INTEGER NOT NULL,
     registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL);
 ";
+
+/// The rows of one transition, taken from the model under the service's lock and written
+/// later, possibly together with other batches (see `storage::commit`).
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    jobs: Vec<JobRow>,
+    tiles: Vec<TileRow>,
+    extras: Vec<Extra>,
+}
+
+#[derive(Clone, Debug)]
+struct JobRow {
+    id: String,
+    seq: i64,
+    spec: String,
+    state: &'static str,
+    passes: String,
+    worker_failures: String,
+    error: Option<String>,
+    created_ms: i64,
+    started_ms: Option<i64>,
+    finished_ms: Option<i64>,
+}
+
+#[derive(Clone, Debug)]
+struct TileRow {
+    job: String,
+    idx: i64,
+    rect: Rect,
+    samples: (u32, u32),
+    epoch: i64,
+    state: &'static str,
+    worker: Option<String>,
+    failures: u32,
+}
+
+impl Batch {
+    /// The rows `changes` names from `model`, plus `extras`.
+    pub fn of(model: &JobsModel, changes: &Changes, extras: &[Extra]) -> Batch {
+        let mut batch = Batch { extras: extras.to_vec(), ..Batch::default() };
+        for (id, tiles) in changes {
+            let Some(job) = model.jobs.get(id) else { continue };
+            batch.jobs.push(JobRow {
+                id: job.id.clone(),
+                seq: job.seq as i64,
+                spec: json(&job.spec),
+                state: job.state.as_str(),
+                passes: json(&job.passes),
+                worker_failures: json(&job.worker_failures),
+                error: job.error.clone(),
+                created_ms: job.created_ms as i64,
+                started_ms: job.started_ms.map(|t| t as i64),
+                finished_ms: job.finished_ms.map(|t| t as i64),
+            });
+            for &i in tiles {
+                let t = &job.tiles[i];
+                let (state, worker) = match &t.state {
+                    TileState::Queued => ("queued", None),
+                    TileState::Leased { worker, .. } => ("leased", Some(worker.clone())),
+                    // merged tiles are `accepted` until a checkpoint covers them (see module doc)
+                    TileState::Accepted | TileState::Merged => ("accepted", None),
+                };
+                batch.tiles.push(TileRow {
+                    job: id.clone(),
+                    idx: i as i64,
+                    rect: t.spec.rect,
+                    samples: (t.spec.samples.start, t.spec.samples.end),
+                    epoch: t.epoch as i64,
+                    state,
+                    worker,
+                    failures: t.failures,
+                });
+            }
+        }
+        batch
+    }
+
+    /// Whether there is nothing to write.
+    pub fn is_empty(&self) -> bool {
+        self.jobs.is_empty() && self.tiles.is_empty() && self.extras.is_empty()
+    }
+}
+
+fn write_extra(tx: &rusqlite::Transaction<'_>, extra: &Extra) -> Result<(), StoreError> {
+    match extra {
+        Extra::Checkpoint { job, merged, file } => {
+            tx.execute(
+                "UPDATE jobs SET merged = ?2, checkpoint = ?3 WHERE id = ?1",
+                params![job, *merged as i64, file],
+            )?;
+            tx.execute("DELETE FROM results WHERE job_id = ?1 AND idx < ?2", params![job, *merged as i64])?
+        }
+        Extra::Outputs { job, exr, png, merged } => {
+            tx.execute(
+                "UPDATE jobs SET result_exr = ?2, preview_png = ?3, merged = ?4, checkpoint = NULL WHERE id = ?1",
+                params![job, exr, png, *merged as i64],
+            )?;
+            tx.execute("DELETE FROM results WHERE job_id = ?1 AND idx < ?2", params![job, *merged as i64])?
+        }
+        Extra::Result { job, tile, epoch, non_finite, payload } => tx
+            .prepare_cached(
+                "INSERT OR REPLACE INTO results (job_id, idx, epoch, non_finite, payload) VALUES (?1, ?2, ?3, ?4, ?5)",
+            )?
+            .execute(params![job, *tile as i64, *epoch as i64, *non_finite as i64, payload])?,
+    };
+    Ok(())
+}
 
 fn json<T: serde::Serialize>(v: &T) -> String {
     serde_json::to_string(v).expect("invariant: plain data serialises")
@@ -116,67 +248,57 @@ impl Store {
 
     /// Writes the rows `changes` names from `model`, plus `extras`, in one transaction.
     pub fn persist(&mut self, model: &JobsModel, changes: &Changes, extras: &[Extra]) -> Result<(), StoreError> {
+        self.write(&[Batch::of(model, changes, extras)])
+    }
+
+    /// Writes `batches` in order in one transaction (one commit, one fsync: group commit).
+    pub fn write(&mut self, batches: &[Batch]) -> Result<(), StoreError> {
         let tx = self.conn.transaction()?;
-        for (id, tiles) in changes {
-            let Some(job) = model.jobs.get(id) else { continue };
-            tx.execute(
-                "INSERT INTO jobs (id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)
-                 ON CONFLICT(id) DO UPDATE SET state = ?4, passes = ?5, worker_failures = ?6, error = ?7,
-                    started_ms = ?9, finished_ms = ?10",
-                params![
-                    job.id,
-                    job.seq as i64,
-                    json(&job.spec),
-                    job.state.as_str(),
-                    json(&job.passes),
-                    json(&job.worker_failures),
-                    job.error,
-                    job.created_ms as i64,
-                    job.started_ms.map(|t| t as i64),
-                    job.finished_ms.map(|t| t as i64),
-                ],
-            )?;
+        for batch in batches {
+            for j in &batch.jobs {
+                tx.prepare_cached(
+                    "INSERT INTO jobs (id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)
+                     ON CONFLICT(id) DO UPDATE SET state = ?4, passes = ?5, worker_failures = ?6, error = ?7,
+                        started_ms = ?9, finished_ms = ?10",
+                )?
+                .execute(params![
+                    j.id,
+                    j.seq,
+                    j.spec,
+                    j.state,
+                    j.passes,
+                    j.worker_failures,
+                    j.error,
+                    j.created_ms,
+                    j.started_ms,
+                    j.finished_ms
+                ])?;
+            }
             let mut stmt = tx.prepare_cached(
                 "INSERT OR REPLACE INTO tiles (job_id, idx, x0, y0, x1, y1, s0, s1, epoch, state, worker, failures)
                  VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
             )?;
-            for &i in tiles {
-                let t = &job.tiles[i];
-                let (state, worker) = match &t.state {
-                    TileState::Queued => ("queued", None),
-                    TileState::Leased { worker, .. } => ("leased", Some(worker.as_str())),
-                    // merged tiles are `accepted` until a checkpoint covers them (see module doc)
-                    TileState::Accepted | TileState::Merged => ("accepted", None),
-                };
-                let r = t.spec.rect;
+            for t in &batch.tiles {
+                let r = t.rect;
                 stmt.execute(params![
-                    id,
-                    i as i64,
+                    t.job,
+                    t.idx,
                     r.x0,
                     r.y0,
                     r.x1,
                     r.y1,
-                    t.spec.samples.start,
-                    t.spec.samples.end,
-                    t.epoch as i64,
-                    state,
-                    worker,
+                    t.samples.0,
+                    t.samples.1,
+                    t.epoch,
+                    t.state,
+                    t.worker,
                     t.failures
                 ])?;
             }
-        }
-        for extra in extras {
-            match extra {
-                Extra::Checkpoint { job, merged, file } => tx.execute(
-                    "UPDATE jobs SET merged = ?2, checkpoint = ?3 WHERE id = ?1",
-                    params![job, *merged as i64, file],
-                )?,
-                Extra::Outputs { job, exr, png } => tx.execute(
-                    "UPDATE jobs SET result_exr = ?2, preview_png = ?3 WHERE id = ?1",
-                    params![job, exr, png],
-                )?,
-            };
+            for extra in &batch.extras {
+                write_extra(&tx, extra)?;
+            }
         }
         tx.commit()?;
         Ok(())
@@ -270,6 +392,18 @@ impl Store {
             tiles.push(tile);
         }
         Ok(tiles)
+    }
+
+    /// An accepted result not yet covered by a checkpoint: (non-finite count, payload).
+    pub fn load_result(&self, job: &str, tile: usize, epoch: u64) -> Result<Option<(u64, Vec<u8>)>, StoreError> {
+        Ok(self
+            .conn
+            .query_row(
+                "SELECT non_finite, payload FROM results WHERE job_id = ?1 AND idx = ?2 AND epoch = ?3",
+                params![job, tile as i64, epoch as i64],
+                |r| Ok((r.get::<_, i64>(0)? as u64, r.get::<_, Vec<u8>>(1)?)),
+            )
+            .optional()?)
     }
 
     /// Registers or refreshes a worker.

@@ -1,5 +1,5 @@
 //! `JobService`: the coordinator's only domain API. Each call applies an event to the pure
-//! [`JobsModel`], persists what changed (SQLite rows, result files, film checkpoints), and only
+//! [`JobsModel`], persists what changed (SQLite rows and results, film checkpoints), and only
 //! then answers; merging of accepted results into the in-memory films happens here, strictly
 //! in tile order. On start-up it rebuilds the model and films from storage and merges again
 //! whatever was accepted after the last checkpoint, so a restart resumes every unfinished job.
@@ -13,7 +13,8 @@
 use super::emis::{EmisJob, TileStrategy};
 use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, ResultOutcome, TileSpec, TileState};
 use super::validate::ResultClaim;
-use crate::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow};
+use crate::storage::commit::{Committer, Ticket};
+use crate::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow, sqlite::Batch};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -23,15 +24,19 @@ use tessera_common::scene::Scene;
 use tessera_common::settings::RenderSettings;
 
 pub use super::view::{JobView, StrategyView, WorkerView};
+pub use merge::CHECKPOINT_SPACING;
+use merge::CheckpointState;
 
-mod merging;
+mod merge;
 
 /// Tunables of the service.
 #[derive(Clone, Debug)]
 pub struct ServiceConfig {
     /// A lease lives this long without a heartbeat.
     pub lease_timeout_ms: u64,
-    /// Least time between film checkpoints of a job (one is always written at the end).
+    /// Least time between film checkpoints of a job. The interval also grows with the
+    /// checkpoint's cost (see [`CHECKPOINT_SPACING`]); a finished job's outputs replace its last
+    /// checkpoint.
     pub checkpoint_interval_ms: u64,
 }
 
@@ -107,14 +112,15 @@ pub struct Counters {
 
 struct Inner {
     model: JobsModel,
-    store: Store,
+    /// The last commit ticket handed out (see [`JobService::persist`]).
+    ticket: Ticket,
     films: HashMap<String, Film>,
     emis: HashMap<String, EmisJob>,
     /// EMIS decisions of finished jobs (whose state is dropped).
     strategies: HashMap<String, StrategyView>,
     held: HashMap<(String, usize), (TileAccum, Option<PilotData>)>,
     files: HashMap<String, JobFiles>,
-    last_checkpoint_ms: HashMap<String, u64>,
+    checkpoints: HashMap<String, CheckpointState>,
     workers: BTreeMap<String, WorkerRow>,
     counters: Counters,
 }
@@ -125,6 +131,7 @@ pub struct JobService {
     blobs: BlobStore,
     scenes_dir: PathBuf,
     inner: Mutex<Inner>,
+    commits: Committer,
     /// Signalled when tiles become available (for long-polling workers).
     pub work: tokio::sync::Notify,
     /// Bumped on every job change (for watchers).
@@ -139,20 +146,20 @@ impl JobService {
         let blobs = BlobStore::open(&data_dir.join("blobs"))?;
         let mut inner = Inner {
             model: JobsModel::default(),
-            store,
+            ticket: 0,
             films: HashMap::new(),
             emis: HashMap::new(),
             strategies: HashMap::new(),
             held: HashMap::new(),
             files: HashMap::new(),
-            last_checkpoint_ms: HashMap::new(),
+            checkpoints: HashMap::new(),
             workers: BTreeMap::new(),
             counters: Counters::default(),
         };
-        for w in inner.store.load_workers()? {
+        for w in store.load_workers()? {
             inner.workers.insert(w.id.clone(), w);
         }
-        let jobs = inner.store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
+        let jobs = store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
         let svc_ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
         for (job, files) in jobs {
             if !job.state.is_terminal() {
@@ -179,18 +186,23 @@ impl JobService {
             blobs,
             scenes_dir: data_dir.join("scenes"),
             inner: Mutex::new(inner),
+            commits: Committer::new(store),
             work: tokio::sync::Notify::new(),
             changed: tokio::sync::watch::channel(0).0,
         };
         {
-            let mut inner = svc.lock();
             for id in svc_ids {
-                if inner.model.jobs[&id].state == JobState::Optimizing {
+                if svc.lock().model.jobs[&id].state == JobState::Optimizing {
                     // stopped between a barrier and its update: run the update now
-                    svc.optimize(&mut inner, &id, now_ms)?;
+                    svc.optimize(&mut svc.lock(), &id, now_ms)?;
                 }
-                svc.merge_ready(&mut inner, &id, now_ms)?;
+                let finishing = svc.merge_ready(&mut svc.lock(), &id, now_ms, Changes::new(), Vec::new())?;
+                if let Some(f) = finishing {
+                    svc.finish(f)?;
+                }
             }
+            let ticket = svc.lock().ticket;
+            svc.commits.wait(ticket)?;
         }
         Ok(svc)
     }
@@ -201,13 +213,22 @@ impl JobService {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// Queues what changed for the database (in the order of the transitions, since the caller
+    /// holds the lock). It is durable once [`JobService::sync`] or `commits.wait(inner.ticket)`
+    /// returns: every public method does one of the two before it answers.
     fn persist(&self, inner: &mut Inner, changes: &Changes, extras: &[Extra]) -> Result<(), ServiceError> {
         if changes.is_empty() && extras.is_empty() {
             return Ok(());
         }
-        inner.store.persist(&inner.model, changes, extras)?;
+        inner.ticket = self.commits.enqueue(Batch::of(&inner.model, changes, extras));
         self.changed.send_modify(|v| *v += 1);
         Ok(())
+    }
+
+    /// Waits, holding the lock, until everything queued so far is committed (the calls off the
+    /// hot path; `upload` and `lease` wait after releasing the lock, so their commits group).
+    fn sync(&self, inner: &Inner) -> Result<(), ServiceError> {
+        Ok(self.commits.wait(inner.ticket)?)
     }
 
     /// Validates and stores a scene bundle and settings, and queues the job.
@@ -243,6 +264,7 @@ impl JobService {
             inner.emis.insert(id.clone(), e);
         }
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
         self.work.notify_waiters();
         Ok(self.view(&inner, &id, now_ms))
@@ -303,7 +325,7 @@ impl JobService {
             last_seen_ms: now_ms,
         };
         let mut inner = self.lock();
-        inner.store.save_worker(&row)?;
+        self.commits.store().save_worker(&row)?;
         tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
@@ -324,18 +346,22 @@ impl JobService {
         self.seen(&mut inner, worker, now_ms)?;
         let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
         self.persist(&mut inner, &changes, &[])?;
-        let inner = &mut *inner;
-        leases
+        let state = &mut *inner;
+        let grants = leases
             .into_iter()
             .map(|l| {
-                let job = &inner.model.jobs[&l.job];
-                let strategy = match inner.emis.get_mut(&l.job) {
+                let job = &state.model.jobs[&l.job];
+                let strategy = match state.emis.get_mut(&l.job) {
                     Some(e) => Some(e.strategy(&self.blobs, job.collects(l.tile))?),
                     None => None,
                 };
                 Ok(LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l, strategy })
             })
-            .collect()
+            .collect::<Result<Vec<_>, ServiceError>>()?;
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(grants)
     }
 
     /// The tile a lease refers to.
@@ -359,6 +385,7 @@ impl JobService {
             inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
             tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
             self.persist(&mut inner, &changes, &[])?;
+            self.sync(&inner)?;
             self.work.notify_waiters();
         }
         Ok(())
@@ -376,6 +403,7 @@ impl JobService {
         let changes = inner.model.report_failure(worker, lease, message, now_ms);
         tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, message, "worker reported a failure");
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         self.work.notify_waiters();
         Ok(())
     }
@@ -407,30 +435,43 @@ impl JobService {
             return Ok(outcome);
         };
         let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
-        if let Ok((accum, _)) = &verdict {
-            let mut stored = accum.non_finite.to_le_bytes().to_vec();
-            stored.extend_from_slice(&claim.pilot_bytes.to_le_bytes());
-            stored.extend_from_slice(payload);
-            self.blobs.put_result(&lease.job, lease.tile, lease.epoch, &stored)?;
-        }
+        let stored = verdict.as_ref().ok().map(|(accum, _)| Extra::Result {
+            job: lease.job.clone(),
+            tile: lease.tile,
+            epoch: lease.epoch,
+            non_finite: accum.non_finite,
+            payload: payload.to_vec(),
+        });
         let mut inner = self.lock();
         let (outcome, changes) =
             inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
-        self.persist(&mut inner, &changes, &[])?;
         match (&outcome, verdict) {
             (ResultOutcome::Accepted, Ok(result)) => {
                 inner.counters.results_accepted += 1;
                 inner.held.insert((lease.job.clone(), lease.tile), result);
-                self.merge_ready(&mut inner, &lease.job, now_ms)?;
+                // the result and its acceptance are committed in the merge's transaction: one
+                // commit (one fsync) per result, still before anyone is answered
+                let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());
+                let ticket = inner.ticket;
+                drop(inner);
+                // outside the lock, so that concurrent uploads share a commit
+                self.commits.wait(ticket)?;
+                if let Some(f) = finishing? {
+                    self.finish(f)?;
+                }
                 Ok(outcome)
             }
             (ResultOutcome::Refused(reason), _) => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
                 inner.counters.results_refused += 1;
                 tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, reason = %reason, "tile result refused");
                 self.work.notify_waiters();
                 Err(ServiceError::InvalidResult(reason.clone()))
             }
             _ => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
                 inner.counters.results_ignored += 1;
                 Ok(outcome)
             }
@@ -452,6 +493,7 @@ impl JobService {
         let mut inner = self.lock();
         let changes = inner.model.cancel(job, now_ms).map_err(|e| ServiceError::NotFound(e.to_string()))?;
         self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
         inner.films.remove(job);
         if let Some(view) = inner.emis.remove(job).and_then(|e| e.view()) {
             inner.strategies.insert(job.to_string(), view);
@@ -461,18 +503,30 @@ impl JobService {
     }
 
     /// One job.
+    ///
+    /// Answered only once everything the view shows is committed (uploads are answered after
+    /// their commit but become visible before it), so a client never sees progress that a
+    /// crash could take back.
     pub fn get(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         let inner = self.lock();
         let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-        Ok(self.view(&inner, &j.id, now_ms))
+        let view = self.view(&inner, &j.id, now_ms);
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(view)
     }
 
-    /// Every job, newest first.
-    pub fn list(&self, now_ms: u64) -> Vec<JobView> {
+    /// Every job, newest first (committed state, as [`JobService::get`]).
+    pub fn list(&self, now_ms: u64) -> Result<Vec<JobView>, ServiceError> {
         let inner = self.lock();
         let mut jobs: Vec<_> = inner.model.jobs.values().collect();
         jobs.sort_by_key(|j| std::cmp::Reverse(j.seq));
-        jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect()
+        let views = jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect();
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(views)
     }
 
     /// A finished job's EXR or PNG.
