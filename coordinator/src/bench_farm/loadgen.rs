@@ -27,7 +27,9 @@ pub struct SimResult {
 }
 
 /// A valid result for `lease`: every pixel's sums finite and plausible (a smooth pattern of
-/// radiance sums, so the bytes are not all equal), every count the lease's sample count.
+/// radiance sums, so the bytes are not all equal), every count the lease's sample count; for an
+/// EMIS lease that collects moments, followed by pilot data of the job's size (every
+/// candidate's moment sums, statistics and guides, as a real worker sends them).
 pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
     let r = lease.rect.unwrap_or_default();
     let (w, h) = (r.x1.saturating_sub(r.x0), r.y1.saturating_sub(r.y0));
@@ -41,10 +43,40 @@ pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
         }
     }
     let count = vec![n; pixels];
-    SimResult {
-        header: tessera_proto::result_header(worker_id, lease, 0, 0.0, 0),
-        payload: tessera_proto::encode_tile_payload(&sum, &count),
+    let mut payload = tessera_proto::encode_tile_payload(&sum, &count);
+    let pilot = pilot_data(lease, w, h, n);
+    payload.extend_from_slice(&pilot);
+    SimResult { header: tessera_proto::result_header(worker_id, lease, 0, 0.0, pilot.len() as u64), payload }
+}
+
+/// Encoded pilot data for an EMIS lease that collects moments (empty otherwise).
+fn pilot_data(lease: &pb::TileLease, width: u32, height: u32, iterations: u32) -> Vec<u8> {
+    use tessera_common::integrator::emis::PilotData;
+    use tessera_common::integrator::guides::GuideBuffer;
+    use tessera_common::mis::cost::StatisticsSums;
+    use tessera_common::mis::moments::MomentBuffer;
+    if !lease.strategy.as_ref().is_some_and(|s| s.collect_moments) {
+        return Vec::new();
     }
+    let Some(settings) = lease.settings.as_ref().and_then(|s| tessera_proto::convert::settings_from_pb(s).ok()) else {
+        return Vec::new();
+    };
+    let candidates = settings.emis_config().candidates.candidates().len();
+    let mut moments = MomentBuffer::new(width, height, candidates);
+    moments.iterations = iterations;
+    for (i, m) in moments.sums.iter_mut().enumerate() {
+        *m = (i % 97) as f32 * 0.01;
+    }
+    let mut guides = GuideBuffer::new(width, height);
+    guides.samples = iterations;
+    let statistics = StatisticsSums {
+        iterations: iterations as u64,
+        camera_vertices: 3 * (width * height) as u64 * iterations as u64,
+        light_paths: (width * height) as u64 * iterations as u64,
+        light_vertices: 4 * (width * height) as u64 * iterations as u64,
+        ..Default::default()
+    };
+    PilotData { moments, statistics, guides }.encode()
 }
 
 /// The upload stream of `r`, cut as the real worker cuts it.
@@ -322,19 +354,30 @@ pub fn ingest_command(args: &BenchFarmArgs) -> anyhow::Result<()> {
         let job = generated_job(IntegratorName::Vcm, w, h, args.vcm_iterations, "ingest-vcm");
         let serve = ServeProcess::start(pin.then_some(0))?;
         let vcm = run_case(&serve, &format!("vcm full frame {w}x{h}"), vec![job], args.workers, 1).await?;
-        anyhow::Ok([pt, vcm])
+        drop(serve);
+        // EMIS: the same frames with every candidate's moments (updates after 1 and n - 1
+        // iterations, so all but the last tile carry moment buffers)
+        let n = args.vcm_iterations.max(3);
+        let mut job = generated_job(IntegratorName::EmisVcm, w, h, n, "ingest-emis");
+        if let Some(s) = job.settings.as_mut() {
+            s.emis_updates = Some(pb::EmisUpdates { iterations: vec![1, n - 1] });
+        }
+        let serve = ServeProcess::start(pin.then_some(0))?;
+        let emis =
+            run_case(&serve, &format!("emis-vcm full frame {w}x{h} with moments"), vec![job], args.workers, 1).await?;
+        anyhow::Ok(([pt, vcm], emis))
     });
     if pin {
         pin_current_thread(&cpus)?;
     }
-    let reports = reports?;
+    let (reports, emis) = reports?;
     println!(
         "ingest: {} simulated workers, lease batch {} (pt), coordinator {}",
         args.workers,
         args.lease_batch,
         if pin { "pinned to CPU 0, generator on the others" } else { "not pinned" }
     );
-    for r in &reports {
+    for r in reports.iter().chain([&emis]) {
         print_report(r, args.json);
     }
     print_feeding(&reports, &times);
@@ -434,5 +477,12 @@ mod tests {
     #[test]
     fn loadgen_full_frame_vcm_results_are_accepted() {
         assert_eq!(drain_with_generated_results(IntegratorName::Vcm, 40, 30, 3), 3);
+    }
+
+    /// The pilot data the generator appends to EMIS results is accepted, the coordinator
+    /// optimises on it at the barriers (1, 4) and the job finishes.
+    #[test]
+    fn loadgen_emis_results_with_moments_are_accepted() {
+        assert_eq!(drain_with_generated_results(IntegratorName::EmisVcm, 40, 30, 6), 6);
     }
 }
