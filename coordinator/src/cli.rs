@@ -66,9 +66,19 @@ impl From<IntegratorKind> for IntegratorName {
     }
 }
 
-/// Merging and EMIS options, shared by `render` and `submit`.
+/// Path length, sample counts, merging and EMIS options, shared by `render` and `submit`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct MisArgs {
+pub struct IntegratorArgs {
+    /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_depth: Option<i64>,
+    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels);
+    /// 0 makes bdpt a path tracer on the shared bidirectional code (hits and NEE only).
+    #[arg(long, default_value_t = 1.0)]
+    pub light_paths_per_pixel: f32,
+    /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.
+    #[arg(long, default_value_t = 1)]
+    pub connections: u32,
     /// Merging for vcm (on: merge probability 1 in every pixel).
     #[arg(long, value_enum, default_value = "on")]
     pub merge: Switch,
@@ -107,9 +117,12 @@ pub enum CostModelArg {
     Reference,
 }
 
-impl MisArgs {
+impl IntegratorArgs {
     /// Sets these options in `settings`.
     pub fn apply(&self, settings: &mut RenderSettings) {
+        settings.max_depth = self.max_depth;
+        settings.light_paths_per_pixel = self.light_paths_per_pixel;
+        settings.connections = self.connections;
         settings.merge = self.merge == Switch::On;
         settings.correlation_aware = self.correlation_aware == Switch::On;
         settings.emis_updates = self.emis_updates.clone();
@@ -194,19 +207,9 @@ pub struct RenderArgs {
     /// Render threads [default: all cores].
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
-    #[arg(long, allow_negative_numbers = true)]
-    pub max_depth: Option<i64>,
-    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels);
-    /// 0 makes bdpt a path tracer on the shared bidirectional code (hits and NEE only).
-    #[arg(long, default_value_t = 1.0)]
-    pub light_paths_per_pixel: f32,
-    /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.
-    #[arg(long, default_value_t = 1)]
-    pub connections: u32,
-    /// Merging and EMIS options.
+    /// Path length, sample counts, merging and EMIS options.
     #[command(flatten)]
-    pub mis: MisArgs,
+    pub mis: IntegratorArgs,
     /// Set a scene parameter ($name), overriding its <default>: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,

@@ -46,13 +46,7 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
 /// The settings `tessera render`'s arguments ask for (spp, seed and time stay with the
 /// command: they are resolved against the scene there).
 pub fn settings_from_args(args: &RenderArgs) -> RenderSettings {
-    let mut settings = RenderSettings {
-        integrator: args.integrator.into(),
-        max_depth: args.max_depth,
-        light_paths_per_pixel: args.light_paths_per_pixel,
-        connections: args.connections,
-        ..RenderSettings::default()
-    };
+    let mut settings = RenderSettings { integrator: args.integrator.into(), ..RenderSettings::default() };
     args.mis.apply(&mut settings);
     settings
 }

@@ -2,7 +2,7 @@
 //! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG.
 
 use super::{Client, ServerArgs, runtime, state_name, status_error};
-use crate::cli::MisArgs;
+use crate::cli::IntegratorArgs;
 use crate::local::{parse_defines, scene_name};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -34,18 +34,9 @@ pub struct SubmitArgs {
     /// Higher priorities run first.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub priority: i32,
-    /// Longest path in segments counting the camera ray, -1 for unlimited.
-    #[arg(long, allow_negative_numbers = true)]
-    pub max_depth: Option<i64>,
-    /// Light paths per pixel per iteration (lt, bdpt, vcm).
-    #[arg(long, default_value_t = 1.0)]
-    pub light_paths_per_pixel: f32,
-    /// Connections per camera vertex (bdpt, vcm).
-    #[arg(long, default_value_t = 1)]
-    pub connections: u32,
-    /// Merging and EMIS options.
+    /// Path length, sample counts, merging and EMIS options.
     #[command(flatten)]
-    pub mis: MisArgs,
+    pub mis: IntegratorArgs,
     /// Set a scene parameter: -D name=value.
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     pub define: Vec<String>,
@@ -88,9 +79,6 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         spp: args.spp,
         time_s: args.time,
         seed: args.seed,
-        max_depth: args.max_depth,
-        light_paths_per_pixel: args.light_paths_per_pixel,
-        connections: args.connections,
         defines: defines.clone().into_iter().collect(),
         ..RenderSettings::default()
     };
