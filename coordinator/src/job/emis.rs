@@ -35,6 +35,40 @@ pub struct TileStrategy {
     pub collect: bool,
 }
 
+/// The size of an EMIS job's pilot data, copied out so that decoding a result (megabytes)
+/// needs no lock on the job.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PilotShape {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Candidates per pixel.
+    pub candidates: usize,
+}
+
+impl PilotShape {
+    /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
+    /// tile collects, the job's size and candidate count, one iteration per tile iteration.
+    pub fn decode(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        match (collect, bytes.is_empty()) {
+            (false, true) => return Ok(None),
+            (false, false) => return Err("result has pilot data but the tile does not collect moments".into()),
+            (true, true) => return Err("result has no pilot data but the tile collects moments".into()),
+            (true, false) => {}
+        }
+        let pilot = PilotData::decode(bytes, self.width, self.height, self.candidates)?;
+        let iterations = tile.samples.len() as u32;
+        if pilot.moments.iterations != iterations || pilot.statistics.iterations != iterations as u64 {
+            return Err(format!(
+                "pilot data covers {} iterations ({} in the statistics), the tile {iterations}",
+                pilot.moments.iterations, pilot.statistics.iterations
+            ));
+        }
+        Ok(Some(pilot))
+    }
+}
+
 /// An EMIS job's state on the coordinator.
 pub struct EmisJob {
     /// Merged pilot data, current strategy, reports.
@@ -83,25 +117,15 @@ impl EmisJob {
         Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect })
     }
 
-    /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
-    /// tile collects, the job's size and candidate count, one iteration per tile iteration.
-    pub fn decode_pilot(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
-        match (collect, bytes.is_empty()) {
-            (false, true) => return Ok(None),
-            (false, false) => return Err("result has pilot data but the tile does not collect moments".into()),
-            (true, true) => return Err("result has no pilot data but the tile collects moments".into()),
-            (true, false) => {}
-        }
+    /// What this job's pilot data must look like.
+    pub fn shape(&self) -> PilotShape {
         let m = &self.state.moments;
-        let pilot = PilotData::decode(bytes, m.width, m.height, self.state.candidates.len())?;
-        let iterations = tile.samples.len() as u32;
-        if pilot.moments.iterations != iterations || pilot.statistics.iterations != iterations as u64 {
-            return Err(format!(
-                "pilot data covers {} iterations ({} in the statistics), the tile {iterations}",
-                pilot.moments.iterations, pilot.statistics.iterations
-            ));
-        }
-        Ok(Some(pilot))
+        PilotShape { width: m.width, height: m.height, candidates: self.state.candidates.len() }
+    }
+
+    /// [`PilotShape::decode`] with this job's shape.
+    pub fn decode_pilot(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        self.shape().decode(tile, collect, bytes)
     }
 
     /// Adds a tile's pilot data (tiles are merged in order, so the sums are those of a local

@@ -57,9 +57,10 @@ impl JobService {
         })?;
         let (image, pilot) = payload.split_at(payload.len() - pilot_bytes);
         let accum = validate_result(tile, claim, image)?;
-        let inner = self.lock();
-        let pilot = match inner.emis.get(job) {
-            Some(e) => e.decode_pilot(tile, collect, pilot)?,
+        // megabytes of pilot data are decoded without holding the service's lock
+        let shape = self.lock().emis.get(job).map(EmisJob::shape);
+        let pilot = match shape {
+            Some(shape) => shape.decode(tile, collect, pilot)?,
             None if pilot.is_empty() => None,
             None => return Err("result has pilot data but the job is not an EMIS job".into()),
         };
