@@ -41,6 +41,17 @@ pub const CHUNK_BYTES: usize = 1 << 20;
 /// Largest gRPC message either side accepts: a chunk plus headers, or an inline scene bundle.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
 
+/// A request carrying `token` as a bearer token (the coordinator's authentication), or none.
+pub fn authorized<T>(message: T, token: Option<&str>) -> tonic::Request<T> {
+    let mut req = tonic::Request::new(message);
+    if let Some(t) = token
+        && let Ok(v) = format!("Bearer {t}").parse()
+    {
+        req.metadata_mut().insert("authorization", v);
+    }
+    req
+}
+
 /// The header of an upload answering `lease` with exactly the leased rectangle and samples
 /// (what an honest worker sends).
 pub fn result_header(

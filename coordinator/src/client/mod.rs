@@ -42,13 +42,7 @@ impl Client {
 
     /// Wraps a message with the bearer token.
     pub fn request<T>(&self, message: T) -> tonic::Request<T> {
-        let mut req = tonic::Request::new(message);
-        if let Some(t) = &self.token
-            && let Ok(v) = format!("Bearer {t}").parse()
-        {
-            req.metadata_mut().insert("authorization", v);
-        }
-        req
+        tessera_proto::authorized(message, self.token.as_deref())
     }
 }
 
