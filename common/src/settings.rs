@@ -19,6 +19,7 @@ use crate::integrator::vcm::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use crate::mis::cost::CostModel;
 use crate::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
+use crate::mis::optimize::MomentFilter;
 use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -129,6 +130,8 @@ pub struct RenderSettings {
     pub merge_kernel: MergeKernel,
     /// EMIS: the cost heuristic's constants (decision 8).
     pub cost_model: CostModel,
+    /// EMIS: whether moments are made relative before or after the box filter.
+    pub moment_filter: MomentFilter,
 }
 
 impl Default for RenderSettings {
@@ -148,6 +151,7 @@ impl Default for RenderSettings {
             merge_ratio: MomentSettings::default().merge_ratio,
             merge_kernel: MomentSettings::default().merge_kernel,
             cost_model: CostModel::default(),
+            moment_filter: MomentFilter::default(),
         }
     }
 }
@@ -293,6 +297,7 @@ impl RenderSettings {
         config.correlation_aware = self.correlation_aware;
         config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
         config.constants = self.cost_model.constants();
+        config.filters.order = self.moment_filter;
         config
     }
 }

@@ -50,6 +50,9 @@ pub struct BenchArgs {
     /// Equal-time mode: the EMIS cost heuristic's constants.
     #[arg(long, value_enum, default_value = "reference")]
     pub cost_model: crate::cli::CostModelArg,
+    /// Equal-time mode: the EMIS moment filter order.
+    #[arg(long, value_enum, default_value = "relative")]
+    pub moment_filter: crate::cli::MomentFilterArg,
     /// Integrators compared in equal-time mode.
     #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
     pub integrators: Vec<IntegratorKind>,

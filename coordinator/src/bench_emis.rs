@@ -40,6 +40,7 @@ fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Resu
             &RenderSettings {
                 integrator: kind.into(),
                 cost_model: args.cost_model.into(),
+                moment_filter: args.moment_filter.into(),
                 ..RenderSettings::default()
             },
             &scene,

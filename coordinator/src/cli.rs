@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::mis::optimize::MomentFilter;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// Tessera: a distributed renderer for Mitsuba 3 scenes.
@@ -97,6 +98,28 @@ pub struct IntegratorArgs {
     /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
     #[arg(long, value_enum, default_value = "reference")]
     pub cost_model: CostModelArg,
+    /// emis-*: make moments relative to the image before the box filter, or after it (the
+    /// reference, which lets bright features spread into dark neighbours).
+    #[arg(long, value_enum, default_value = "relative")]
+    pub moment_filter: MomentFilterArg,
+}
+
+/// The order of the EMIS moment filter and the division by the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MomentFilterArg {
+    /// Per-pixel relative moments M/(Ī² + 1e-4), then the box filter.
+    Relative,
+    /// The reference: box filter on M, then divide by the filtered Ī² + 1e-4.
+    Absolute,
+}
+
+impl From<MomentFilterArg> for MomentFilter {
+    fn from(arg: MomentFilterArg) -> MomentFilter {
+        match arg {
+            MomentFilterArg::Relative => MomentFilter::Relative,
+            MomentFilterArg::Absolute => MomentFilter::Absolute,
+        }
+    }
 }
 
 impl From<CostModelArg> for CostModel {
@@ -135,6 +158,7 @@ impl IntegratorArgs {
             MergeKernelArg::Reference => MergeKernel::Reference,
         };
         settings.cost_model = self.cost_model.into();
+        settings.moment_filter = self.moment_filter.into();
     }
 }
 

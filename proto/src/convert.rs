@@ -6,6 +6,7 @@ use crate::v1 as pb;
 use tessera_common::film::Rect;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::mis::optimize::MomentFilter;
 use tessera_common::settings::RenderSettings;
 
 fn parse_json_name<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> Result<T, String> {
@@ -53,6 +54,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<CostModel>("cost_model", v)?,
             None => d.cost_model,
         },
+        moment_filter: match &s.moment_filter {
+            Some(v) => parse_json_name::<MomentFilter>("moment_filter", v)?,
+            None => d.moment_filter,
+        },
     })
 }
 
@@ -73,6 +78,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         merge_ratio: Some(json_name(&s.merge_ratio)),
         merge_kernel: Some(json_name(&s.merge_kernel)),
         cost_model: Some(json_name(&s.cost_model)),
+        moment_filter: Some(json_name(&s.moment_filter)),
     }
 }
 
