@@ -191,7 +191,7 @@ pub fn render_iterations(
     let candidates = config.candidates.candidates();
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
     integrator.with_observer(&estimator).render_tile(scene, &request, &mut accum);
-    let (moments, statistics) = estimator.snapshot();
+    let (moments, statistics) = estimator.into_snapshot();
     let guides = GuideBuffer::render(scene, seed, iterations);
     (accum, Some(PilotData { moments, statistics, guides }))
 }
