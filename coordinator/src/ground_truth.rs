@@ -11,10 +11,10 @@
 //! relative moment of about 1). It is taken with no pixel dropped; the table also shows it with
 //! the top 0.1 % of pixel errors dropped, as the equal-time benchmark measures, which at small
 //! K hides rare large errors (caustics seen by path tracing) that a long render does not drop.
-//! Predictions are
-//! image-level relative moments the way the optimiser forms them (box radius 3, relative to the
-//! reference in the order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed),
-//! times the cost: from the candidate's own samples (Σ y², "measured") and from the pilot.
+//! Predictions are image-level relative moments the way the optimiser forms them (box radius
+//! 3, relative to the reference in the order of [`MomentFilter`], outliers above the 99.9 %
+//! quantile zeroed), times the cost: from the candidate's own samples (Σ y², "measured") and
+//! from the pilot.
 //!
 //! Reported per variant: the candidate it chooses and its **regret**, the true work-normalised
 //! error of that choice over the best candidate's (1 = perfect), plus how well its predictions
@@ -64,12 +64,13 @@ fn relative_mean(w: usize, h: usize, per_pixel: Vec<f32>, reference: &[f32], ord
     let norm: Vec<f32> = reference.iter().map(|&r| r * r + 1e-4).collect();
     let filtered = order.filter(&Image::from_data(w, h, per_pixel), &norm, 3);
     let basis: Vec<f32> = filtered.data.iter().zip(&norm).map(|(&m, &n)| order.outlier_basis(m, n)).collect();
-    let threshold = Image::from_data(w, h, basis.clone()).histogram_quantile(0.999);
+    let basis = Image::from_data(w, h, basis);
+    let threshold = basis.histogram_quantile(0.999);
     (0..w * h)
         .filter(|&p| reference[p] > 0.0)
         .map(|p| {
             let m = filtered.data[p];
-            if basis[p] > threshold && m.is_finite() { 0.0 } else { (m / norm[p]) as f64 }
+            if basis.data[p] > threshold && m.is_finite() { 0.0 } else { (m / norm[p]) as f64 }
         })
         .sum::<f64>()
         / (w * h) as f64
@@ -209,9 +210,9 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
                 by_order[1][i]
             );
         }
-        for (order, predicted) in MomentFilter::ALL.iter().zip(&by_order) {
+        for ((order, predicted), regrets) in MomentFilter::ALL.iter().zip(&by_order).zip(&mut order_regrets) {
             let choice = argmin(predicted);
-            order_regrets[(*order == MomentFilter::Absolute) as usize].push(variance[choice] / best);
+            regrets.push(variance[choice] / best);
             println!(
                 "pilot moments (principled, squared), {order:?} filter order: choose {} (regret {:.2}x, spearman {:.2})",
                 name_of(choice),

@@ -69,9 +69,10 @@ impl MomentFilter {
     /// Every order, for benchmarks that compare them.
     pub const ALL: [MomentFilter; 2] = [MomentFilter::Relative, MomentFilter::Absolute];
 
-    /// Each candidate's filtered moment image, in moment units (the relative order multiplies
-    /// its filtered relative moments back by Ī² + 1e-4), and the image whose 99.9 % quantile
-    /// sets the candidate's outlier threshold is [`MomentFilter::outlier_basis`] of it.
+    /// A candidate's filtered moment image in moment units: the relative order filters
+    /// M / `norm` (`norm` = Ī² + 1e-4 per pixel) and multiplies the result back by `norm`, so
+    /// both orders feed the same pixel- and image-level steps. [`MomentFilter::outlier_basis`]
+    /// says which value the outlier threshold applies to.
     pub fn filter(self, moments: &Image, norm: &[f32], radius: usize) -> Image {
         match self {
             MomentFilter::Absolute => moments.box_blur(radius),
