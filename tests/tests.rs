@@ -108,7 +108,8 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
     let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
     let xml = std::fs::read(scene("cornell-box")).unwrap();
-    let settings = json!({"integrator": "emis-vcm", "spp": 6, "seed": 4});
+    // updates after 1 and 4; the 10 final iterations are two calls (8 + 2) on both sides
+    let settings = json!({"integrator": "emis-vcm", "spp": 14, "seed": 4});
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
     assert_eq!(status, 201, "{job}");
     assert_eq!((job["state"].as_str(), job["tiles_total"].as_u64()), (Some("queued"), Some(1)), "the pilot: {job}");
@@ -119,7 +120,7 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     assert_eq!(updates.iter().map(|u| u["iteration"].as_u64().unwrap()).collect::<Vec<_>>(), [1, 4]);
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
-    let local = local_render(dir.path(), &scene("cornell-box"), "emis-vcm", 6, 4);
+    let local = local_render(dir.path(), &scene("cornell-box"), "emis-vcm", 14, 4);
     assert_same_image(&out, &local);
     let (farm_mask, local_mask) = (read_layer(&out, "merge_mask").unwrap(), read_layer(&local, "merge_mask").unwrap());
     assert!(farm_mask.iter().zip(&local_mask).all(|(a, b)| a.to_bits() == b.to_bits()), "same merge mask");

@@ -18,6 +18,7 @@
 
 use super::model::{JobSpec, TileSpec};
 use tessera_common::film::Rect;
+use tessera_common::integrator::emis::FINAL_ITERATIONS_PER_CALL;
 
 /// Edge of the rectangles of image-tile integrators.
 pub const TILE_SIZE: u32 = 64;
@@ -83,7 +84,10 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
     let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done).filter(|&u| u < total);
     let update = update.filter(|_| may_collect && is_emis(spec));
     let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
-    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done), collect: update.is_some() }
+    let collect = update.is_some();
+    // as `render_emis` does: a full-frame call per collecting iteration, larger calls after
+    let per_tile = if is_emis(spec) && !collect { FINAL_ITERATIONS_PER_CALL } else { 1 };
+    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done, per_tile), collect }
 }
 
 /// The first pass (the pilot for EMIS). A time budget starts with one iteration to measure
@@ -93,11 +97,16 @@ pub fn first_pass(spec: &JobSpec) -> PassPlan {
     plan_from(spec, 0, count, true, expected_total(spec, 0, 0.0))
 }
 
-/// Tiles rendering samples `[begin, begin + count)` of every pixel.
-pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32) -> Vec<TileSpec> {
+/// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take
+/// `per_tile` iterations each (the last one the rest).
+pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32, per_tile: u32) -> Vec<TileSpec> {
     if spec.full_frame {
         (begin..begin + count)
-            .map(|i| TileSpec { rect: Rect::full(spec.width, spec.height), samples: i..i + 1 })
+            .step_by(per_tile as usize)
+            .map(|i| TileSpec {
+                rect: Rect::full(spec.width, spec.height),
+                samples: i..(i + per_tile).min(begin + count),
+            })
             .collect()
     } else {
         Rect::tiles(spec.width, spec.height, TILE_SIZE)
@@ -191,14 +200,20 @@ mod tests {
         assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
         assert_eq!(after_pass(&s, 4, 1.0, true), BarrierAction::Optimize);
         let third = pass_after_update(&s, 4, 1.0);
-        assert_eq!((third.tiles.first().unwrap().samples.start, third.tiles.len(), third.collect), (4, 8, false));
+        // after the last update the pass is cut into calls of FINAL_ITERATIONS_PER_CALL
+        assert_eq!(third.collect, false);
+        let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [4..12]);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 1.0);
+        let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
         assert_eq!(after_pass(&s, 12, 1.0, false), BarrierAction::Finish);
         // a budget that ends at an update point runs no update there, and collects nothing
         // for it
         let s = spec(IntegratorName::EmisBdpt, Some(4), None);
         let after = pass_after_update(&s, 1, 1.0);
         assert!(!after.collect);
-        assert_eq!(after.tiles.len(), 3);
+        assert_eq!(after.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [1..4]);
         let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
         assert!(!one.collect);
         // other integrators never collect
