@@ -51,11 +51,14 @@ pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
 
 /// Encoded pilot data for an EMIS lease that collects moments (empty otherwise).
 fn pilot_data(lease: &pb::TileLease, width: u32, height: u32, iterations: u32) -> Vec<u8> {
-    use tessera_common::integrator::emis::PilotData;
+    use tessera_common::integrator::emis::{self, PilotData};
     use tessera_common::integrator::guides::GuideBuffer;
     use tessera_common::mis::cost::StatisticsSums;
     use tessera_common::mis::moments::MomentBuffer;
-    if !lease.strategy.as_ref().is_some_and(|s| s.collect_moments) {
+    let samples = lease.sample_begin..lease.sample_end;
+    let collects =
+        |s: &pb::TileStrategy| s.collect_moments && emis::collects_moments(s.light_paths_per_pixel, &samples);
+    if !lease.strategy.as_ref().is_some_and(collects) {
         return Vec::new();
     }
     let Some(settings) = lease.settings.as_ref().and_then(|s| tessera_proto::convert::settings_from_pb(s).ok()) else {

@@ -8,7 +8,7 @@ use super::model::{JobSpec, TileSpec};
 use super::view::StrategyView;
 use crate::storage::BlobStore;
 use tessera_common::film::Film;
-use tessera_common::integrator::emis::{EmisState, PilotData};
+use tessera_common::integrator::emis::{EmisState, PilotData, collects_moments};
 use tessera_common::integrator::vcm::MergeMask;
 
 /// Where a tile's merge probability comes from.
@@ -45,12 +45,16 @@ pub struct PilotShape {
     pub height: u32,
     /// Candidates per pixel.
     pub candidates: usize,
+    /// ν of the current strategy ([`collects_moments`] depends on it).
+    pub nu: f32,
 }
 
 impl PilotShape {
     /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
-    /// tile collects, the job's size and candidate count, one iteration per tile iteration.
+    /// tile collects (in a collecting pass and [`collects_moments`]), the job's size and
+    /// candidate count, one iteration per tile iteration.
     pub fn decode(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        let collect = collect && collects_moments(self.nu, &tile.samples);
         match (collect, bytes.is_empty()) {
             (false, true) => return Ok(None),
             (false, false) => return Err("result has pilot data but the tile does not collect moments".into()),
@@ -120,7 +124,12 @@ impl EmisJob {
     /// What this job's pilot data must look like.
     pub fn shape(&self) -> PilotShape {
         let m = &self.state.moments;
-        PilotShape { width: m.width, height: m.height, candidates: self.state.candidates.len() }
+        PilotShape {
+            width: m.width,
+            height: m.height,
+            candidates: self.state.candidates.len(),
+            nu: self.state.strategy.nu,
+        }
     }
 
     /// [`PilotShape::decode`] with this job's shape.
@@ -195,5 +204,13 @@ mod tests {
         let two = pilot(&job, 2).encode();
         assert!(job.decode_pilot(&tile, true, &two).unwrap_err().contains("covers 2 iterations"));
         assert!(job.decode_pilot(&tile, true, &good[..good.len() - 4]).is_err());
+        // with path tracing as the strategy only even iterations record moments
+        let mut pt = EmisJob::new(&spec()).unwrap();
+        pt.state.strategy.nu = 0.0;
+        assert!(pt.decode_pilot(&tile, true, &[]).unwrap().is_none());
+        assert!(pt.decode_pilot(&tile, true, &good).unwrap_err().contains("does not collect"));
+        let even = TileSpec { samples: 2..3, ..tile };
+        assert!(pt.decode_pilot(&even, true, &good).unwrap().is_some());
+        assert!(pt.decode_pilot(&even, true, &[]).unwrap_err().contains("no pilot data"));
     }
 }

@@ -45,6 +45,24 @@ use std::time::Instant;
 /// while a farm still gets one tile per worker out of a pass of a few dozen iterations.
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
 
+/// Whether a collecting call over `iterations` records moments when the current strategy
+/// has `nu` light paths per pixel. While path tracing is the strategy, only even iterations
+/// do: recording a pt iteration's moments needs the bidirectional integrator's densities of
+/// every technique plus the 51-candidate estimator, 1.55× the cost of the pt iteration
+/// itself (cornell-box, one thread, 104 against 63 ms with the guides), which on a scene where
+/// pt stays best is pure overhead. Half the iterations still give the updates at 16 and 64
+/// 8 and 32 iterations of moments on top of the pilot's. With a bidirectional strategy the
+/// estimator adds a smaller share and every iteration records.
+pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
+    nu > 0.0 || iterations.clone().any(|i| i % 2 == 0)
+}
+
+/// Denoiser guides are rendered in collecting iterations below this count only: they are
+/// a per-pixel average of first-hit albedo and normal, converged long before moments are,
+/// and cost about 14 % of a pt iteration each (the reference computes its denoised image
+/// once, at the first update).
+pub const GUIDE_ITERATIONS: u32 = 16;
+
 /// Which bidirectional method the candidates come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EmisMethod {
@@ -152,7 +170,8 @@ pub struct PilotData {
 }
 
 /// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments,
-/// statistics and guides of those iterations. Deterministic for any thread count.
+/// statistics and guides of those iterations, if [`collects_moments`] says so (the pilot
+/// data is `Some` exactly then). Deterministic for any thread count.
 pub fn render_iterations(
     scene: &Scene,
     settings: PathSettings,
@@ -166,6 +185,7 @@ pub fn render_iterations(
     let rect = Rect::full(w, h);
     let mut accum = TileAccum::new(rect);
     let request = TileRequest { rect, samples: iterations.clone(), seed };
+    let collect = collect && collects_moments(strategy.nu, &iterations);
     if !collect && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), row by row in parallel and merged in order, so deterministic
@@ -201,7 +221,8 @@ pub fn render_iterations(
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
     integrator.with_observer(&estimator).render_tile(scene, &request, &mut accum);
     let (moments, statistics) = estimator.into_snapshot();
-    let guides = GuideBuffer::render(scene, seed, iterations);
+    let guided = iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS);
+    let guides = if guided.is_empty() { GuideBuffer::new(w, h) } else { GuideBuffer::render(scene, seed, guided) };
     (accum, Some(PilotData { moments, statistics, guides }))
 }
 
