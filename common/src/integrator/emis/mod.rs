@@ -6,8 +6,9 @@
 //! [`MomentEstimator`] records every candidate's second moment per pixel. After iterations 1,
 //! 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from the
 //! merged moments, the denoised image and the path statistics; rendering continues with that
-//! strategy (moments still collected, each sample with the counts it was drawn with) until the
-//! last update the budget can reach, then without moments. Every iteration, pilot included,
+//! strategy (moments still collected, each sample with the counts it was drawn with; while
+//! that strategy is pt, in even iterations only, see [`collects_moments`]) until the last
+//! update the budget can reach, then without moments. Every iteration, pilot included,
 //! stays in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
 //!
