@@ -13,13 +13,10 @@ use crate::chart::{Group, write_bar_chart};
 use crate::local::{make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use tessera_common::film::{Rect, TileAccum};
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
-use tessera_common::integrator::guides::GuideBuffer;
-use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::integrator::PathSettings;
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::mis::cost::PathStatistics;
 use tessera_common::mis::denoise::{Guides, denoised_intensity};
-use tessera_common::mis::estimator::MomentEstimator;
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::moments::MomentBuffer;
 use tessera_common::mis::optimize::{OptimizerInput, optimize};
@@ -142,26 +139,23 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
     Ok(())
 }
 
-/// Pilot iteration time with and without moment accumulation, interleaved `repeats` times.
+/// Pilot iteration time with and without moment accumulation, interleaved `repeats` times:
+/// the calls a render makes ([`render_iterations`] without and with collection), so the
+/// estimator's buffer, its hand-over and the guides are all counted.
 fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> (f64, f64) {
-    let (w, h) = (scene.camera.width, scene.camera.height);
     let config = EmisConfig::new(method);
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
-    let candidates = config.candidates.candidates();
     let (mut plain, mut with) = (f64::INFINITY, f64::INFINITY);
     for r in 0..repeats {
-        let request = TileRequest { rect: Rect::full(w, h), samples: r * iterations..(r + 1) * iterations, seed: 1 };
-        let integrator = strategy.integrator(settings, config.correlation_aware);
-        let t = Instant::now();
-        integrator.render_tile(scene, &request, &mut TileAccum::new(Rect::full(w, h)));
-        plain = plain.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
-        integrator.with_observer(&estimator).render_tile(scene, &request, &mut TileAccum::new(Rect::full(w, h)));
-        let _ = estimator.snapshot();
-        let _ = GuideBuffer::render(scene, 1, request.samples.clone());
-        with = with.min(t.elapsed().as_secs_f64());
+        let samples = r * iterations..(r + 1) * iterations;
+        for collect in [false, true] {
+            let t = Instant::now();
+            std::hint::black_box(render_iterations(scene, settings, &config, &strategy, 1, samples.clone(), collect));
+            let elapsed = t.elapsed().as_secs_f64();
+            let best = if collect { &mut with } else { &mut plain };
+            *best = best.min(elapsed);
+        }
     }
     (plain / iterations as f64, with / iterations as f64)
 }

@@ -118,7 +118,9 @@ pub struct MomentEstimator {
     proxy_connect: AtomicU32,
     /// f32 bits, indexed `pixel * candidates + candidate`.
     sums: Vec<AtomicU32>,
-    queued: Mutex<Vec<Queued>>,
+    /// Light-tracing samples of the iteration, one queue per pool thread: a single queue's
+    /// lock, taken once per splat, serialised the threads.
+    queued: Vec<Mutex<Vec<Queued>>>,
     statistics: Mutex<StatisticsSums>,
 }
 
@@ -147,7 +149,7 @@ impl MomentEstimator {
             merging: candidates.iter().any(|c| c.merge),
             proxy_connect: AtomicU32::new((PROXY_CONNECTIONS / 5.0).to_bits()),
             sums: (0..n).map(|_| AtomicU32::new(0)).collect(),
-            queued: Mutex::new(Vec::new()),
+            queued: (0..rayon::current_num_threads().max(1)).map(|_| Mutex::new(Vec::new())).collect(),
             statistics: Mutex::new(StatisticsSums::default()),
         }
     }
@@ -267,7 +269,8 @@ impl SampleObserver for MomentEstimator {
         }
         if record.technique == Technique::LightTrace {
             let q = Queued { pixel: record.pixel, sequence: record.sequence, weights, pilot, w2 };
-            self.queued.lock().expect("invariant: queue lock is never poisoned").push(q);
+            let shard = rayon::current_thread_index().unwrap_or(0) % self.queued.len();
+            self.queued[shard].lock().expect("invariant: queue lock is never poisoned").push(q);
             return;
         }
         let mut out = [0.0f32; MAX_CANDIDATES];
@@ -288,7 +291,13 @@ impl SampleObserver for MomentEstimator {
     }
 
     fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
-        let mut queued = std::mem::take(&mut *self.queued.lock().expect("invariant: queue lock is never poisoned"));
+        let mut queued: Vec<Queued> = self
+            .queued
+            .iter()
+            .flat_map(|shard| std::mem::take(&mut *shard.lock().expect("invariant: queue lock is never poisoned")))
+            .collect();
+        // (pixel, sequence) is unique per sample: the order, and so the sums, do not depend on
+        // which thread queued what
         queued.par_sort_unstable_by_key(|q| (q.pixel, q.sequence));
         queued.par_chunk_by(|a, b| a.pixel == b.pixel).for_each(|samples| {
             let mut total = [0.0f32; MAX_CANDIDATES];
