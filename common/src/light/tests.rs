@@ -28,8 +28,15 @@ fn shapes() -> (Vec<Shape>, Vec<Mesh>) {
             ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
             ShapeGeometry::Disk { .. } => PI * 0.5 * 0.3,
         };
-        let mut s =
-            Shape { geometry, material: 0, light: Some(0), flip_normals: false, area, area_cdf: vec![], id: None };
+        let mut s = Shape {
+            geometry,
+            material: 0,
+            light: Some(0),
+            flip_normals: false,
+            area,
+            area_sampling: Default::default(),
+            id: None,
+        };
         s.prepare_area_sampling(mesh);
         s
     };

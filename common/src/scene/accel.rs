@@ -1,26 +1,29 @@
 //! Ray queries against all shapes: one obvhs compressed wide BVH (CWBVH) over triangles,
-//! spheres and disks. This is the only module that imports obvhs; everything else sees
-//! [`Accel::closest_hit`] and [`Accel::occluded`].
+//! spheres and disks, collapsed from the binary tree of [`super::sah`]. This is the only
+//! module that imports obvhs; everything else sees [`Accel::closest_hit`] and
+//! [`Accel::occluded`].
 //!
 //! Triangles use the watertight test of Woop, Benthin and Wald (JCGT 2013), so rays through
 //! shared edges and vertices of a closed mesh always hit one of the triangles: no light leaks.
 
+use super::sah::{self, Bounds};
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use crate::geometry::Ray;
 use glam::UVec2;
-use glam::{Vec3, Vec3A};
+use glam::{Mat3A, Vec3, Vec3A};
 use obvhs::{
-    Boundable, BvhBuildParams,
     aabb::Aabb,
-    cwbvh::{CwBvh, Traversal},
+    bvh2::{Bvh2, node::Bvh2Node},
+    cwbvh::{CwBvh, Traversal, bvh2_to_cwbvh::bvh2_to_cwbvh},
 };
 
 /// What the BVH stores per primitive, in BVH order.
 #[derive(Clone, Copy, Debug)]
 enum Geom {
-    Triangle([Vec3; 3]),
+    Triangle([Vec3A; 3]),
     Sphere { center: Vec3, radius: f32 },
     Disk { index: u32 },
+    Quad { index: u32 },
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -30,21 +33,15 @@ struct Prim {
     index: u32,
 }
 
-impl Boundable for Prim {
-    fn aabb(&self) -> Aabb {
+impl Prim {
+    fn bounds(&self) -> Bounds {
         match self.geom {
-            Geom::Triangle([a, b, c]) => Aabb::new(Vec3A::from(a.min(b).min(c)), Vec3A::from(a.max(b).max(c))),
-            Geom::Sphere { center, radius } => Aabb::new(Vec3A::from(center - radius), Vec3A::from(center + radius)),
-            Geom::Disk { .. } => unreachable!("invariant: disk bounds are computed before the build"),
+            Geom::Triangle([a, b, c]) => Bounds { lo: a.min(b).min(c).into(), hi: a.max(b).max(c).into() },
+            Geom::Sphere { center, radius } => Bounds { lo: center - radius, hi: center + radius },
+            Geom::Disk { .. } | Geom::Quad { .. } => {
+                unreachable!("invariant: disk and quad bounds are computed before the build")
+            }
         }
-    }
-}
-
-struct Bounded(Aabb);
-
-impl Boundable for Bounded {
-    fn aabb(&self) -> Aabb {
-        self.0
     }
 }
 
@@ -66,12 +63,99 @@ pub struct Accel {
     bvh: CwBvh,
     prims: Vec<Prim>,
     disks: Vec<glam::Mat4>,
+    quads: Vec<Quad>,
 }
 
-/// Per-ray constants of the watertight triangle test.
+/// A corner of a [`Quad`]: A at (α, β) = (0, 0), B at (1, 0), C at (1, 1), D at (0, 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Corner {
+    A,
+    B,
+    C,
+    D,
+}
+
+/// A two-triangle mesh that is a planar parallelogram (Mitsuba's `rectangle`), tested as one
+/// primitive: one plane test instead of two triangle tests, and nothing to leak through on
+/// the shared diagonal. Hits report the triangle and barycentrics the mesh would have given.
+#[derive(Clone, Copy, Debug)]
+struct Quad {
+    origin: Vec3A,
+    normal: Vec3A,
+    /// q·dual_α = α for a point q = origin + α·(B − A) + β·(D − A) in the plane.
+    dual_alpha: Vec3A,
+    dual_beta: Vec3A,
+    /// Triangle 0 holds A (α + β ≤ 1), triangle 1 holds C; the corners of each triangle's
+    /// second and third vertices, whose weights are the barycentrics.
+    bary_corners: [[Corner; 2]; 2],
+}
+
+impl Quad {
+    /// Recognises a parallelogram made of two triangles sharing a diagonal.
+    fn from_mesh(mesh: &Mesh) -> Option<Quad> {
+        let [a, b, c, d] = mesh.parallelogram()?;
+        // plane and duals in double precision: grazing rays amplify any error of the normal
+        let p = |i: u32| mesh.positions[i as usize].as_dvec3();
+        let (pa, e1, e2) = (p(a), p(b) - p(a), p(d) - p(a));
+        let normal = e1.cross(e2);
+        let n2 = normal.length_squared();
+        let corner = |i: u32| match i {
+            i if i == a => Corner::A,
+            i if i == b => Corner::B,
+            i if i == c => Corner::C,
+            _ => Corner::D,
+        };
+        let [t0, t1] = [mesh.triangles[0], mesh.triangles[1]];
+        Some(Quad {
+            origin: Vec3A::from(pa.as_vec3()),
+            normal: Vec3A::from((normal / n2.sqrt()).as_vec3()),
+            dual_alpha: Vec3A::from((e2.cross(normal) / n2).as_vec3()),
+            dual_beta: Vec3A::from((normal.cross(e1) / n2).as_vec3()),
+            bary_corners: [[corner(t0[1]), corner(t0[2])], [corner(t1[1]), corner(t1[2])]],
+        })
+    }
+
+    fn bounds(&self, mesh: &Mesh) -> Bounds {
+        let (lo, hi) = mesh
+            .positions
+            .iter()
+            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        Bounds { lo, hi }
+    }
+
+    /// Returns (t, triangle, b1, b2) for a hit in (0, tmax).
+    #[inline(always)]
+    fn intersect(&self, o: Vec3A, d: Vec3A, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+        let t = (self.origin - o).dot(self.normal) / d.dot(self.normal);
+        if !(t > 0.0 && t < tmax) {
+            return None;
+        }
+        let q = o + d * t - self.origin;
+        let (alpha, beta) = (q.dot(self.dual_alpha), q.dot(self.dual_beta));
+        if !((0.0..=1.0).contains(&alpha) && (0.0..=1.0).contains(&beta)) {
+            return None;
+        }
+        let triangle = (alpha + beta > 1.0) as u32;
+        let weight = |corner: Corner| match corner {
+            Corner::A => 1.0 - alpha - beta,
+            Corner::B if triangle == 0 => alpha,
+            Corner::B => 1.0 - beta,
+            Corner::C => alpha + beta - 1.0,
+            Corner::D if triangle == 0 => beta,
+            Corner::D => 1.0 - alpha,
+        };
+        let [c1, c2] = self.bary_corners[triangle as usize];
+        Some((t, triangle, weight(c1), weight(c2)))
+    }
+}
+
+/// Per-ray constants of the watertight triangle test: the permutation that makes the
+/// direction's largest axis z, and the shear that maps the direction onto +z, folded into one
+/// matrix so that a vertex is transformed by three SIMD multiply-adds. Each output lane sums
+/// one rounded product with exact terms (the vertex coordinate times 1, and zeros), so it is
+/// bit-identical to the paper's `a[kx] - Sx·a[kz]` and edges stay watertight.
 struct WatertightRay {
-    k: [usize; 3],
-    shear: Vec3,
+    shear: Mat3A,
 }
 
 impl WatertightRay {
@@ -89,27 +173,27 @@ impl WatertightRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WatertightRay { k: [kx, ky, kz], shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]) }
+        let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        let unit = |k: usize| Vec3A::from(std::array::from_fn::<f32, 3, _>(|i| if i == k { 1.0 } else { 0.0 }));
+        // rows: x' = v[kx] − sx·v[kz], y' = v[ky] − sy·v[kz], z' = sz·v[kz]
+        let rows = Mat3A::from_cols(unit(kx) - sx * unit(kz), unit(ky) - sy * unit(kz), sz * unit(kz));
+        WatertightRay { shear: rows.transpose() }
     }
 
     /// Returns (t, b1, b2) for a hit in (0, tmax).
     #[inline(always)]
-    fn intersect(&self, o: Vec3, tmax: f32, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
-        // plain arrays: indexing a glam vector with a run-time axis compiles to branches
-        let (a, b, c) = ((tri[0] - o).to_array(), (tri[1] - o).to_array(), (tri[2] - o).to_array());
-        let s = self.shear;
-        let (ax, ay) = (a[kx] - s.x * a[kz], a[ky] - s.y * a[kz]);
-        let (bx, by) = (b[kx] - s.x * b[kz], b[ky] - s.y * b[kz]);
-        let (cx, cy) = (c[kx] - s.x * c[kz], c[ky] - s.y * c[kz]);
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
+    fn intersect(&self, o: Vec3A, tmax: f32, tri: &[Vec3A; 3]) -> Option<(f32, f32, f32)> {
+        let a = self.shear * (tri[0] - o);
+        let b = self.shear * (tri[1] - o);
+        let c = self.shear * (tri[2] - o);
+        let mut u = c.x * b.y - c.y * b.x;
+        let mut v = a.x * c.y - a.y * c.x;
+        let mut w = b.x * a.y - b.y * a.x;
         if u == 0.0 || v == 0.0 || w == 0.0 {
             // fall back to double precision on edges so that the sign test is exact
-            u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
-            v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
-            w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
+            u = (c.x as f64 * b.y as f64 - c.y as f64 * b.x as f64) as f32;
+            v = (a.x as f64 * c.y as f64 - a.y as f64 * c.x as f64) as f32;
+            w = (b.x as f64 * a.y as f64 - b.y as f64 * a.x as f64) as f32;
         }
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
@@ -118,7 +202,7 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let t_scaled = u * (s.z * a[kz]) + v * (s.z * b[kz]) + w * (s.z * c[kz]);
+        let t_scaled = u * a.z + v * b.z + w * c.z;
         if (det > 0.0 && (t_scaled <= 0.0 || t_scaled >= tmax * det))
             || (det < 0.0 && (t_scaled >= 0.0 || t_scaled <= tmax * det))
         {
@@ -164,26 +248,56 @@ fn intersect_disk(o: Vec3, d: Vec3, tmax: f32, to_local: &glam::Mat4) -> Option<
     (p.x * p.x + p.y * p.y <= 1.0).then_some(t)
 }
 
+/// Collapses the SAH builder's binary tree into obvhs's compressed wide BVH.
+fn wide_from_binary(bounds: &[Bounds]) -> CwBvh {
+    let binary = sah::build(bounds);
+    if binary.nodes.is_empty() {
+        return CwBvh::default();
+    }
+    let nodes = binary
+        .nodes
+        .iter()
+        .map(|n| {
+            let aabb = Aabb::new(Vec3A::from(n.bounds.lo), Vec3A::from(n.bounds.hi));
+            Bvh2Node::new(aabb, n.leaf as u32, n.first)
+        })
+        .collect();
+    let bvh2 = Bvh2 { nodes, primitive_indices: binary.order, ..Default::default() };
+    // three primitives per leaf, the most the compressed format holds
+    bvh2_to_cwbvh(&bvh2, 3, true, false)
+}
+
 impl Accel {
     /// Builds the BVH over every shape.
     pub fn build(shapes: &[Shape], meshes: &[Mesh]) -> Accel {
         let mut prims = Vec::new();
         let mut disks = Vec::new();
+        let mut quads = Vec::new();
         let mut bounds = Vec::new();
         for (si, shape) in shapes.iter().enumerate() {
             match &shape.geometry {
                 ShapeGeometry::Mesh(m) => {
                     let mesh = &meshes[*m as usize];
+                    if let Some(quad) = Quad::from_mesh(mesh) {
+                        bounds.push(quad.bounds(mesh));
+                        prims.push(Prim { geom: Geom::Quad { index: quads.len() as u32 }, shape: si as u32, index: 0 });
+                        quads.push(quad);
+                        continue;
+                    }
                     for ti in 0..mesh.triangles.len() {
-                        let p = Prim { geom: Geom::Triangle(mesh.corners(ti)), shape: si as u32, index: ti as u32 };
-                        bounds.push(p.aabb());
+                        let p = Prim {
+                            geom: Geom::Triangle(mesh.corners(ti).map(Vec3A::from)),
+                            shape: si as u32,
+                            index: ti as u32,
+                        };
+                        bounds.push(p.bounds());
                         prims.push(p);
                     }
                 }
                 ShapeGeometry::Sphere { center, radius } => {
                     let p =
                         Prim { geom: Geom::Sphere { center: *center, radius: *radius }, shape: si as u32, index: 0 };
-                    bounds.push(p.aabb());
+                    bounds.push(p.bounds());
                     prims.push(p);
                 }
                 ShapeGeometry::Disk { to_world, .. } => {
@@ -195,22 +309,16 @@ impl Accel {
                         hi = hi.max(p);
                     }
                     let pad = (hi - lo).max_element() * 1e-4 + 1e-6;
-                    bounds.push(Aabb::new(Vec3A::from(lo - pad), Vec3A::from(hi + pad)));
+                    bounds.push(Bounds { lo: lo - pad, hi: hi + pad });
                     prims.push(Prim { geom: Geom::Disk { index: disks.len() as u32 }, shape: si as u32, index: 0 });
                     disks.push(to_world.inv_f32());
                 }
             }
         }
-        let bounded: Vec<Bounded> = bounds.into_iter().map(Bounded).collect();
-        let mut build_time = std::time::Duration::ZERO;
-        let bvh = if bounded.is_empty() {
-            CwBvh::default()
-        } else {
-            obvhs::cwbvh::builder::build_cwbvh(&bounded, BvhBuildParams::fast_build(), &mut build_time)
-        };
+        let bvh = wide_from_binary(&bounds);
         // store primitives in BVH leaf order so the traversal callback indexes them directly
         let prims = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
-        Accel { bvh, prims, disks }
+        Accel { bvh, prims, disks, quads }
     }
 
     /// Number of primitives.
@@ -219,11 +327,20 @@ impl Accel {
     }
 
     #[inline(always)]
-    fn intersect_prim(&self, prim: &Prim, wt: &WatertightRay, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, f32, f32)> {
+    /// Returns (t, triangle index offset, b1, b2).
+    fn intersect_prim(
+        &self,
+        prim: &Prim,
+        wt: &WatertightRay,
+        o: Vec3,
+        d: Vec3,
+        tmax: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         match &prim.geom {
-            Geom::Triangle(tri) => wt.intersect(o, tmax, tri),
-            Geom::Sphere { center, radius } => intersect_sphere(o, d, tmax, *center, *radius).map(|t| (t, 0.0, 0.0)),
-            Geom::Disk { index } => intersect_disk(o, d, tmax, &self.disks[*index as usize]).map(|t| (t, 0.0, 0.0)),
+            Geom::Triangle(tri) => wt.intersect(Vec3A::from(o), tmax, tri).map(|(t, b1, b2)| (t, 0, b1, b2)),
+            Geom::Quad { index } => self.quads[*index as usize].intersect(Vec3A::from(o), Vec3A::from(d), tmax),
+            Geom::Sphere { center, radius } => intersect_sphere(o, d, tmax, *center, *radius).map(|t| (t, 0, 0.0, 0.0)),
+            Geom::Disk { index } => intersect_disk(o, d, tmax, &self.disks[*index as usize]).map(|t| (t, 0, 0.0, 0.0)),
         }
     }
 
@@ -247,8 +364,8 @@ impl Accel {
             let mut node;
             obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
                 let prim = &self.prims[state.primitive_id as usize];
-                if let Some((t, b1, b2)) = self.intersect_prim(prim, &wt, ray.o, ray.d, traverse_ray.tmax) {
-                    best = Some(Hit { t, shape: prim.shape, index: prim.index, bary: [b1, b2] });
+                if let Some((t, offset, b1, b2)) = self.intersect_prim(prim, &wt, ray.o, ray.d, traverse_ray.tmax) {
+                    best = Some(Hit { t, shape: prim.shape, index: prim.index + offset, bary: [b1, b2] });
                     traverse_ray.tmax = t;
                 }
             });
@@ -304,7 +421,7 @@ mod tests {
             light: None,
             flip_normals: false,
             area: 1.0,
-            area_cdf: vec![],
+            area_sampling: Default::default(),
             id: None,
         };
         (vec![shape], vec![mesh])
@@ -358,6 +475,65 @@ mod tests {
             let o = center + (s.next_2d().extend(s.next_1d()) - 0.5) * 0.5;
             assert!(accel.closest_hit(&Ray::new(o, d)).is_some(), "escaped from inside at ray {i}");
         }
+    }
+
+    /// A rectangle is tested as one quad. Against the exact (f64) plane intersection, its
+    /// distance and its hit point (rebuilt from the reported triangle and barycentrics, as
+    /// `Scene::intersect` does) are within a few roundings times the conditioning of the ray
+    /// meeting the plane, and rays clearly inside hit while rays clearly outside miss.
+    #[test]
+    fn rectangle_quad_hits_match_the_exact_plane() {
+        let t = Transform::translate(DVec3::new(0.2, 0.1, -0.4))
+            .after(&Transform::rotate(DVec3::new(0.3, 1.0, -0.5).normalize(), 61.0).unwrap())
+            .after(&Transform::scale(DVec3::new(1.5, 0.7, 1.0)).unwrap());
+        let mut mesh = Mesh::rectangle();
+        mesh.transform(&t);
+        let [a, b, _, d] = mesh.parallelogram().unwrap().map(|i| mesh.positions[i as usize].as_dvec3());
+        let (e1, e2) = (b - a, d - a);
+        let n = e1.cross(e2);
+        let (mut shapes, _) = cube_scene(&Transform::IDENTITY);
+        shapes.truncate(1);
+        let accel = Accel::build(&shapes, std::slice::from_ref(&mesh));
+        assert!(matches!(accel.prims[..], [Prim { geom: Geom::Quad { .. }, .. }]));
+        let (mut hits, mut misses) = (0, 0);
+        for i in 0..20_000u32 {
+            let mut s = Sampler::for_pixel(3, i, 0);
+            // points on a slightly larger rectangle, seen from random origins on both sides
+            let local = (s.next_2d() * 2.0 - 1.0) * 1.1;
+            let target = t.point(Vec3::new(local.x, local.y, 0.0));
+            let origin = target + crate::math::warp::square_to_uniform_sphere(s.next_2d()) * 3.0;
+            let ray = Ray::new(origin, (target - origin).normalize());
+            let (o, dir) = (ray.o.as_dvec3(), ray.d.as_dvec3());
+            let cos = dir.dot(n.normalize()).abs();
+            let t_true = (a - o).dot(n) / dir.dot(n);
+            let p_true = o + dir * t_true;
+            let (alpha, beta) = (
+                (p_true - a).dot(e2.cross(n)) / n.length_squared(),
+                (p_true - a).dot(n.cross(e1)) / n.length_squared(),
+            );
+            let bound = 16.0 * f32::EPSILON as f64 * (t_true + o.abs().max_element()) / cos;
+            // how far inside the border the exact point is, in distance
+            let inside =
+                [alpha * e1.length(), (1.0 - alpha) * e1.length(), beta * e2.length(), (1.0 - beta) * e2.length()]
+                    .into_iter()
+                    .fold(f64::INFINITY, f64::min);
+            match accel.closest_hit(&ray) {
+                Some(hit) => {
+                    hits += 1;
+                    assert!(inside > -bound, "ray {i} hit outside the rectangle");
+                    assert!((hit.t as f64 - t_true).abs() <= bound, "ray {i}: t {} vs {t_true}", hit.t);
+                    let [p0, p1, p2] = mesh.corners(hit.index as usize).map(|p| p.as_dvec3());
+                    let [b1, b2] = hit.bary.map(|w| w as f64);
+                    let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+                    assert!((p - p_true).length() <= bound, "ray {i}: point off by {}", (p - p_true).length());
+                }
+                None => {
+                    misses += 1;
+                    assert!(inside < bound, "ray {i} missed a point {inside} inside");
+                }
+            }
+        }
+        assert!(hits > 10_000 && misses > 2_000, "hits {hits}, misses {misses}");
     }
 
     #[test]

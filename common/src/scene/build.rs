@@ -426,7 +426,15 @@ impl Builder<'_> {
             }
             None => None,
         };
-        let mut shape = Shape { geometry, material, light, flip_normals, area, area_cdf: vec![], id: e.id.clone() };
+        let mut shape = Shape {
+            geometry,
+            material,
+            light,
+            flip_normals,
+            area,
+            area_sampling: Default::default(),
+            id: e.id.clone(),
+        };
         if light.is_some() {
             let mesh = match &shape.geometry {
                 ShapeGeometry::Mesh(m) => Some(&self.meshes[*m as usize]),

@@ -23,6 +23,32 @@ impl Mesh {
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
+    /// The vertex indices of corners A, B, C, D of a two-triangle mesh that is a planar
+    /// parallelogram (A and C opposite, B and D on the shared diagonal, A + C = B + D up to
+    /// rounding), with A in triangle 0; `None` for any other mesh.
+    pub fn parallelogram(&self) -> Option<[u32; 4]> {
+        let [t0, t1] = self.triangles[..] else { return None };
+        let mut shared = t0.iter().filter(|i| t1.contains(i));
+        let (Some(&b), Some(&d), None) = (shared.next(), shared.next(), shared.next()) else { return None };
+        let a = *t0.iter().find(|i| !t1.contains(i))?;
+        let c = *t1.iter().find(|i| !t0.contains(i))?;
+        let [pa, pb, pc, pd] = [a, b, c, d].map(|i| self.positions[i as usize]);
+        let scale = pa.abs().max(pb.abs()).max(pc.abs()).max(pd.abs()).max_element().max(1e-30);
+        let degenerate = !((pb - pa).cross(pd - pa).length_squared() > 0.0);
+        // both triangles wound the same way, so one normal serves both
+        let normal = |t: [u32; 3]| {
+            let [p0, p1, p2] = t.map(|i| self.positions[i as usize]);
+            (p1 - p0).cross(p2 - p0)
+        };
+        if degenerate
+            || !(normal(t0).dot(normal(t1)) > 0.0)
+            || ((pa + pc) - (pb + pd)).abs().max_element() > 1e-6 * scale
+        {
+            return None;
+        }
+        Some([a, b, c, d])
+    }
+
     /// Area of triangle `i`.
     pub fn triangle_area(&self, i: usize) -> f32 {
         let [a, b, c] = self.corners(i);
@@ -110,10 +136,34 @@ pub struct Shape {
     pub flip_normals: bool,
     /// Total surface area.
     pub area: f32,
-    /// Cumulative triangle areas (meshes that emit), normalised to end at 1.
-    pub area_cdf: Vec<f32>,
+    /// How an emitting mesh is sampled by area (see [`Shape::prepare_area_sampling`]).
+    pub area_sampling: AreaSampling,
     /// The XML `id`, when given (for messages).
     pub id: Option<String>,
+}
+
+/// Area sampling of an emitting mesh.
+#[derive(Clone, Debug, Default)]
+pub enum AreaSampling {
+    /// Not prepared (non-emitting shapes, analytic shapes).
+    #[default]
+    None,
+    /// A planar parallelogram (two triangles, Mitsuba's `rectangle`): `origin + u·e1 + v·e2`.
+    Parallelogram {
+        /// Corner at u = v = 0.
+        origin: Vec3,
+        /// Edge along u.
+        e1: Vec3,
+        /// Edge along v.
+        e2: Vec3,
+        /// Unit geometric normal of the triangles (before `flip_normals`).
+        normal: Vec3,
+    },
+    /// Any triangle mesh: a triangle by area, then a point in it.
+    Triangles {
+        /// Cumulative triangle areas, normalised to end at 1.
+        cdf: Vec<f32>,
+    },
 }
 
 /// A point on a shape's surface.
@@ -126,21 +176,30 @@ pub struct SurfacePoint {
 }
 
 impl Shape {
-    /// Builds the area CDF of a mesh shape so it can be sampled by area.
+    /// Prepares sampling by area: parallelograms map the square linearly (no triangle choice,
+    /// no square root); other meshes get a CDF over triangle areas.
     pub fn prepare_area_sampling(&mut self, mesh: Option<&Mesh>) {
-        if let Some(mesh) = mesh {
-            let mut acc = 0.0f64;
-            let mut cdf = Vec::with_capacity(mesh.triangles.len());
-            for i in 0..mesh.triangles.len() {
-                acc += mesh.triangle_area(i) as f64;
-                cdf.push(acc as f32);
-            }
-            let total = acc.max(1e-30) as f32;
-            for c in &mut cdf {
-                *c /= total;
-            }
-            self.area_cdf = cdf;
+        let Some(mesh) = mesh else { return };
+        if let Some(corners) = mesh.parallelogram() {
+            let [origin, b, _, d] = corners.map(|i| mesh.positions[i as usize]);
+            let (e1, e2) = (b - origin, d - origin);
+            // both triangles share this normal; orient it like triangle 0's winding
+            let [p0, p1, p2] = mesh.corners(0);
+            let normal = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+            self.area_sampling = AreaSampling::Parallelogram { origin, e1, e2, normal };
+            return;
         }
+        let mut acc = 0.0f64;
+        let mut cdf = Vec::with_capacity(mesh.triangles.len());
+        for i in 0..mesh.triangles.len() {
+            acc += mesh.triangle_area(i) as f64;
+            cdf.push(acc as f32);
+        }
+        let total = acc.max(1e-30) as f32;
+        for c in &mut cdf {
+            *c /= total;
+        }
+        self.area_sampling = AreaSampling::Triangles { cdf };
     }
 
     /// Samples a point uniformly by area; the pdf is `1 / self.area`.
@@ -148,10 +207,17 @@ impl Shape {
         let flip = if self.flip_normals { -1.0 } else { 1.0 };
         match &self.geometry {
             ShapeGeometry::Mesh(m) => {
+                let cdf = match &self.area_sampling {
+                    AreaSampling::Parallelogram { origin, e1, e2, normal } => {
+                        return SurfacePoint { p: *origin + *e1 * u.x + *e2 * u.y, n: *normal * flip };
+                    }
+                    AreaSampling::Triangles { cdf } => cdf,
+                    AreaSampling::None => unreachable!("invariant: emitting meshes are prepared for sampling"),
+                };
                 let mesh = &meshes[*m as usize];
-                let i = self.area_cdf.partition_point(|&c| c <= u.x).min(self.area_cdf.len().saturating_sub(1));
-                let lo = if i == 0 { 0.0 } else { self.area_cdf[i - 1] };
-                let width = (self.area_cdf[i] - lo).max(1e-30);
+                let i = cdf.partition_point(|&c| c <= u.x).min(cdf.len().saturating_sub(1));
+                let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+                let width = (cdf[i] - lo).max(1e-30);
                 let ux = ((u.x - lo) / width).clamp(0.0, 1.0 - f32::EPSILON);
                 let b = crate::math::warp::square_to_uniform_triangle(Vec2::new(ux, u.y));
                 let [a, bb, c] = mesh.corners(i);
