@@ -64,6 +64,7 @@ pub struct Accel {
     prims: Vec<Prim>,
     disks: Vec<glam::Mat4>,
     quads: Vec<Quad>,
+    has_triangles: bool,
 }
 
 /// A corner of a [`Quad`]: A at (α, β) = (0, 0), B at (1, 0), C at (1, 1), D at (0, 1).
@@ -317,8 +318,9 @@ impl Accel {
         }
         let bvh = wide_from_binary(&bounds);
         // store primitives in BVH leaf order so the traversal callback indexes them directly
-        let prims = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
-        Accel { bvh, prims, disks, quads }
+        let prims: Vec<Prim> = bvh.primitive_indices.iter().map(|&i| prims[i as usize]).collect();
+        let has_triangles = prims.iter().any(|p: &Prim| matches!(p.geom, Geom::Triangle(_)));
+        Accel { bvh, prims, disks, quads, has_triangles }
     }
 
     /// Number of primitives.
@@ -344,11 +346,24 @@ impl Accel {
         }
     }
 
+    /// The triangle test's per-ray constants; scenes without triangles (rectangles and
+    /// spheres only) skip computing them.
+    #[inline(always)]
+    fn watertight_ray(&self, d: Vec3) -> WatertightRay {
+        if self.has_triangles { WatertightRay::new(d) } else { WatertightRay { shear: Mat3A::ZERO } }
+    }
+
     fn obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
         // obvhs takes the sign of 1/d from `signum`, which is -1 for -0.0, but classifies the
         // direction with `d < 0`, which is false for -0.0: the slab test then inverts and the
         // BVH is missed. Adding +0.0 turns -0.0 into +0.0.
-        obvhs::ray::Ray::new(Vec3A::from(ray.o), Vec3A::from(ray.d + Vec3::ZERO), 0.0, ray.tmax)
+        let direction = Vec3A::from(ray.d + Vec3::ZERO);
+        // obvhs's `safe_inverse` per lane (±1/ε below ε), as one vector division and a select
+        // instead of three branches and three scalar divisions
+        let tiny = direction.abs().cmple(Vec3A::splat(f32::EPSILON));
+        let inv_direction =
+            Vec3A::select(tiny, direction.signum() / f32::EPSILON, Vec3A::ONE / direction);
+        obvhs::ray::Ray { origin: Vec3A::from(ray.o), direction, inv_direction, tmin: 0.0, tmax: ray.tmax }
     }
 
     /// The closest intersection in `(0, ray.tmax)`.
@@ -356,7 +371,7 @@ impl Accel {
         if self.prims.is_empty() {
             return None;
         }
-        let wt = WatertightRay::new(ray.d);
+        let wt = self.watertight_ray(ray.d);
         let mut traverse_ray = Self::obvhs_ray(ray);
         let mut best: Option<Hit> = None;
         TRAVERSAL.with_borrow_mut(|state| {
@@ -378,7 +393,7 @@ impl Accel {
         if self.prims.is_empty() {
             return false;
         }
-        let wt = WatertightRay::new(ray.d);
+        let wt = self.watertight_ray(ray.d);
         let traverse_ray = Self::obvhs_ray(ray);
         let mut hit = false;
         TRAVERSAL.with_borrow_mut(|state| {
