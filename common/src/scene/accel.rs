@@ -175,7 +175,8 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
-        let unit = |k: usize| Vec3A::from(std::array::from_fn::<f32, 3, _>(|i| if i == k { 1.0 } else { 0.0 }));
+        const UNIT: [Vec3A; 3] = [Vec3A::X, Vec3A::Y, Vec3A::Z];
+        let unit = |k: usize| UNIT[k];
         // rows: x' = v[kx] − sx·v[kz], y' = v[ky] − sy·v[kz], z' = sz·v[kz]
         let rows = Mat3A::from_cols(unit(kx) - sx * unit(kz), unit(ky) - sy * unit(kz), sz * unit(kz));
         WatertightRay { shear: rows.transpose() }

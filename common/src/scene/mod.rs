@@ -68,6 +68,9 @@ pub struct Scene {
     /// Radius of the bounding sphere of all geometry.
     pub bounds_radius: f32,
     accel: Accel,
+    /// Unit geometric normal of every triangle, per mesh (zero for degenerate triangles),
+    /// computed once rather than at every hit.
+    face_normals: Vec<Vec<Vec3>>,
 }
 
 impl Scene {
@@ -104,6 +107,17 @@ impl Scene {
         integrator: IntegratorSettings,
     ) -> Scene {
         let accel = Accel::build(&shapes, &meshes);
+        let face_normals = meshes
+            .iter()
+            .map(|m| {
+                (0..m.triangles.len())
+                    .map(|i| {
+                        let [a, b, c] = m.corners(i);
+                        (b - a).cross(c - a).normalize_or_zero()
+                    })
+                    .collect()
+            })
+            .collect();
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
         for s in &shapes {
             match &s.geometry {
@@ -146,6 +160,7 @@ impl Scene {
             bounds_center,
             bounds_radius,
             accel,
+            face_normals,
         }
     }
 
@@ -183,7 +198,7 @@ impl Scene {
                 let [b1, b2] = hit.bary;
                 let b0 = 1.0 - b1 - b2;
                 let p = a * b0 + b * b1 + c * b2;
-                let ng = (b - a).cross(c - a).normalize_or_zero();
+                let ng = self.face_normals[*m as usize][hit.index as usize];
                 let ns = match &mesh.normals {
                     Some(ns) => {
                         let [i0, i1, i2] = mesh.triangles[hit.index as usize];
