@@ -10,6 +10,7 @@ mod build;
 mod build_bsdf;
 pub mod error;
 pub mod load;
+mod primitive;
 mod sah;
 pub mod shape;
 pub mod xml;
