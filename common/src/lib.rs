@@ -14,6 +14,7 @@
 pub mod bsdf;
 pub mod bundle;
 pub mod camera;
+pub mod cpu;
 pub mod film;
 pub mod geometry;
 pub mod integrator;

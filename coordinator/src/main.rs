@@ -3,6 +3,10 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    if let Err(e) = tessera_common::cpu::check_cpu_features() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     tessera_coordinator::telemetry::init();
     match tessera_coordinator::cli::run() {
         Ok(()) => ExitCode::SUCCESS,

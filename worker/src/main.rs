@@ -6,6 +6,10 @@ use clap::Parser;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    if let Err(e) = tessera_common::cpu::check_cpu_features() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     tessera_worker::init_logging();
     let args = tessera_worker::Args::parse();
     match tessera_worker::run(args) {
