@@ -50,7 +50,7 @@ pub struct RoughConductor {
 }
 
 impl RoughConductor {
-    pub(super) fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, wo: Vec3, _uc: f32, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -59,7 +59,19 @@ impl RoughConductor {
         if wi.z <= 0.0 {
             return None;
         }
-        BsdfSample::smooth(wo, wi, self.eval(wo, wi, mode), self.pdf(wo, wi), 1.0)
+        // `eval` and `pdf` in one pass: the sampled normal is the half vector, and D(m) and
+        // G1(wo, m) serve both the value and the density
+        let d = self.distribution.d(m);
+        if d == 0.0 {
+            return None;
+        }
+        let g1_wo = self.distribution.g1(wo, m);
+        let g = g1_wo * self.distribution.g1(wi, m);
+        let wo_m = wo.dot(m);
+        let f = fresnel_conductor(wo_m, self.eta, self.k) * self.specular_reflectance;
+        let value = f * (d * g / (4.0 * wo.z * wi.z));
+        let pdf = self.distribution.pdf_given(wo, m, d, g1_wo) / (4.0 * wo_m);
+        BsdfSample::smooth(wo, wi, value, pdf, 1.0)
     }
 
     pub(super) fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Rgb {

@@ -90,14 +90,23 @@ impl Microfacet {
     /// Density of the normals this distribution samples given the direction `wo` (on either side:
     /// the upper-hemisphere copy is used), in the solid-angle measure of `m`.
     pub fn pdf(&self, wo: Vec3, m: Vec3) -> f32 {
+        let w = if wo.z < 0.0 { -wo } else { wo };
+        let visible = self.sample_visible && self.kind == MicrofacetKind::Ggx;
+        self.pdf_given(wo, m, self.d(m), if visible { self.g1(w, m) } else { 0.0 })
+    }
+
+    /// [`Microfacet::pdf`] from `D(m)` and, when visible normals are sampled, `G1(|wo|, m)`
+    /// already computed by the caller.
+    #[inline]
+    pub fn pdf_given(&self, wo: Vec3, m: Vec3, d: f32, g1_wo: f32) -> f32 {
         if self.sample_visible && self.kind == MicrofacetKind::Ggx {
             let w = if wo.z < 0.0 { -wo } else { wo };
             if w.z == 0.0 {
                 return 0.0;
             }
-            self.d(m) * self.g1(w, m) * w.dot(m).abs() / w.z
+            d * g1_wo * w.dot(m).abs() / w.z
         } else {
-            self.d(m) * m.z.max(0.0)
+            d * m.z.max(0.0)
         }
     }
 
