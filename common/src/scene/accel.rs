@@ -24,7 +24,7 @@ const FLAT_LIMIT: usize = 8;
 /// What the BVH stores per primitive, in BVH order.
 #[derive(Clone, Copy, Debug)]
 enum Geom {
-    Triangle([Vec3A; 3]),
+    Triangle([Vec3; 3]),
     Sphere { center: Vec3, radius: f32 },
     Disk { index: u32 },
     Quad { index: u32 },
@@ -40,7 +40,7 @@ struct Prim {
 impl Prim {
     fn bounds(&self) -> Bounds {
         match self.geom {
-            Geom::Triangle([a, b, c]) => Bounds { lo: a.min(b).min(c).into(), hi: a.max(b).max(c).into() },
+            Geom::Triangle([a, b, c]) => Bounds { lo: a.min(b).min(c), hi: a.max(b).max(c) },
             Geom::Sphere { center, radius } => Bounds { lo: center - radius, hi: center + radius },
             Geom::Disk { .. } | Geom::Quad { .. } => {
                 unreachable!("invariant: disk and quad bounds are computed before the build")
@@ -110,11 +110,7 @@ impl Accel {
                         continue;
                     }
                     for ti in 0..mesh.triangles.len() {
-                        let p = Prim {
-                            geom: Geom::Triangle(mesh.corners(ti).map(Vec3A::from)),
-                            shape: si as u32,
-                            index: ti as u32,
-                        };
+                        let p = Prim { geom: Geom::Triangle(mesh.corners(ti)), shape: si as u32, index: ti as u32 };
                         bounds.push(p.bounds());
                         prims.push(p);
                     }

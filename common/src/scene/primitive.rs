@@ -124,10 +124,10 @@ impl WatertightRay {
 
     /// Returns (t, b1, b2) for a hit in (0, tmax).
     #[inline(always)]
-    pub(super) fn intersect(&self, o: Vec3A, tmax: f32, tri: &[Vec3A; 3]) -> Option<(f32, f32, f32)> {
-        let a = self.shear * (tri[0] - o);
-        let b = self.shear * (tri[1] - o);
-        let c = self.shear * (tri[2] - o);
+    pub(super) fn intersect(&self, o: Vec3A, tmax: f32, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)> {
+        let a = self.shear * (Vec3A::from(tri[0]) - o);
+        let b = self.shear * (Vec3A::from(tri[1]) - o);
+        let c = self.shear * (Vec3A::from(tri[2]) - o);
         let mut u = c.x * b.y - c.y * b.x;
         let mut v = a.x * c.y - a.y * c.x;
         let mut w = b.x * a.y - b.y * a.x;
