@@ -4,33 +4,33 @@
 //! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--ground-truth-pilot`
 //! iterations) runs four moment estimators at once, one per setting of the two switches of
 //! decision 3. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
-//! off / everywhere, plus path tracing: 19) renders K iterations itself.
+//! off / everywhere, plus path tracing: 19) renders K iterations itself, timed the way a final
+//! pass renders it (path tracing by the `pt` integrator).
 //!
-//! The truth is the candidate's relMSE against the reference × K, times its cost: the mean
-//! per-pixel relative variance per iteration, which is what the moments estimate (plus a
-//! relative moment of about 1). It is taken with no pixel dropped; the table also shows it with
-//! the top 0.1 % of pixel errors dropped, as the equal-time benchmark measures, which at small
-//! K hides rare large errors (caustics seen by path tracing) that a long render does not drop.
-//! Predictions are image-level relative moments the way the optimiser forms them (box radius
-//! 3, relative to the reference in the order of [`MomentFilter`], outliers above the 99.9 %
-//! quantile zeroed), times the cost: from the candidate's own samples (Σ y², "measured") and
-//! from the pilot.
+//! The truth is the candidate's relMSE against the reference × K, times its measured CPU time
+//! per iteration: the work-normalised error an equal-time render sees. It is taken with no
+//! pixel dropped; the table also shows it with the top 0.1 % of pixel errors dropped, as the
+//! equal-time benchmark measures, which at small K hides rare large errors (caustics seen by
+//! path tracing) that a long render does not drop. Predictions are image-level relative
+//! moments the way the optimiser forms them (box radius 3, relative to the reference in the
+//! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed), times the cost model
+//! of `--cost-model`: from the candidate's own samples (Σ y², "measured") and from the pilot.
 //!
 //! Reported per variant: the candidate it chooses and its **regret**, the true work-normalised
 //! error of that choice over the best candidate's (1 = perfect), plus how well its predictions
-//! correlate with the truth over all candidates (Spearman ρ). The default switches and filter
-//! order are the ones with the lowest geometric-mean regret over the scenes.
+//! correlate with the truth over all candidates (Spearman ρ). Each scene also ends with one
+//! `json:` line holding every figure, for analyses beyond the table.
 
 use crate::bench::BenchArgs;
 use crate::local::scene_name;
 use std::path::PathBuf;
 use tessera_common::film::compare::relmse;
 use tessera_common::film::{Film, Rect, TileAccum};
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::integrator::vcm::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::mis::candidate::Candidate;
-use tessera_common::mis::cost::{CostConstants, pixel_cost};
+use tessera_common::mis::cost::{CostConstants, CostModel, pixel_cost};
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::moments::MomentBuffer;
@@ -139,9 +139,13 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         });
         let snapshots: Vec<_> = estimators.iter().map(|e| e.snapshot()).collect();
         let statistics = snapshots[0].1.statistics(w * h);
+        let constants = CostModel::from(args.cost_model).constants();
         let cost = |c: &Candidate| {
+            pixel_cost(&constants, &statistics, c, if c.merge { 1.0 } else { 0.0 }, !c.is_path_tracing(), w * h)
+        };
+        let calibrated_cost = |c: &Candidate| {
             pixel_cost(
-                &CostConstants::default(),
+                &CostConstants::calibrated(),
                 &statistics,
                 c,
                 if c.merge { 1.0 } else { 0.0 },
@@ -153,17 +157,32 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         let mut variance = Vec::new();
         let mut variance_dropped = Vec::new();
         let mut direct = Vec::new();
+        let mut seconds = Vec::new();
         for c in &candidates {
             let own = MomentEstimator::new(w, h, std::slice::from_ref(c), MomentSettings::default());
-            let integrator = strategy_of(c).integrator(settings, config.correlation_aware);
-            let mut accum = TileAccum::new(full);
+            let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
             pool.install(|| {
-                integrator.with_observer(&own).render_tile(
+                strategy_of(c).integrator(settings, config.correlation_aware).with_observer(&own).render_tile(
                     &scene,
-                    &TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 },
-                    &mut accum,
+                    &request,
+                    &mut TileAccum::new(full),
                 )
             });
+            // The image and the time come from a second render without the moment observer:
+            // the same samples, timed the way an equal-time render spends them.
+            let started = crate::bench::cpu_seconds();
+            let (accum, _) = pool.install(|| {
+                render_iterations(
+                    &scene,
+                    settings,
+                    &config,
+                    &strategy_of(c),
+                    request.seed,
+                    request.samples.clone(),
+                    false,
+                )
+            });
+            seconds.push((crate::bench::cpu_seconds() - started) / k as f64);
             let mut film = Film::new(w, h);
             film.merge_tile(&accum);
             let image = film.average();
@@ -173,7 +192,6 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
                 relative_mean(wu, hu, moments_of(&own.snapshot().0, 0), &ref_mean, MomentFilter::default()) * cost(c),
             );
         }
-        let best = variance.iter().copied().fold(f64::INFINITY, f64::min);
         let name_of = |i: usize| {
             let c = &candidates[i];
             if c.is_path_tracing() {
@@ -183,8 +201,6 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
             }
         };
         let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
-        let truth = argmin(&variance);
-        println!("\n### {}: truth's choice {} ", scene_name(path), name_of(truth));
         let predict = |snapshot: usize, order: MomentFilter| -> Vec<f64> {
             (0..candidates.len())
                 .map(|ci| {
@@ -194,16 +210,26 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
                 .collect()
         };
         let by_order: Vec<Vec<f64>> = MomentFilter::ALL.iter().map(|&order| predict(0, order)).collect();
+        // Equal-time truth: relMSE × K × measured CPU seconds per iteration, in units of the
+        // cost model's (its cost per unit is fitted over the candidates, so only the ranking and
+        // the model's relative errors show).
+        let unit = candidates.iter().zip(&seconds).map(|(c, s)| s / cost(c)).sum::<f64>() / candidates.len() as f64;
+        let timed: Vec<f64> =
+            candidates.iter().enumerate().map(|(i, c)| variance[i] / cost(c) * seconds[i] / unit).collect();
+        let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
+        println!("\n### {}: truth's choice {} ", scene_name(path), name_of(argmin(&timed)));
         println!(
-            "| candidate | cost | relMSE × K × cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
+            "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
         );
-        println!("|---|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|---|---|");
         for i in 0..candidates.len() {
             println!(
-                "| {} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
+                "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
                 name_of(i),
                 cost(&candidates[i]),
+                seconds[i] / unit,
                 variance[i],
+                timed[i],
                 variance_dropped[i],
                 direct[i],
                 by_order[0][i],
@@ -212,33 +238,51 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         }
         for ((order, predicted), regrets) in MomentFilter::ALL.iter().zip(&by_order).zip(&mut order_regrets) {
             let choice = argmin(predicted);
-            regrets.push(variance[choice] / best);
+            regrets.push(timed[choice] / timed_best);
             println!(
                 "pilot moments (principled, squared), {order:?} filter order: choose {} (regret {:.2}x, spearman {:.2})",
                 name_of(choice),
-                variance[choice] / best,
-                spearman(predicted, &variance)
+                timed[choice] / timed_best,
+                spearman(predicted, &timed)
             );
         }
         let d = argmin(&direct);
         println!(
             "measured second moments: choose {} (regret {:.2}x, spearman {:.2})",
             name_of(d),
-            variance[d] / best,
-            spearman(&direct, &variance)
+            timed[d] / timed_best,
+            spearman(&direct, &timed)
         );
-        direct_regrets.push(variance[d] / best);
+        direct_regrets.push(timed[d] / timed_best);
         for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
             let predicted = predict(vi, MomentFilter::default());
             let choice = argmin(&predicted);
-            regrets[vi].push(variance[choice] / best);
+            regrets[vi].push(timed[choice] / timed_best);
             println!(
                 "pilot moments, ratio {ratio:?}, kernel {kernel:?}: choose {} (regret {:.2}x, spearman {:.2})",
                 name_of(choice),
-                variance[choice] / best,
-                spearman(&predicted, &variance)
+                timed[choice] / timed_best,
+                spearman(&predicted, &timed)
             );
         }
+        // everything above as one JSON line, for analyses beyond this table
+        let rows: Vec<serde_json::Value> = candidates
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                serde_json::json!({
+                    "nu": c.nu, "connections": c.connections, "merge": c.merge,
+                    "cost": cost(c), "calibrated_cost": calibrated_cost(c), "seconds": seconds[i],
+                    "relmse_k": variance[i] / cost(c), "relmse_k_dropped": variance_dropped[i] / cost(c),
+                    "measured_moment": direct[i] / cost(c), "predicted_moment": by_order[0][i] / cost(c),
+                })
+            })
+            .collect();
+        println!(
+            "json: {}",
+            serde_json::json!({"scene": scene_name(path), "k": k, "pilot": pilot_iterations,
+                "statistics": statistics, "candidates": rows})
+        );
     }
     let gm = |v: &[f64]| (v.iter().map(|x| x.ln()).sum::<f64>() / v.len().max(1) as f64).exp();
     println!("\n### geometric-mean regret over {} scenes", scenes.len());
