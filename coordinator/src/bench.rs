@@ -48,7 +48,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',')]
     pub equal_time: Vec<f64>,
     /// Equal-time mode: the EMIS cost heuristic's constants.
-    #[arg(long, value_enum, default_value = "reference")]
+    #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: crate::cli::CostModelArg,
     /// Equal-time mode: the EMIS moment filter order.
     #[arg(long, value_enum, default_value = "relative")]

@@ -1,10 +1,11 @@
 //! `tessera bench --calibrate-costs`: the timing runs of emis-spec §2 on our renderer. On each
-//! scene it times path tracing, light tracing at ν = 1 and 2, connections c = 1 and 4, and
-//! merging at ν = 0.5, 1 and 2 through the same bidirectional engine, interleaved and the
+//! scene it times the configurations of [`calibration_configurations`] through the
+//! bidirectional engine, and path tracing through the `pt` integrator, interleaved and the
 //! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units
-//! (time ÷ the path tracer's time × L̄c); fits the heuristic's constants to all scenes at once
-//! (`tessera_common::mis::calibrate`); and reports each configuration's error with the default
-//! and the fitted constants against the ±30 % the authors report for theirs.
+//! (time ÷ the bidirectional engine's time at ν = 0 × L̄c); fits the heuristic's constants to
+//! all scenes at once (`tessera_common::mis::calibrate`; path tracing's constant is the
+//! geometric mean of its time ratios); and reports each configuration's error with the
+//! reference and the fitted constants against the ±30 % the authors report for theirs.
 
 use crate::bench::BenchArgs;
 use crate::local::scene_name;
@@ -32,8 +33,9 @@ fn predicted(k: &CostConstants, s: &CostSample) -> f64 {
     pixel_cost(k, &s.statistics, &s.candidate, chi, s.candidate.merge, s.pixels)
 }
 
-/// Times every configuration on one scene; returns the samples with measured costs.
-fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::ThreadPool) -> Vec<CostSample> {
+/// Times every configuration on one scene; returns the samples with measured costs and the
+/// `pt` integrator's time over the unit configuration's (the bidirectional engine at ν = 0).
+fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::ThreadPool) -> (Vec<CostSample>, f64) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let pixels = w * h;
     let settings = PathSettings::from_scene(scene, None);
@@ -51,6 +53,7 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
         })
         .collect();
     let mut best = vec![f64::INFINITY; configs.len()];
+    let mut best_pt = f64::INFINITY;
     // one warm-up round, then `repeats` timed rounds, configurations interleaved so that a
     // change in machine load hits them alike
     for round in 0..=repeats {
@@ -63,17 +66,26 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
                 best[i] = best[i].min(t.elapsed().as_secs_f64());
             }
         }
+        // path tracing as a final pass renders it: the `pt` integrator, rows in parallel
+        let samples = 2 + round * iterations..2 + (round + 1) * iterations;
+        let t = Instant::now();
+        pool.install(|| render_iterations(scene, settings, &config, &Strategy::path_tracing(), 7, samples, false));
+        if round > 0 {
+            best_pt = best_pt.min(t.elapsed().as_secs_f64());
+        }
     }
-    configs
+    // the unit configuration stays the unit; the path-tracing sample is the `pt` integrator
+    let samples = configs
         .iter()
         .zip(&best)
-        .map(|(c, t)| CostSample {
+        .map(|(c, &t)| CostSample {
             statistics,
             candidate: *c,
             pixels,
-            measured: t / best[0] * statistics.camera_vertices,
+            measured: if c.is_path_tracing() { best_pt } else { t } / best[0] * statistics.camera_vertices,
         })
-        .collect()
+        .collect();
+    (samples, best_pt / best[0])
 }
 
 /// Runs `--calibrate-costs`.
@@ -82,23 +94,28 @@ pub fn calibrate_costs(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<(
     let iterations = args.spp.max(1);
     let mut all = Vec::new();
     let mut names = Vec::new();
+    let mut pt_ratios = Vec::new();
     for path in scenes {
         let scene = Scene::load(path)?;
-        let samples = measure_scene(&scene, iterations, args.repeats.max(1), &pool);
+        let (samples, pt_ratio) = measure_scene(&scene, iterations, args.repeats.max(1), &pool);
         let s = samples[0].statistics;
         eprintln!(
-            "{}: L̄c {:.2}, L̄l {:.2}, φ {:.3e}",
+            "{}: L̄c {:.2}, L̄l {:.2}, φ {:.3e}; pt / (ν = 0) time {:.3}",
             scene_name(path),
             s.camera_vertices,
             s.light_vertices,
-            s.photons_per_query_per_path
+            s.photons_per_query_per_path,
+            pt_ratio
         );
+        pt_ratios.push(pt_ratio);
         names.extend(std::iter::repeat_n(scene_name(path), samples.len()));
         all.extend(samples);
     }
     let default = CostConstants::reference();
-    let fitted =
-        fit_constants(&all).ok_or_else(|| anyhow::anyhow!("the measurements do not determine the constants"))?;
+    // path tracing's constant: the geometric mean of its measured time ratios
+    let path_tracing = (pt_ratios.iter().map(|r: &f64| r.ln()).sum::<f64>() / pt_ratios.len().max(1) as f64).exp();
+    let fitted = fit_constants(&all, path_tracing)
+        .ok_or_else(|| anyhow::anyhow!("the measurements do not determine the constants"))?;
     println!(
         "{:<18} {:<18} {:>9} {:>9} {:>7} {:>9} {:>7}",
         "scene", "config", "measured", "reference", "err", "fitted", "err"
@@ -128,18 +145,23 @@ pub fn calibrate_costs(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<(
         (sq_fitted / n).sqrt() * 100.0,
         worst_fitted * 100.0
     );
-    println!(
-        "fitted constants: light_vertex {:.3}, connection {:.3}, build {:.3}, query {:.3}, photon_shading {:.3} (reference {:.3}, {:.3}, {:.3}, {:.3}, {:.3})",
-        fitted.light_vertex,
-        fitted.connection,
-        fitted.build,
-        fitted.query,
-        fitted.photon_shading,
-        default.light_vertex,
-        default.connection,
-        default.build,
-        default.query,
-        default.photon_shading
-    );
+    println!("fitted constants (reference in brackets): {}", describe(&fitted, &default));
     Ok(())
+}
+
+fn describe(k: &CostConstants, r: &CostConstants) -> String {
+    [
+        ("light_vertex", k.light_vertex, r.light_vertex),
+        ("light_vertex_walk", k.light_vertex_walk, r.light_vertex_walk),
+        ("connection", k.connection, r.connection),
+        ("connection_walk", k.connection_walk, r.connection_walk),
+        ("build", k.build, r.build),
+        ("query", k.query, r.query),
+        ("photon_shading", k.photon_shading, r.photon_shading),
+        ("path_tracing", k.path_tracing, r.path_tracing),
+    ]
+    .iter()
+    .map(|(name, v, reference)| format!("{name} {v:.3} ({reference:.3})"))
+    .collect::<Vec<_>>()
+    .join(", ")
 }

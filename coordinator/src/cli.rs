@@ -96,7 +96,7 @@ pub struct IntegratorArgs {
     #[arg(long, value_enum, default_value = "squared")]
     pub merge_kernel: MergeKernelArg,
     /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
-    #[arg(long, value_enum, default_value = "reference")]
+    #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: CostModelArg,
     /// emis-*: make moments relative to the image before the box filter, or after it (the
     /// reference, which lets bright features spread into dark neighbours).

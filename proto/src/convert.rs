@@ -108,7 +108,7 @@ mod tests {
             spp: Some(9),
             emis_updates: vec![2, 5],
             merge_ratio: MergeRatio::Reference,
-            cost_model: CostModel::Calibrated,
+            cost_model: CostModel::Reference,
             ..RenderSettings::default()
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);

@@ -11,42 +11,56 @@
 use super::candidate::Candidate;
 use super::cost::{CostConstants, PathStatistics, pixel_cost};
 
-/// The five fitted terms' features of a candidate on a scene, in the order light vertex,
-/// connection, build, query, photon shading (the camera-vertex term is the unit).
-pub fn cost_features(s: &PathStatistics, candidate: &Candidate, pixels: u32) -> [f64; 5] {
-    let unit = |pick: usize| {
-        let mut k = CostConstants {
-            camera_vertex: 0.0,
-            light_vertex: 0.0,
-            connection: 0.0,
-            photon_shading: 0.0,
-            query: 0.0,
-            build: 0.0,
-        };
-        match pick {
-            0 => k.light_vertex = 1.0,
-            1 => k.connection = 1.0,
-            2 => k.build = 1.0,
-            3 => k.query = 1.0,
-            _ => k.photon_shading = 1.0,
-        }
-        let chi = if candidate.merge { 1.0 } else { 0.0 };
-        pixel_cost(&k, s, candidate, chi, candidate.merge, pixels)
+/// How many constants the fit determines (all but the camera vertex, the unit, and path
+/// tracing's, which is a measured ratio of its own).
+pub const FITTED_TERMS: usize = 7;
+
+/// The constants with term `pick` (in [`cost_features`]' order) at `value`, the rest 0.
+fn with_term(pick: usize, value: f64) -> CostConstants {
+    let mut k = CostConstants {
+        camera_vertex: 0.0,
+        light_vertex: 0.0,
+        connection: 0.0,
+        photon_shading: 0.0,
+        query: 0.0,
+        build: 0.0,
+        light_vertex_walk: 0.0,
+        connection_walk: 0.0,
+        path_tracing: 0.0,
     };
-    [unit(0), unit(1), unit(2), unit(3), unit(4)]
+    *match pick {
+        0 => &mut k.light_vertex,
+        1 => &mut k.light_vertex_walk,
+        2 => &mut k.connection,
+        3 => &mut k.connection_walk,
+        4 => &mut k.build,
+        5 => &mut k.query,
+        _ => &mut k.photon_shading,
+    } = value;
+    k
 }
 
-/// The configurations to time on every scene (emis-spec §2's timing runs): path tracing first
-/// (the unit), light tracing at ν = 1 and 2, connections c = 1 and 4, merging at ν = 0.5, 1 and
-/// 2, and connections with merging.
+/// The fitted terms' features of a (bidirectional) candidate on a scene, in the order light
+/// vertex, light-vertex walk, connection, connection walk, build, query, photon shading.
+pub fn cost_features(s: &PathStatistics, candidate: &Candidate, pixels: u32) -> [f64; FITTED_TERMS] {
+    let chi = if candidate.merge { 1.0 } else { 0.0 };
+    std::array::from_fn(|pick| pixel_cost(&with_term(pick, 1.0), s, candidate, chi, candidate.merge, pixels))
+}
+
+/// The configurations to time on every scene (emis-spec §2's timing runs): the bidirectional
+/// engine at ν = 0 first (the unit), light tracing at ν = 0.25, 1 and 2, connections c = 1 and
+/// 4 (at ν = 1) and c = 4 (at ν = 0.25), merging at ν = 0.5, 1 and 2, and connections with
+/// merging. Path tracing's own integrator is timed beside them for [`CostConstants::path_tracing`].
 pub fn calibration_configurations() -> Vec<Candidate> {
     let c = |nu: f32, connections: u32, merge: bool| Candidate { nu, connections, merge };
     vec![
         c(0.0, 0, false),
+        c(0.25, 0, false),
         c(1.0, 0, false),
         c(2.0, 0, false),
         c(1.0, 1, false),
         c(1.0, 4, false),
+        c(0.25, 4, false),
         c(0.5, 0, true),
         c(1.0, 0, true),
         c(2.0, 0, true),
@@ -68,32 +82,38 @@ pub struct CostSample {
     pub measured: f64,
 }
 
-/// Least-squares fit of the non-unit constants to `samples`, weighting every residual by the
-/// measured cost (relative errors). Constants that would come out negative are fixed at 0
-/// and the rest refitted. `None` without samples or with a singular system.
-pub fn fit_constants(samples: &[CostSample]) -> Option<CostConstants> {
-    let mut active = [true; 5];
+/// Least-squares fit of the non-unit constants to `samples` (bidirectional candidates; path
+/// tracing samples are skipped), weighting every residual by the measured cost (relative
+/// errors). Constants that would come out negative are fixed at 0 and the rest refitted.
+/// `path_tracing` is passed through. `None` without samples or with a singular system.
+pub fn fit_constants(samples: &[CostSample], path_tracing: f64) -> Option<CostConstants> {
+    let samples: Vec<CostSample> = samples.iter().filter(|s| !s.candidate.is_path_tracing()).cloned().collect();
+    let mut active = [true; FITTED_TERMS];
     loop {
-        let k = solve(samples, &active)?;
-        match (0..5).find(|&i| active[i] && k[i] < 0.0) {
+        let k = solve(&samples, &active)?;
+        match (0..FITTED_TERMS).find(|&i| active[i] && k[i] < 0.0) {
             Some(i) => active[i] = false,
             None => {
-                return Some(CostConstants {
-                    camera_vertex: 1.0,
-                    light_vertex: k[0],
-                    connection: k[1],
-                    build: k[2],
-                    query: k[3],
-                    photon_shading: k[4],
-                });
+                let mut fitted = CostConstants { camera_vertex: 1.0, path_tracing, ..with_term(0, 0.0) };
+                for (i, &v) in k.iter().enumerate() {
+                    let term = with_term(i, v);
+                    fitted.light_vertex += term.light_vertex;
+                    fitted.light_vertex_walk += term.light_vertex_walk;
+                    fitted.connection += term.connection;
+                    fitted.connection_walk += term.connection_walk;
+                    fitted.build += term.build;
+                    fitted.query += term.query;
+                    fitted.photon_shading += term.photon_shading;
+                }
+                return Some(fitted);
             }
         }
     }
 }
 
 /// Solves the weighted normal equations over the active constants (inactive ones are 0).
-fn solve(samples: &[CostSample], active: &[bool; 5]) -> Option<[f64; 5]> {
-    let idx: Vec<usize> = (0..5).filter(|&i| active[i]).collect();
+fn solve(samples: &[CostSample], active: &[bool; FITTED_TERMS]) -> Option<[f64; FITTED_TERMS]> {
+    let idx: Vec<usize> = (0..FITTED_TERMS).filter(|&i| active[i]).collect();
     let n = idx.len();
     let mut a = vec![vec![0.0; n + 1]; n];
     for s in samples.iter().filter(|s| s.measured > 0.0) {
@@ -124,7 +144,7 @@ fn solve(samples: &[CostSample], active: &[bool; 5]) -> Option<[f64; 5]> {
             }
         }
     }
-    let mut k = [0.0; 5];
+    let mut k = [0.0; FITTED_TERMS];
     for (r, &i) in idx.iter().enumerate() {
         k[i] = a[r][n] / a[r][r];
     }
@@ -152,6 +172,9 @@ mod tests {
             photon_shading: 0.3,
             query: 0.08,
             build: 0.12,
+            light_vertex_walk: 0.2,
+            connection_walk: 0.05,
+            path_tracing: 0.8,
         };
         let pixels = 4096;
         let samples: Vec<CostSample> = scenes()
@@ -165,13 +188,16 @@ mod tests {
                 })
             })
             .collect();
-        let fit = fit_constants(&samples).unwrap();
+        let fit = fit_constants(&samples, 0.8).unwrap();
         for (a, b) in [
             (fit.light_vertex, truth.light_vertex),
             (fit.connection, truth.connection),
             (fit.photon_shading, truth.photon_shading),
             (fit.query, truth.query),
             (fit.build, truth.build),
+            (fit.light_vertex_walk, truth.light_vertex_walk),
+            (fit.connection_walk, truth.connection_walk),
+            (fit.path_tracing, truth.path_tracing),
         ] {
             assert!((a - b).abs() < 1e-6, "fitted {a}, true {b}");
         }
@@ -185,8 +211,8 @@ mod tests {
                 CostSample { measured, ..s.clone() }
             })
             .collect();
-        let fit = fit_constants(&samples).unwrap();
+        let fit = fit_constants(&samples, 0.8).unwrap();
         assert!(fit.connection >= 0.0 && fit.connection < 0.05, "{fit:?}");
-        assert!(fit_constants(&[]).is_none());
+        assert!(fit_constants(&[], 1.0).is_none());
     }
 }

@@ -2,9 +2,17 @@
 //! candidate, in units of one camera-path vertex with its NEE shadow ray, including the
 //! image-wide work (light tracing, photon-map build) amortised over the pixels.
 //!
-//! C_j = L̄c·k_cam + L̄c·c·k_con + k_lt·L̄l·ν + [map built]·(B + χ·(Q + S)), with
+//! C_j = L̄c·k_cam + L̄c·c·(k_con + k_con_walk·(L̄c + L̄l)) + ν·L̄l·(k_lt + k_lt_walk·L̄l)
+//!       + [map built]·(B + χ·(Q + S)), with
 //! B = k_build·L̄l·ν·ln(N·L̄l), Q = k_query·L̄c·ln(N·L̄l) (both 0 when N·L̄l ≤ 1) and
-//! S = k_shade·φ·L̄c·N.
+//! S = k_shade·φ·L̄c·N; pure path tracing costs L̄c·k_pt.
+//!
+//! The two walk terms and k_pt go beyond the reference (decision 8): Tessera computes MIS
+//! weights by walking the path's full pdf arrays, so every light-tracing splat costs in
+//! proportion to the light path's length and every connection to the whole path's; and when
+//! path tracing wins it is rendered by the `pt` integrator, cheaper per camera vertex than the
+//! bidirectional engine the other candidates run in. The reference constants set the walks to
+//! 0 and k_pt to 1, which is exactly the reference formula.
 
 use super::candidate::Candidate;
 use serde::{Deserialize, Serialize};
@@ -24,25 +32,24 @@ pub struct CostConstants {
     pub query: f64,
     /// Building the photon map, per photon per ln(photons).
     pub build: f64,
+    /// A light vertex's MIS walk, per vertex of its light path (L̄l).
+    pub light_vertex_walk: f64,
+    /// A connection's MIS walk, per vertex of the joined path (L̄c + L̄l).
+    pub connection_walk: f64,
+    /// A camera vertex of pure path tracing, rendered by the `pt` integrator.
+    pub path_tracing: f64,
 }
 
-/// Which constants the heuristic uses.
-///
-/// The default is the reference's, although the calibrated constants predict the measured cost
-/// far better: at equal time (`tessera bench --equal-time 20 --threads 1`, six scenes,
-/// 2026-11-21, the second core busy, baselines from the first of two runs) the reference
-/// constants gave emis-vcm 1.26× over vcm and emis-bdpt 1.10× over bdpt (geometric means), the
-/// calibrated ones 1.22× and 0.99×. The reference constants overprice bidirectional work,
-/// which happens to offset the pilot's overestimate of path tracing's second moment in the
-/// scenes where path tracing wins (veach-mis, cornell-box, env-lit); with honest costs that
-/// overestimate decides.
+/// Which constants the heuristic uses. The default is [`CostModel::Calibrated`] (see
+/// [`CostConstants::calibrated`] for the evidence); [`CostModel::Reference`] reproduces the
+/// reference implementation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CostModel {
     /// [`CostConstants::calibrated`]: fitted to this renderer's measured times.
+    #[default]
     Calibrated,
     /// [`CostConstants::reference`]: the reference implementation's constants (emis-spec §2).
-    #[default]
     Reference,
 }
 
@@ -66,26 +73,39 @@ impl CostConstants {
             photon_shading: 0.25,
             query: 0.045,
             build: 0.175,
+            light_vertex_walk: 0.0,
+            connection_walk: 0.0,
+            path_tracing: 1.0,
         }
     }
 
-    /// Constants fitted to this renderer (decision 8) by `tessera bench --calibrate-costs`
-    /// (2 iterations × fastest of 2 interleaved rounds per configuration, 1 thread, the six
-    /// test scenes, 2026-11-21, with another benchmark loading the second core). Against the
-    /// measured cost of 9 configurations × 6 scenes, the reference constants are off by
-    /// 105 % rms (max 335 %: they make merging 2–4× too expensive in simple scenes and light
-    /// vertices ~1.8× too expensive); these are off by 23 % rms (max 57 %, connections at
-    /// c = 4 in the long-path scenes, whose cost grows with path length, which the formula does
-    /// not model). The fit puts the photon-map build and query terms at 0: their cost is
-    /// indistinguishable from (and absorbed by) the per-photon term here.
+    /// Constants fitted to this renderer (decision 8) by `tessera bench --calibrate-costs
+    /// --spp 4 --repeats 3` (11 configurations × 6 scenes, fastest of 3 interleaved rounds,
+    /// 2 threads, 2026-11-22). Against the measured costs the reference constants are off by
+    /// 92 % rms (max 332 %: merging 2–4× too expensive, light vertices up to 1.8× in short-path
+    /// scenes, connections 2× too cheap in long-path ones); these by 14 % rms (max 39 %,
+    /// connections at c = 4 on cornell-box, whose shadow rays cost more than the fit's mean).
+    /// The build and query terms fit to 0: their cost is absorbed by the per-photon term.
+    ///
+    /// Why they are the default: `tessera bench --ground-truth 64 --ground-truth-pilot 16`
+    /// (2026-11-22) gives each of 19 candidates its pilot-predicted relative moment and, as
+    /// truth, its relMSE × K × its measured time. Applying both cost models to those figures
+    /// (image level), the reference constants choose ν = 0.25, c = 1 with merging on caustic-glass,
+    /// 2.73× the best candidate's error at equal time, where these choose ν = 1, c = 1 with
+    /// merging (1.08×); on the other five scenes both choose within 1.15× of the best (these
+    /// within 1.10×). The earlier calibration without the walk terms and the `pt` constant
+    /// chose ν = 2 on cornell-box (1.45×): it priced its long light paths' splats too cheaply.
     pub fn calibrated() -> Self {
         CostConstants {
             camera_vertex: 1.0,
-            light_vertex: 0.56,
-            connection: 0.44,
-            photon_shading: 1.86,
+            light_vertex: 0.202,
+            connection: 0.086,
+            photon_shading: 1.821,
             query: 0.0,
             build: 0.0,
+            light_vertex_walk: 0.196,
+            connection_walk: 0.062,
+            path_tracing: 0.762,
         }
     }
 }
@@ -191,7 +211,12 @@ pub fn pixel_cost(
     let nu = candidate.nu as f64;
     let n = candidate.light_paths(pixels) as f64;
     let (lc, ll) = (s.camera_vertices, s.light_vertices);
-    let mut cost = lc * k.camera_vertex + lc * candidate.connections as f64 * k.connection + k.light_vertex * ll * nu;
+    if candidate.is_path_tracing() {
+        return lc * k.path_tracing;
+    }
+    let connection = k.connection + k.connection_walk * (lc + ll);
+    let light_vertex = k.light_vertex + k.light_vertex_walk * ll;
+    let mut cost = lc * k.camera_vertex + lc * candidate.connections as f64 * connection + light_vertex * ll * nu;
     if map_built && n > 0.0 {
         let log = if n * ll > 1.0 { (n * ll).ln() } else { 0.0 };
         let build = k.build * ll * nu * log;
@@ -245,6 +270,27 @@ mod tests {
     }
 
     #[test]
+    fn walk_terms_and_path_tracing_by_hand() {
+        let k = CostConstants {
+            camera_vertex: 1.0,
+            light_vertex: 0.2,
+            connection: 0.1,
+            photon_shading: 0.0,
+            query: 0.0,
+            build: 0.0,
+            light_vertex_walk: 0.05,
+            connection_walk: 0.03,
+            path_tracing: 0.75,
+        };
+        let s = PathStatistics { camera_vertices: 4.0, light_vertices: 3.0, photons_per_query_per_path: 1e-5 };
+        let c = Candidate { nu: 0.5, connections: 2, merge: false };
+        // camera 4; connections 4·2·(0.1 + 0.03·7); light vertices 0.5·3·(0.2 + 0.05·3)
+        let expected = 4.0 + 8.0 * (0.1 + 0.03 * 7.0) + 1.5 * (0.2 + 0.05 * 3.0);
+        assert!((pixel_cost(&k, &s, &c, 0.0, false, 1000) - expected).abs() < 1e-12);
+        assert!((pixel_cost(&k, &s, &Candidate::PATH_TRACING, 0.0, false, 1000) - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn cost_grows_with_every_count_and_path_tracing_has_no_map_terms() {
         for k in [CostConstants::reference(), CostConstants::calibrated()] {
             let s = PathStatistics { camera_vertices: 6.0, light_vertices: 4.0, photons_per_query_per_path: 1e-6 };
@@ -254,7 +300,8 @@ mod tests {
             assert!(cost(Candidate { connections: 4, ..base }, 1.0) > cost(base, 1.0));
             assert!(cost(base, 1.0) > cost(base, 0.2));
             // pure path tracing: camera vertices only, no build or query term even with a map
-            assert!((pixel_cost(&k, &s, &Candidate::PATH_TRACING, 1.0, true, 65536) - 6.0).abs() < 1e-12);
+            let pt = pixel_cost(&k, &s, &Candidate::PATH_TRACING, 1.0, true, 65536);
+            assert!((pt - 6.0 * k.path_tracing).abs() < 1e-12);
         }
     }
 }

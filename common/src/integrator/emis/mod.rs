@@ -136,6 +136,11 @@ pub struct Strategy {
 }
 
 impl Strategy {
+    /// Pure path tracing (rendered by the `pt` integrator when no moments are collected).
+    pub fn path_tracing() -> Self {
+        Strategy { nu: 0.0, connections: 0, merge: None }
+    }
+
     /// The pilot strategy of decision 5.
     pub fn pilot(method: EmisMethod) -> Self {
         Strategy {
