@@ -89,12 +89,14 @@ pub const MAX_CANDIDATES: usize = 64;
 /// Connections of the proxy strategy per camera vertex.
 const PROXY_CONNECTIONS: f32 = 4.0;
 
-/// A candidate's count ratios against the proxy, per technique group (path tracing is 1).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The candidates' count ratios against the proxy, per technique group (path tracing is 1),
+/// as one array per group so that the per-sample loop over candidates vectorises.
+#[derive(Clone, Debug, PartialEq)]
 struct Ratios {
-    lt: f32,
-    con: f32,
-    vm: f32,
+    lt: [f32; MAX_CANDIDATES],
+    con: [f32; MAX_CANDIDATES],
+    vm: [f32; MAX_CANDIDATES],
+    len: usize,
 }
 
 /// A light-tracing sample waiting for the end of its iteration.
@@ -109,7 +111,7 @@ struct Queued {
 
 /// Collects moments and statistics of pilot iterations; see the module documentation.
 pub struct MomentEstimator {
-    candidates: Vec<Ratios>,
+    candidates: Ratios,
     width: u32,
     height: u32,
     settings: MomentSettings,
@@ -128,18 +130,18 @@ impl MomentEstimator {
     /// An estimator for `candidates` on a `width × height` image.
     pub fn new(width: u32, height: u32, candidates: &[Candidate], settings: MomentSettings) -> Self {
         assert!(candidates.len() <= MAX_CANDIDATES, "invariant: at most {MAX_CANDIDATES} candidates");
-        let ratios = candidates
-            .iter()
-            .map(|c| Ratios {
-                lt: c.nu,
-                con: c.connections as f32 / PROXY_CONNECTIONS,
-                vm: match (c.merge, settings.merge_ratio) {
-                    (false, _) => 0.0,
-                    (true, MergeRatio::Principled) => c.nu,
-                    (true, MergeRatio::Reference) => 1.0,
-                },
-            })
-            .collect();
+        let mut ratios =
+            Ratios { lt: [0.0; MAX_CANDIDATES], con: [0.0; MAX_CANDIDATES], vm: [0.0; MAX_CANDIDATES], len: 0 };
+        for (i, c) in candidates.iter().enumerate() {
+            ratios.lt[i] = c.nu;
+            ratios.con[i] = c.connections as f32 / PROXY_CONNECTIONS;
+            ratios.vm[i] = match (c.merge, settings.merge_ratio) {
+                (false, _) => 0.0,
+                (true, MergeRatio::Principled) => c.nu,
+                (true, MergeRatio::Reference) => 1.0,
+            };
+        }
+        ratios.len = candidates.len();
         let n = width as usize * height as usize * candidates.len();
         MomentEstimator {
             candidates: ratios,
@@ -196,14 +198,15 @@ impl MomentEstimator {
         let t_m = m[0] * pt + m[1] * lt + m[2] * con + m[3] * vm_c;
         if !(s_m > 0.0 && t_m > 0.0) {
             // the pilot cannot have drawn this sample: nothing to add
-            out[..self.candidates.len()].fill(0.0);
+            out[..self.candidates.len].fill(0.0);
             return;
         }
         let scale = s_m * s_m * w2 / t_m;
-        for (o, n) in out.iter_mut().zip(&self.candidates) {
-            let common = pt + n.lt * lt + n.con * con;
-            let s_n = common + n.vm * vm;
-            let t_n = common + n.vm * vm_c;
+        let r = &self.candidates;
+        for (((o, &n_lt), &n_con), &n_vm) in out.iter_mut().zip(&r.lt).zip(&r.con).zip(&r.vm).take(r.len) {
+            let common = pt + n_lt * lt + n_con * con;
+            let s_n = common + n_vm * vm;
+            let t_n = common + n_vm * vm_c;
             // S(n) = 0: the candidate cannot sample the path, its moment is infinite
             *o = if s_n > 0.0 { scale * t_n / (s_n * s_n) } else { f32::INFINITY };
         }
@@ -211,7 +214,7 @@ impl MomentEstimator {
 
     #[inline]
     fn add_to_pixel(&self, pixel: u32, values: &[f32]) {
-        let base = pixel as usize * self.candidates.len();
+        let base = pixel as usize * self.candidates.len;
         for (slot, &v) in self.sums[base..base + values.len()].iter().zip(values) {
             // one writer per pixel at a time (see the module documentation): load and store
             let old = f32::from_bits(slot.load(Ordering::Relaxed));
@@ -227,7 +230,7 @@ impl MomentEstimator {
         let buffer = MomentBuffer {
             width: self.width,
             height: self.height,
-            candidates: self.candidates.len(),
+            candidates: self.candidates.len,
             // AtomicU32 → f32 has the same size and alignment: the collect reuses the allocation
             sums: self.sums.into_iter().map(|a| f32::from_bits(a.into_inner())).collect(),
             iterations: statistics.iterations as u32,
@@ -238,7 +241,7 @@ impl MomentEstimator {
     /// The moments and statistics so far, as a mergeable buffer.
     pub fn snapshot(&self) -> (MomentBuffer, StatisticsSums) {
         let statistics = *self.statistics.lock().expect("invariant: statistics lock is never poisoned");
-        let mut buffer = MomentBuffer::new(self.width, self.height, self.candidates.len());
+        let mut buffer = MomentBuffer::new(self.width, self.height, self.candidates.len);
         for (d, s) in buffer.sums.iter_mut().zip(&self.sums) {
             *d = f32::from_bits(s.load(Ordering::Relaxed));
         }
@@ -275,7 +278,7 @@ impl SampleObserver for MomentEstimator {
         }
         let mut out = [0.0f32; MAX_CANDIDATES];
         self.contributions(&weights, &pilot, w2, &mut out);
-        self.add_to_pixel(record.pixel, &out[..self.candidates.len()]);
+        self.add_to_pixel(record.pixel, &out[..self.candidates.len]);
     }
 
     fn on_iteration_start(&self, start: &IterationStart) {
@@ -308,7 +311,7 @@ impl SampleObserver for MomentEstimator {
                     *t += o;
                 }
             }
-            self.add_to_pixel(samples[0].pixel, &total[..self.candidates.len()]);
+            self.add_to_pixel(samples[0].pixel, &total[..self.candidates.len]);
         });
         self.statistics.lock().expect("invariant: statistics lock is never poisoned").add_iteration(
             start.light_paths,
