@@ -14,7 +14,7 @@ use crate::local::{make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tessera_common::integrator::PathSettings;
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::integrator::emis::{EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
 use tessera_common::mis::cost::PathStatistics;
 use tessera_common::mis::denoise::{Guides, denoised_intensity};
 use tessera_common::mis::filter::Image;
@@ -139,25 +139,43 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
     Ok(())
 }
 
-/// Pilot iteration time with and without moment accumulation, interleaved `repeats` times:
+/// Pilot iteration time without moment accumulation, with it in the first
+/// [`GUIDE_ITERATIONS`] (which also render the denoiser's guides), and with it after them:
 /// the calls a render makes ([`render_iterations`] without and with collection), so the
-/// estimator's buffer, its hand-over and the guides are all counted.
-fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> (f64, f64) {
+/// estimator's buffer and its hand-over are counted. Returns the fastest of `repeats` rounds
+/// for each, and the median over rounds of the two overheads, each a ratio of runs made
+/// back to back within one round (robust to the host's load changing between rounds, which
+/// separate fastest times are not).
+fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> ([f64; 3], [f64; 2]) {
     let config = EmisConfig::new(method);
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
-    let (mut plain, mut with) = (f64::INFINITY, f64::INFINITY);
+    let mut best = [f64::INFINITY; 3];
+    let mut ratios = [Vec::new(), Vec::new()];
     for r in 0..repeats {
-        let samples = r * iterations..(r + 1) * iterations;
-        for collect in [false, true] {
+        let mut round = [0.0; 3];
+        // the same iterations' samples for the plain and the guided run; the unguided run's
+        // come after the guided iterations (a different sample, the same expected work)
+        let guided = (r * iterations) % GUIDE_ITERATIONS;
+        let guided = guided..(guided + iterations).min(GUIDE_ITERATIONS);
+        let unguided = GUIDE_ITERATIONS + r * iterations..GUIDE_ITERATIONS + (r + 1) * iterations;
+        for (i, (samples, collect)) in
+            [(guided.clone(), false), (guided, true), (unguided, true)].into_iter().enumerate()
+        {
             let t = Instant::now();
-            std::hint::black_box(render_iterations(scene, settings, &config, &strategy, 1, samples.clone(), collect));
-            let elapsed = t.elapsed().as_secs_f64();
-            let best = if collect { &mut with } else { &mut plain };
-            *best = best.min(elapsed);
+            let n = samples.len() as f64;
+            std::hint::black_box(render_iterations(scene, settings, &config, &strategy, 1, samples, collect));
+            round[i] = t.elapsed().as_secs_f64() / n;
+            best[i] = best[i].min(round[i]);
         }
+        ratios[0].push(round[1] / round[0]);
+        ratios[1].push(round[2] / round[0]);
     }
-    (plain / iterations as f64, with / iterations as f64)
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    (best, [median(&mut ratios[0]), median(&mut ratios[1])])
 }
 
 /// One optimiser and one denoiser run on synthetic inputs of `w × h` with the VCM candidates.
@@ -201,25 +219,29 @@ pub fn overheads(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<()> {
     let threads = args.threads.unwrap_or(0);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     println!(
-        "moment accumulation (51 VCM / 26 BDPT candidates, guides included), best of {} runs of 2 iterations:",
+        "moment accumulation (51 VCM / 26 BDPT candidates), {} rounds of 2 iterations: time per pilot iteration (fastest round) without moments, with moments and the denoiser's guides (the first {GUIDE_ITERATIONS} iterations), with moments alone (the later ones); overheads are medians over rounds of ratios within a round:",
         args.repeats.max(1)
     );
-    println!("| scene | vcm pilot ms/it | + moments | overhead | bdpt pilot ms/it | + moments | overhead |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| scene | vcm pilot ms/it | + moments, guides | overhead | + moments | overhead | bdpt pilot ms/it | + moments, guides | overhead | + moments | overhead |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for path in scenes {
         let scene = Scene::load(path)?;
-        let (v0, v1) = pool.install(|| accumulation_overhead(&scene, EmisMethod::Vcm, 2, args.repeats.max(1)));
-        let (b0, b1) = pool.install(|| accumulation_overhead(&scene, EmisMethod::Bdpt, 2, args.repeats.max(1)));
-        println!(
-            "| {} | {:.0} | {:.0} | {:.0} % | {:.0} | {:.0} | {:.0} % |",
-            scene_name(path),
-            v0 * 1e3,
-            v1 * 1e3,
-            (v1 / v0 - 1.0) * 100.0,
-            b0 * 1e3,
-            b1 * 1e3,
-            (b1 / b0 - 1.0) * 100.0
-        );
+        let mut cells = Vec::new();
+        for method in [EmisMethod::Vcm, EmisMethod::Bdpt] {
+            let ([plain, guided, moments], [guided_ratio, moments_ratio]) =
+                pool.install(|| accumulation_overhead(&scene, method, 2, args.repeats.max(1)));
+            cells.push(format!(
+                "{:.0} | {:.0} | {:.0} % | {:.0} | {:.0} %",
+                plain * 1e3,
+                guided * 1e3,
+                (guided_ratio - 1.0) * 100.0,
+                moments * 1e3,
+                (moments_ratio - 1.0) * 100.0
+            ));
+        }
+        println!("| {} | {} |", scene_name(path), cells.join(" | "));
     }
     println!("\noptimiser (51 candidates, synthetic moments) and denoiser, best of {} runs:", args.repeats.max(1));
     for (w, h) in [(256u32, 256u32), (1920, 1080)] {

@@ -95,6 +95,11 @@ impl CostConstants {
     /// merging (1.08×); on the other five scenes both choose within 1.15× of the best (these
     /// within 1.10×). The earlier calibration without the walk terms and the `pt` constant
     /// chose ν = 2 on cornell-box (1.45×): it priced its long light paths' splats too cheaply.
+    /// At equal time (`tessera bench --equal-time 20` twice and `--equal-time 60` once, 2
+    /// threads, 2026-11-22) emis-vcm reached 0.94×, 0.94× (20 s) and 0.95× (60 s) of vcm on
+    /// caustic-glass, against 0.78× with the reference constants the day before; over the six
+    /// scenes emis-vcm/vcm 1.56×, 1.55× and 1.51×, emis-bdpt/bdpt 1.34×, 1.30× and 1.30×, and
+    /// emis-vcm at least 0.91×, 0.92× and 0.95× the better of pt and vcm on every scene.
     pub fn calibrated() -> Self {
         CostConstants {
             camera_vertex: 1.0,
