@@ -90,12 +90,13 @@ impl CostConstants {
     /// Why they are the default: `tessera bench --ground-truth 64 --ground-truth-pilot 16`
     /// (2026-11-22) gives each of 19 candidates its pilot-predicted relative moment and, as
     /// truth, its relMSE × K × its measured time. Applying both cost models to those figures
-    /// (image level), the reference constants choose ν = 0.25, c = 1 with merging on caustic-glass,
-    /// 2.73× the best candidate's error at equal time, where these choose ν = 1, c = 1 with
-    /// merging (1.08×); on the other five scenes both choose within 1.15× of the best (these
-    /// within 1.10×); the same command with these constants, on caustic-glass alone, chose
-    /// ν = 1, c = 1 with merging at 1.06×. The earlier calibration without the walk terms and the `pt` constant
-    /// chose ν = 2 on cornell-box (1.45×): it priced its long light paths' splats too cheaply.
+    /// (image level), the reference constants choose ν = 0.25, c = 1 with merging on
+    /// caustic-glass, 2.73× the best candidate's error at equal time, where these choose
+    /// ν = 1, c = 1 with merging (1.08×); on the other five scenes both choose within 1.15× of
+    /// the best (these within 1.10×). The same command with these constants, on caustic-glass
+    /// alone, chose ν = 1, c = 1 with merging at 1.06×. The earlier calibration without the
+    /// walk terms and the `pt` constant chose ν = 2 on cornell-box (1.45×): it priced its long
+    /// light paths' splats too cheaply.
     /// At equal time (`tessera bench --equal-time 20` twice and `--equal-time 60` once, 2
     /// threads, 2026-11-22) emis-vcm reached 0.94×, 0.94× (20 s) and 0.95× (60 s) of vcm on
     /// caustic-glass, against 0.78× with the reference constants the day before; over the six
