@@ -30,7 +30,7 @@ use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_
 use tessera_common::integrator::vcm::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::mis::candidate::Candidate;
-use tessera_common::mis::cost::{CostConstants, CostModel, pixel_cost};
+use tessera_common::mis::cost::{CostModel, pixel_cost};
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::moments::MomentBuffer;
@@ -143,21 +143,11 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         let cost = |c: &Candidate| {
             pixel_cost(&constants, &statistics, c, if c.merge { 1.0 } else { 0.0 }, !c.is_path_tracing(), w * h)
         };
-        let calibrated_cost = |c: &Candidate| {
-            pixel_cost(
-                &CostConstants::calibrated(),
-                &statistics,
-                c,
-                if c.merge { 1.0 } else { 0.0 },
-                !c.is_path_tracing(),
-                w * h,
-            )
-        };
         // ---- every candidate on its own ----
-        let mut variance = Vec::new();
-        let mut variance_dropped = Vec::new();
-        let mut direct = Vec::new();
-        let mut seconds = Vec::new();
+        // per candidate, unscaled: relMSE × K (all pixels, top 0.1 % dropped), the relative
+        // moment of its own samples, CPU seconds per iteration
+        let (mut error, mut error_dropped, mut own_moment, mut seconds) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for c in &candidates {
             let own = MomentEstimator::new(w, h, std::slice::from_ref(c), MomentSettings::default());
             let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
@@ -186,12 +176,20 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
             let mut film = Film::new(w, h);
             film.merge_tile(&accum);
             let image = film.average();
-            variance.push(relmse(&image, &reference.pixels, 0.0) * k as f64 * cost(c));
-            variance_dropped.push(relmse(&image, &reference.pixels, 0.001) * k as f64 * cost(c));
-            direct.push(
-                relative_mean(wu, hu, moments_of(&own.snapshot().0, 0), &ref_mean, MomentFilter::default()) * cost(c),
-            );
+            error.push(relmse(&image, &reference.pixels, 0.0) * k as f64);
+            error_dropped.push(relmse(&image, &reference.pixels, 0.001) * k as f64);
+            own_moment.push(relative_mean(
+                wu,
+                hu,
+                moments_of(&own.snapshot().0, 0),
+                &ref_mean,
+                MomentFilter::default(),
+            ));
         }
+        let costs: Vec<f64> = candidates.iter().map(cost).collect();
+        let times_cost = |v: &[f64]| -> Vec<f64> { v.iter().zip(&costs).map(|(x, c)| x * c).collect() };
+        let (variance, variance_dropped, direct) =
+            (times_cost(&error), times_cost(&error_dropped), times_cost(&own_moment));
         let name_of = |i: usize| {
             let c = &candidates[i];
             if c.is_path_tracing() {
@@ -203,19 +201,15 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
         let predict = |snapshot: usize, order: MomentFilter| -> Vec<f64> {
             (0..candidates.len())
-                .map(|ci| {
-                    relative_mean(wu, hu, moments_of(&snapshots[snapshot].0, ci), &ref_mean, order)
-                        * cost(&candidates[ci])
-                })
+                .map(|ci| relative_mean(wu, hu, moments_of(&snapshots[snapshot].0, ci), &ref_mean, order) * costs[ci])
                 .collect()
         };
         let by_order: Vec<Vec<f64>> = MomentFilter::ALL.iter().map(|&order| predict(0, order)).collect();
         // Equal-time truth: relMSE × K × measured CPU seconds per iteration, in units of the
         // cost model's (its cost per unit is fitted over the candidates, so only the ranking and
         // the model's relative errors show).
-        let unit = candidates.iter().zip(&seconds).map(|(c, s)| s / cost(c)).sum::<f64>() / candidates.len() as f64;
-        let timed: Vec<f64> =
-            candidates.iter().enumerate().map(|(i, c)| variance[i] / cost(c) * seconds[i] / unit).collect();
+        let unit = seconds.iter().zip(&costs).map(|(s, c)| s / c).sum::<f64>() / candidates.len() as f64;
+        let timed: Vec<f64> = error.iter().zip(&seconds).map(|(e, s)| e * s / unit).collect();
         let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
         println!("\n### {}: truth's choice {} ", scene_name(path), name_of(argmin(&timed)));
         println!(
@@ -226,7 +220,7 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
             println!(
                 "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
                 name_of(i),
-                cost(&candidates[i]),
+                costs[i],
                 seconds[i] / unit,
                 variance[i],
                 timed[i],
@@ -272,9 +266,9 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
             .map(|(i, c)| {
                 serde_json::json!({
                     "nu": c.nu, "connections": c.connections, "merge": c.merge,
-                    "cost": cost(c), "calibrated_cost": calibrated_cost(c), "seconds": seconds[i],
-                    "relmse_k": variance[i] / cost(c), "relmse_k_dropped": variance_dropped[i] / cost(c),
-                    "measured_moment": direct[i] / cost(c), "predicted_moment": by_order[0][i] / cost(c),
+                    "cost": costs[i], "seconds": seconds[i],
+                    "relmse_k": error[i], "relmse_k_dropped": error_dropped[i],
+                    "measured_moment": own_moment[i], "predicted_moment": by_order[0][i] / costs[i],
                 })
             })
             .collect();

@@ -15,7 +15,20 @@ use super::cost::{CostConstants, PathStatistics, pixel_cost};
 /// tracing's, which is a measured ratio of its own).
 pub const FITTED_TERMS: usize = 7;
 
-/// The constants with term `pick` (in [`cost_features`]' order) at `value`, the rest 0.
+/// Term `pick` of `k`, in [`cost_features`]' order.
+fn term_mut(k: &mut CostConstants, pick: usize) -> &mut f64 {
+    match pick {
+        0 => &mut k.light_vertex,
+        1 => &mut k.light_vertex_walk,
+        2 => &mut k.connection,
+        3 => &mut k.connection_walk,
+        4 => &mut k.build,
+        5 => &mut k.query,
+        _ => &mut k.photon_shading,
+    }
+}
+
+/// The constants with term `pick` at `value` and every other, the unit included, at 0.
 fn with_term(pick: usize, value: f64) -> CostConstants {
     let mut k = CostConstants {
         camera_vertex: 0.0,
@@ -28,15 +41,7 @@ fn with_term(pick: usize, value: f64) -> CostConstants {
         connection_walk: 0.0,
         path_tracing: 0.0,
     };
-    *match pick {
-        0 => &mut k.light_vertex,
-        1 => &mut k.light_vertex_walk,
-        2 => &mut k.connection,
-        3 => &mut k.connection_walk,
-        4 => &mut k.build,
-        5 => &mut k.query,
-        _ => &mut k.photon_shading,
-    } = value;
+    *term_mut(&mut k, pick) = value;
     k
 }
 
@@ -95,15 +100,8 @@ pub fn fit_constants(samples: &[CostSample], path_tracing: f64) -> Option<CostCo
             Some(i) => active[i] = false,
             None => {
                 let mut fitted = CostConstants { camera_vertex: 1.0, path_tracing, ..with_term(0, 0.0) };
-                for (i, &v) in k.iter().enumerate() {
-                    let term = with_term(i, v);
-                    fitted.light_vertex += term.light_vertex;
-                    fitted.light_vertex_walk += term.light_vertex_walk;
-                    fitted.connection += term.connection;
-                    fitted.connection_walk += term.connection_walk;
-                    fitted.build += term.build;
-                    fitted.query += term.query;
-                    fitted.photon_shading += term.photon_shading;
+                for (pick, &value) in k.iter().enumerate() {
+                    *term_mut(&mut fitted, pick) = value;
                 }
                 return Some(fitted);
             }

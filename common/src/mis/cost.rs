@@ -215,12 +215,12 @@ pub fn pixel_cost(
     map_built: bool,
     pixels: u32,
 ) -> f64 {
-    let nu = candidate.nu as f64;
-    let n = candidate.light_paths(pixels) as f64;
     let (lc, ll) = (s.camera_vertices, s.light_vertices);
     if candidate.is_path_tracing() {
         return lc * k.path_tracing;
     }
+    let nu = candidate.nu as f64;
+    let n = candidate.light_paths(pixels) as f64;
     let connection = k.connection + k.connection_walk * (lc + ll);
     let light_vertex = k.light_vertex + k.light_vertex_walk * ll;
     let mut cost = lc * k.camera_vertex + lc * candidate.connections as f64 * connection + light_vertex * ll * nu;
