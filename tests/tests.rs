@@ -6,7 +6,9 @@
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Duration;
-use tessera_tests::{Coordinator, Worker, assert_same_image, local_render, rest, scene, tessera, wait_for};
+use tessera_tests::{
+    Coordinator, Worker, assert_same_image, local_render, local_render_with, rest, scene, tessera, wait_for,
+};
 
 const TIMEOUT: Duration = Duration::from_secs(240);
 
@@ -130,6 +132,45 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     assert_eq!(read_attribute(&out, "tessera/emis_updates").unwrap(), Some(2.0));
 }
 
+/// The path-tracing start on the farm. On caustic-glass (seed 4) the updates after 1 and 2
+/// keep path tracing (pt passes: odd iterations return no moments), the one after 4 picks a
+/// bidirectional strategy: the coordinator discards its film and renders the budget's 6
+/// iterations, 4..10, into a new one. The image, its sample counts and the decisions equal a
+/// local render's, bit for bit.
+#[test]
+fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() {
+    use tessera_common::film::exr::{read_attribute, read_sample_counts};
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let xml = std::fs::read(scene("caustic-glass")).unwrap();
+    let gem = std::fs::read(scene("caustic-glass").with_file_name("gem.obj")).unwrap();
+    let settings = json!({
+        "integrator": "emis-vcm", "spp": 6, "seed": 4,
+        "emis_pilot": "path-tracing", "emis_updates": [1, 2, 4],
+    });
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![("gem.obj".into(), gem)], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&c, id, None);
+    let updates = done["strategy"]["updates"].as_array().expect("EMIS decisions in the status");
+    let summary: Vec<_> = updates
+        .iter()
+        .map(|u| (u["iteration"].as_u64().unwrap(), u["reduced"].as_bool().unwrap(), u["restarted"].as_bool().unwrap()))
+        .collect();
+    assert_eq!(summary, [(1, true, false), (2, true, false), (4, true, true)], "{updates:?}");
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4"];
+    let local = local_render_with(dir.path(), &scene("caustic-glass"), "emis-vcm", 6, 4, &more);
+    assert_same_image(&out, &local);
+    assert!(read_sample_counts(&out).unwrap().iter().all(|&n| n == 6), "the kept iterations only");
+    assert_eq!(read_attribute(&out, "tessera/emis_kept_from").unwrap(), Some(4.0));
+    for key in ["tessera/emis_nu", "tessera/emis_connections", "tessera/emis_updates", "tessera/emis_kept_from"] {
+        assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap(), "{key}");
+    }
+}
+
 #[test]
 fn scene_with_assets_renders_over_rest() {
     // caustic-glass references gem.obj: the bundle must carry it to the workers
@@ -218,8 +259,15 @@ fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
 
 /// Kills the coordinator once `kill_after` (but fewer than `kill_before`) tiles are done,
 /// restarts it on the same data dir and checks that the job completes with every sample merged
-/// once and the local image.
-fn coordinator_killed_mid_job(integrator: &str, spp: u32, kill_after: u64, kill_before: u64) {
+/// once and the local image. `more`: further options of `tessera submit` and `tessera render`.
+fn coordinator_killed_mid_job(
+    name: &str,
+    integrator: &str,
+    spp: u32,
+    more: &[&str],
+    kill_after: u64,
+    kill_before: u64,
+) {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     // checkpoint after every merge, so that tiles are merged both before and after the crash
@@ -229,8 +277,9 @@ fn coordinator_killed_mid_job(integrator: &str, spp: u32, kill_after: u64, kill_
     // `tessera submit --wait` follows the job across the crash and downloads the result
     let out = dir.path().join("farm.exr");
     let mut submit = std::process::Command::new(tessera_tests::bin("tessera"))
-        .args(["submit", scene("cornell-box").to_str().unwrap(), "--server", &c.url, "--integrator", integrator])
+        .args(["submit", scene(name).to_str().unwrap(), "--server", &c.url, "--integrator", integrator])
         .args(["--spp", &spp.to_string(), "--seed", "8", "--wait", "-o", out.to_str().unwrap()])
+        .args(more)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -252,22 +301,36 @@ fn coordinator_killed_mid_job(integrator: &str, spp: u32, kill_after: u64, kill_
     let (_, resumed) = rest::get_json(&job_url(&c, &id), None);
     assert!(resumed["tiles_done"].as_u64().unwrap() >= before, "accepted tiles were lost: {resumed}");
     let done = wait_done(&c, &id, None);
-    assert_eq!(done["samples_done"], 256 * 256 * spp as u64, "every pixel sample merged exactly once: {done}");
+    // iterations a path-tracing start discarded were rendered (and merged) too
+    let updates = done["strategy"]["updates"].as_array().cloned().unwrap_or_default();
+    let discarded = updates.iter().find(|u| u["restarted"] == true).map_or(0, |u| u["iteration"].as_u64().unwrap());
+    let samples = 256 * 256 * (discarded + spp as u64);
+    assert_eq!(done["samples_done"], samples, "every pixel sample merged exactly once: {done}");
     let status = wait_for(TIMEOUT, "tessera submit --wait to finish", || submit.try_wait().unwrap());
     assert!(status.success(), "submit --wait did not survive the restart: {status:?}");
-    assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), integrator, spp, 8));
+    assert_same_image(&out, &local_render_with(dir.path(), &scene(name), integrator, spp, 8, more));
 }
 
 #[test]
 fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
-    coordinator_killed_mid_job("pt", 24, 3, 16);
+    coordinator_killed_mid_job("cornell-box", "pt", 24, &[], 3, 16);
 }
 
 /// The EMIS state (merged moments, statistics, guides, strategy) survives the crash too: killed
 /// after the updates at 1 and 4, inside the pass that collects moments for the update at 16.
 #[test]
 fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
-    coordinator_killed_mid_job("emis-vcm", 20, 6, 16);
+    coordinator_killed_mid_job("cornell-box", "emis-vcm", 20, &[], 6, 16);
+}
+
+/// A path-tracing start survives the crash with its restart: on caustic-glass (seed 8) the
+/// update after 1 iteration picks a bidirectional strategy and clears the film; the crash
+/// comes inside the pass collecting moments for the update at 16, so the restarted film, the
+/// full-set moments and the first kept iteration come back from the checkpoint.
+#[test]
+fn coordinator_killed_mid_emis_job_after_a_restart_resumes_with_the_new_film() {
+    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4,16"];
+    coordinator_killed_mid_job("caustic-glass", "emis-vcm", 20, &more, 6, 16);
 }
 
 #[test]

@@ -14,7 +14,7 @@
 //! assert!(s.validate().is_ok());
 //! ```
 
-use crate::integrator::emis::{EmisConfig, EmisMethod, EmisState, render_emis};
+use crate::integrator::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
 use crate::integrator::vcm::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use crate::mis::cost::CostModel;
@@ -132,6 +132,8 @@ pub struct RenderSettings {
     pub cost_model: CostModel,
     /// EMIS: whether moments are made relative before or after the box filter.
     pub moment_filter: MomentFilter,
+    /// EMIS: the method's own pilot, or path tracing first.
+    pub emis_pilot: PilotStart,
 }
 
 impl Default for RenderSettings {
@@ -152,6 +154,7 @@ impl Default for RenderSettings {
             merge_kernel: MomentSettings::default().merge_kernel,
             cost_model: CostModel::default(),
             moment_filter: MomentFilter::default(),
+            emis_pilot: PilotStart::default(),
         }
     }
 }
@@ -298,6 +301,7 @@ impl RenderSettings {
         config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
         config.constants = self.cost_model.constants();
         config.filters.order = self.moment_filter;
+        config.pilot = self.emis_pilot;
         config
     }
 }

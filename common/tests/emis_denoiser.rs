@@ -14,7 +14,7 @@ use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::mis::denoise::{Guides, denoised_intensity};
 use tessera_common::mis::estimator::MomentEstimator;
 use tessera_common::mis::filter::Image;
-use tessera_common::mis::optimize::{Decision, OptimizerInput, optimize};
+use tessera_common::mis::optimize::{Decision, MergeScope, OptimizerInput, optimize};
 use tessera_common::scene::Scene;
 
 fn check(name: &str) {
@@ -47,6 +47,7 @@ fn check(name: &str) {
             statistics: statistics.statistics(w * h),
             constants: config.constants,
             filters: config.filters,
+            merge_scope: MergeScope::PerPixel,
         })
     };
     let (ours, truth) = (decide(&denoised), decide(&converged));

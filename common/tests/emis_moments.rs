@@ -130,26 +130,36 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
 #[test]
 fn pt_strategy_records_moments_in_even_iterations_only() {
     use tessera_common::integrator::PathTracer;
-    use tessera_common::integrator::emis::{EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
+    use tessera_common::integrator::emis::{
+        CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations,
+    };
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
     let pt = Strategy { nu: 0.0, connections: 0, merge: None };
-    let (odd, none) = render_iterations(&scene, settings, &config, &pt, 3, 3..4, true);
+    let (odd, none) = render_iterations(&scene, settings, &config, &pt, 3, 3..4, Some(CandidateSet::Full));
     assert!(none.is_none(), "odd iterations of a pt strategy record nothing");
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut direct = TileAccum::new(Rect::full(w, h));
     let request = TileRequest { rect: Rect::full(w, h), samples: 3..4, seed: 3 };
     PathTracer { settings }.render_tile(&scene, &request, &mut direct);
     assert_eq!(odd.sum, direct.sum, "a non-recording iteration is rendered by pt");
-    let (_, even) = render_iterations(&scene, settings, &config, &pt, 3, 4..5, true);
+    let (_, even) = render_iterations(&scene, settings, &config, &pt, 3, 4..5, Some(CandidateSet::Full));
     let even = even.expect("even iterations record");
     assert_eq!((even.moments.iterations, even.statistics.iterations, even.guides.samples), (1, 1, 1));
     let late = GUIDE_ITERATIONS + GUIDE_ITERATIONS % 2;
-    let (_, late) = render_iterations(&scene, settings, &config, &pt, 3, late..late + 1, true);
+    let (_, late) = render_iterations(&scene, settings, &config, &pt, 3, late..late + 1, Some(CandidateSet::Full));
     let late = late.expect("even iterations record");
     assert_eq!((late.moments.iterations, late.guides.samples), (1, 0), "no guides after GUIDE_ITERATIONS");
     // a bidirectional strategy records every iteration
-    let (_, bidir) = render_iterations(&scene, settings, &config, &Strategy::pilot(EmisMethod::Bdpt), 3, 3..4, true);
+    let (_, bidir) = render_iterations(
+        &scene,
+        settings,
+        &config,
+        &Strategy::pilot(EmisMethod::Bdpt),
+        3,
+        3..4,
+        Some(CandidateSet::Full),
+    );
     assert!(bidir.is_some());
 }

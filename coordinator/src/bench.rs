@@ -53,6 +53,9 @@ pub struct BenchArgs {
     /// Equal-time mode: the EMIS moment filter order.
     #[arg(long, value_enum, default_value = "relative")]
     pub moment_filter: crate::cli::MomentFilterArg,
+    /// `--equal-time`: the pilots each `emis-*` integrator runs with (each a column).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "bidirectional")]
+    pub emis_pilot: Vec<crate::cli::EmisPilotArg>,
     /// Integrators compared in equal-time mode.
     #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
     pub integrators: Vec<IntegratorKind>,

@@ -10,34 +10,58 @@
 
 use crate::bench::BenchArgs;
 use crate::chart::{Group, write_bar_chart};
+use crate::cli::IntegratorKind;
 use crate::local::{make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tessera_common::integrator::PathSettings;
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
+use tessera_common::integrator::emis::{
+    CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, PilotStart, Strategy, render_iterations,
+};
 use tessera_common::mis::cost::PathStatistics;
 use tessera_common::mis::denoise::{Guides, denoised_intensity};
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::moments::MomentBuffer;
-use tessera_common::mis::optimize::{OptimizerInput, optimize};
+use tessera_common::mis::optimize::{MergeScope, OptimizerInput, optimize};
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::sampler::Sampler;
 use tessera_common::scene::Scene;
-use tessera_common::settings::RenderSettings;
+use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// One scene's equal-time results: (integrator, relMSE, samples/s).
 type Row = Vec<(String, f64, f64)>;
+
+/// The columns: each integrator of `--integrators`, the `emis-*` ones once per pilot of
+/// `--emis-pilot` (a path-tracing start is named `emis-vcm/pt-start`).
+fn columns(args: &BenchArgs) -> Vec<(IntegratorKind, PilotStart, String)> {
+    let mut out = Vec::new();
+    for &kind in &args.integrators {
+        if IntegratorName::from(kind).emis_method().is_none() {
+            out.push((kind, PilotStart::default(), kind.name().to_string()));
+            continue;
+        }
+        for pilot in args.emis_pilot.iter().map(|&p| PilotStart::from(p)) {
+            let name = match pilot {
+                PilotStart::Bidirectional => kind.name().to_string(),
+                PilotStart::PathTracing => format!("{}/pt-start", kind.name()),
+            };
+            out.push((kind, pilot, name));
+        }
+    }
+    out
+}
 
 fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Result<Row> {
     let scene = Scene::load(path)?;
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
-    for &kind in &args.integrators {
+    for (kind, pilot, name) in columns(args) {
         let renderer = make_renderer(
             &RenderSettings {
                 integrator: kind.into(),
                 cost_model: args.cost_model.into(),
                 moment_filter: args.moment_filter.into(),
+                emis_pilot: pilot,
                 ..RenderSettings::default()
             },
             &scene,
@@ -50,7 +74,7 @@ fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Resu
         };
         let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
         let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
-        rows.push((renderer.name().to_string(), relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
+        rows.push((name, relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
     }
     Ok(rows)
 }
@@ -66,7 +90,7 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
         println!(
             "relMSE against the reference (top 0.1 % dropped), speed-up over pt = relMSE(pt) / relMSE, samples/s\n"
         );
-        let names: Vec<String> = args.integrators.iter().map(|k| k.name().to_string()).collect();
+        let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
         println!("| scene | {} |", names.join(" | "));
         println!("|---|{}", "---|".repeat(names.len()));
         let mut table = Vec::new();
@@ -88,7 +112,13 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
             table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect::<Vec<f64>>()
         };
         println!();
-        for (a, b, target) in [("emis-vcm", "vcm", 1.2), ("emis-bdpt", "bdpt", 1.1), ("emis-vcm", "pt", 0.0)] {
+        for (a, b, target) in [
+            ("emis-vcm", "vcm", 1.2),
+            ("emis-bdpt", "bdpt", 1.1),
+            ("emis-vcm", "pt", 0.0),
+            ("emis-vcm/pt-start", "emis-vcm", 0.0),
+            ("emis-bdpt/pt-start", "emis-bdpt", 0.0),
+        ] {
             let r = ratio(a, b);
             if !r.is_empty() {
                 let per_scene: Vec<String> = r.iter().map(|x| format!("{x:.2}x")).collect();
@@ -160,7 +190,9 @@ fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, rep
         let guided = guided..(guided + iterations).min(GUIDE_ITERATIONS);
         let unguided = GUIDE_ITERATIONS + r * iterations..GUIDE_ITERATIONS + (r + 1) * iterations;
         for (i, (samples, collect)) in
-            [(guided.clone(), false), (guided, true), (unguided, true)].into_iter().enumerate()
+            [(guided.clone(), None), (guided, Some(CandidateSet::Full)), (unguided, Some(CandidateSet::Full))]
+                .into_iter()
+                .enumerate()
         {
             let t = Instant::now();
             let n = samples.len() as f64;
@@ -209,6 +241,7 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
         statistics: PathStatistics::default(),
         constants: config.constants,
         filters: config.filters,
+        merge_scope: MergeScope::PerPixel,
     });
     std::hint::black_box(decision);
     (t.elapsed().as_secs_f64(), denoise, moments.sums.len() * 4)

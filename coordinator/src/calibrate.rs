@@ -12,7 +12,7 @@ use crate::local::scene_name;
 use std::path::PathBuf;
 use std::time::Instant;
 use tessera_common::film::{Rect, TileAccum};
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::integrator::vcm::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::mis::calibrate::{CostSample, calibration_configurations, fit_constants};
@@ -41,8 +41,17 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
     let settings = PathSettings::from_scene(scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
     // the statistics of the pilot (two iterations), as the optimiser would see them
-    let (_, pilot) =
-        pool.install(|| render_iterations(scene, settings, &config, &Strategy::pilot(EmisMethod::Vcm), 1, 0..2, true));
+    let (_, pilot) = pool.install(|| {
+        render_iterations(
+            scene,
+            settings,
+            &config,
+            &Strategy::pilot(EmisMethod::Vcm),
+            1,
+            0..2,
+            Some(CandidateSet::Full),
+        )
+    });
     let statistics = pilot.expect("invariant: collected").statistics.statistics(pixels);
     let configs = calibration_configurations();
     let integrators: Vec<_> = configs
@@ -69,7 +78,7 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
         // path tracing as a final pass renders it: the `pt` integrator, rows in parallel
         let samples = 2 + round * iterations..2 + (round + 1) * iterations;
         let t = Instant::now();
-        pool.install(|| render_iterations(scene, settings, &config, &Strategy::path_tracing(), 7, samples, false));
+        pool.install(|| render_iterations(scene, settings, &config, &Strategy::path_tracing(), 7, samples, None));
         if round > 0 {
             best_pt = best_pt.min(t.elapsed().as_secs_f64());
         }

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
+use tessera_common::integrator::emis::PilotStart;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::mis::optimize::MomentFilter;
@@ -102,6 +103,29 @@ pub struct IntegratorArgs {
     /// reference, which lets bright features spread into dark neighbours).
     #[arg(long, value_enum, default_value = "relative")]
     pub moment_filter: MomentFilterArg,
+    /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
+    /// switches to the full candidate set, discarding the iterations so far, once a
+    /// bidirectional strategy wins.
+    #[arg(long, value_enum, default_value = "bidirectional")]
+    pub emis_pilot: EmisPilotArg,
+}
+
+impl From<EmisPilotArg> for PilotStart {
+    fn from(arg: EmisPilotArg) -> PilotStart {
+        match arg {
+            EmisPilotArg::Bidirectional => PilotStart::Bidirectional,
+            EmisPilotArg::PathTracing => PilotStart::PathTracing,
+        }
+    }
+}
+
+/// How an EMIS render starts (decision 5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EmisPilotArg {
+    /// The method's own pilot: VCM (BDPT) with N = P, c = 1 (χ = 1), kept in the image.
+    Bidirectional,
+    /// Path tracing, choosing from a reduced candidate set until a bidirectional one wins.
+    PathTracing,
 }
 
 /// The order of the EMIS moment filter and the division by the image.
@@ -159,6 +183,7 @@ impl IntegratorArgs {
         };
         settings.cost_model = self.cost_model.into();
         settings.moment_filter = self.moment_filter.into();
+        settings.emis_pilot = self.emis_pilot.into();
     }
 }
 

@@ -169,7 +169,7 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
                     &strategy_of(c),
                     request.seed,
                     request.samples.clone(),
-                    false,
+                    None,
                 )
             });
             seconds.push((crate::bench::cpu_seconds() - started) / k as f64);

@@ -166,6 +166,7 @@ pub fn write_outputs(
         let json = serde_json::json!({
             "integrator": integrator,
             "iterations": out.spp,
+            "kept_from": e.kept_from,
             "final": { "nu": e.strategy.nu, "connections": e.strategy.connections },
             "candidates": e.candidates,
             "updates": e.reports,
@@ -176,12 +177,15 @@ pub fn write_outputs(
     Ok(())
 }
 
-/// Adds what EMIS decided to an EXR: ν, c and the update count as attributes, the merge mask
+/// Adds what EMIS decided to an EXR: ν, c, the update count and the first kept iteration as
+/// attributes, the merge mask
 /// (`mask`, from [`EmisState::merge_mask`]) and the relative moment as layers.
 pub fn add_emis_extras<'a>(e: &'a EmisState, mask: &'a [f32], extras: &mut ExrExtras<'a>) {
     extras.attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
     extras.attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
     extras.attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
+    // a path-tracing start's discarded iterations: the image holds iterations kept_from.. only
+    extras.attributes.push(("tessera/emis_kept_from".into(), Attribute::Int(e.kept_from as i32)));
     extras.layers.push(("merge_mask", mask));
     if let Some(relative) = &e.relative_moment {
         extras.layers.push(("relative_moment", &relative.data));

@@ -4,6 +4,7 @@
 
 use crate::v1 as pb;
 use tessera_common::film::Rect;
+use tessera_common::integrator::emis::PilotStart;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::mis::optimize::MomentFilter;
@@ -58,6 +59,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<MomentFilter>("moment_filter", v)?,
             None => d.moment_filter,
         },
+        emis_pilot: match &s.emis_pilot {
+            Some(v) => parse_json_name::<PilotStart>("emis_pilot", v)?,
+            None => d.emis_pilot,
+        },
     })
 }
 
@@ -79,6 +84,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         merge_kernel: Some(json_name(&s.merge_kernel)),
         cost_model: Some(json_name(&s.cost_model)),
         moment_filter: Some(json_name(&s.moment_filter)),
+        emis_pilot: Some(json_name(&s.emis_pilot)),
     }
 }
 
@@ -109,6 +115,7 @@ mod tests {
             emis_updates: vec![2, 5],
             merge_ratio: MergeRatio::Reference,
             cost_model: CostModel::Reference,
+            emis_pilot: PilotStart::PathTracing,
             ..RenderSettings::default()
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);

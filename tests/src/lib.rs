@@ -134,21 +134,29 @@ pub fn tessera(args: &[&str]) -> (bool, String, String) {
 
 /// Renders locally with `tessera render` and returns the EXR path.
 pub fn local_render(dir: &Path, scene: &Path, integrator: &str, spp: u32, seed: u64) -> PathBuf {
+    local_render_with(dir, scene, integrator, spp, seed, &[])
+}
+
+/// [`local_render`] with more options for `tessera render`.
+pub fn local_render_with(dir: &Path, scene: &Path, integrator: &str, spp: u32, seed: u64, more: &[&str]) -> PathBuf {
     let out = dir.join(format!("local-{integrator}-{spp}-{seed}.exr"));
-    let (ok, _, err) = tessera(&[
+    let (spp, seed) = (spp.to_string(), seed.to_string());
+    let mut args = vec![
         "render",
         scene.to_str().expect("utf-8 path"),
         "--integrator",
         integrator,
         "--spp",
-        &spp.to_string(),
+        &spp,
         "--seed",
-        &seed.to_string(),
+        &seed,
         "--threads",
         "1",
         "-o",
         out.to_str().expect("utf-8 path"),
-    ]);
+    ];
+    args.extend_from_slice(more);
+    let (ok, _, err) = tessera(&args);
     assert!(ok, "local render failed: {err}");
     out
 }

@@ -7,7 +7,7 @@
 use std::time::Instant;
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::TileRequest;
-use tessera_common::integrator::emis::{Strategy, render_iterations};
+use tessera_common::integrator::emis::{CandidateSet, Strategy, render_iterations};
 use tessera_common::scene::Scene;
 use tessera_common::settings::Renderer;
 
@@ -27,8 +27,8 @@ pub struct TileWork {
 pub struct EmisWork {
     /// The pass's counts.
     pub strategy: Strategy,
-    /// Whether to return pilot data.
-    pub collect: bool,
+    /// Whether to return pilot data, and for which candidates.
+    pub collect: Option<CandidateSet>,
 }
 
 /// A rendered tile.

@@ -10,7 +10,7 @@ use crate::scene_cache::{MaskCache, SceneCache};
 use std::collections::HashSet;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tessera_common::integrator::emis::Strategy;
+use tessera_common::integrator::emis::{CandidateSet, Strategy};
 use tessera_common::integrator::vcm::MergeMask;
 use tessera_common::settings::Renderer;
 use tessera_proto::v1 as pb;
@@ -147,7 +147,8 @@ async fn emis_work(
         anyhow::bail!("lease strategy has light_paths_per_pixel {}", s.light_paths_per_pixel);
     }
     let strategy = Strategy { nu: s.light_paths_per_pixel, connections: s.connections, merge };
-    Ok(EmisWork { strategy, collect: s.collect_moments })
+    let set = if s.reduced_candidates { CandidateSet::Reduced } else { CandidateSet::Full };
+    Ok(EmisWork { strategy, collect: s.collect_moments.then_some(set) })
 }
 
 /// Renders one batch of leases (all of one job) and uploads the results.

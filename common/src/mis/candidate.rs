@@ -53,6 +53,14 @@ impl CandidateConfig {
         CandidateConfig { merging: false, ..Self::vcm() }
     }
 
+    /// The path-tracing start's reduced set (emis-spec §1, the reference's `OnDemandVcm`):
+    /// ν ∈ {0.5, 1}, c ∈ {0, 1}, merging as in `self`, plus path tracing: 9 candidates for
+    /// VCM, 5 for BDPT. A few strategies likely to beat path tracing where anything does,
+    /// judged from path-tracing moments alone.
+    pub fn reduced(&self) -> Self {
+        CandidateConfig { nu: vec![0.5, 1.0], connections: vec![0, 1], merging: self.merging }
+    }
+
     /// The Cartesian product ν × c × {merge off, on}, then pure path tracing (exactly once).
     pub fn candidates(&self) -> Vec<Candidate> {
         let merges: &[bool] = if self.merging { &[false, true] } else { &[false] };
@@ -84,6 +92,17 @@ mod tests {
         assert!(bdpt.iter().all(|c| !c.merge));
         let unique: std::collections::HashSet<String> = vcm.iter().map(|c| format!("{c:?}")).collect();
         assert_eq!(unique.len(), 51, "no duplicates");
+    }
+
+    #[test]
+    fn the_reduced_set_has_9_and_5_candidates_with_one_path_tracer() {
+        let vcm = CandidateConfig::vcm().reduced().candidates();
+        let bdpt = CandidateConfig::bdpt().reduced().candidates();
+        assert_eq!((vcm.len(), bdpt.len()), (9, 5));
+        assert!(vcm.iter().chain(&bdpt).all(|c| [0.0, 0.5, 1.0].contains(&c.nu) && c.connections <= 1));
+        assert_eq!(vcm.iter().filter(|c| c.merge).count(), 4);
+        assert!(bdpt.iter().all(|c| !c.merge));
+        assert_eq!(vcm.iter().chain(&bdpt).filter(|c| c.is_path_tracing()).count(), 2);
     }
 
     #[test]

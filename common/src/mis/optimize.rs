@@ -12,6 +12,10 @@
 //!    after zeroing values above each candidate's 99.9 % quantile, times the mean cost; the
 //!    argmin wins.
 //!
+//! With [`MergeScope::Global`] (the path-tracing start's first decisions, emis-spec §1 and §4)
+//! there is no pixel level: every candidate (ν, c, merge) is an image-level candidate that
+//! merges everywhere or nowhere, and χ is 1 or 0 in every pixel.
+//!
 //! Why relative first (evidence, 2026-11-21): the box filter keeps each candidate's total
 //! moment but moves it between pixels. Around a small, very bright feature (a visible light
 //! source, its glossy reflection) it carries that feature's huge absolute moment M ≈ Ī² into
@@ -111,6 +115,16 @@ impl Default for FilterSettings {
     }
 }
 
+/// Where the merge decision is made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MergeScope {
+    /// Per pixel: the merge mask χ of the pixel level (decision 1).
+    PerPixel,
+    /// For the whole image: merging everywhere and nowhere are separate image-level
+    /// candidates (the path-tracing start's reduced set).
+    Global,
+}
+
 /// Everything the optimiser reads.
 pub struct OptimizerInput<'a> {
     /// The candidates, in the moment buffer's order.
@@ -125,6 +139,8 @@ pub struct OptimizerInput<'a> {
     pub constants: CostConstants,
     /// Filter radii.
     pub filters: FilterSettings,
+    /// Per-pixel or global merge decisions.
+    pub merge_scope: MergeScope,
 }
 
 /// One image-level candidate's score, for reports.
@@ -134,6 +150,8 @@ pub struct ImageLevelScore {
     pub nu: f32,
     /// Connections.
     pub connections: u32,
+    /// With [`MergeScope::Global`]: whether this candidate merges (everywhere).
+    pub merge: Option<bool>,
     /// Mean relative second moment.
     pub relative_moment: f64,
     /// Mean pixel cost.
@@ -205,6 +223,86 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels)
     };
     // ---- pixel level: the merge bit of the best full candidate ----
+    let pixel_mask = match input.merge_scope {
+        MergeScope::PerPixel => Some(pixel_level(input, &filtered, &cost)),
+        MergeScope::Global => None,
+    };
+    // ---- image level ----
+    let thresholds: Vec<f32> = filtered
+        .par_iter()
+        .map(|img| {
+            let basis: Vec<f32> = img.data.iter().zip(&norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+            Image::from_data(w, h, basis).histogram_quantile(input.filters.outlier_quantile)
+        })
+        .collect();
+    let groups = image_level_groups(input.candidates, input.merge_scope);
+    // χ_j of group `g` in pixel `p`
+    let chi_at = |g: &Group, p: usize| match (g.merge, &pixel_mask) {
+        (Some(merge), _) => merge as u8 as f32,
+        (None, Some(mask)) => mask.data[p],
+        (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
+    };
+    let scores: Vec<ImageLevelScore> = groups
+        .par_iter()
+        .map(|g| {
+            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+            for p in 0..w * h {
+                let chi = chi_at(g, p) as f64;
+                let Some(c) = g.variant(chi > 0.1) else { continue };
+                total_cost +=
+                    cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
+                let i = input.image.data[p] as f64;
+                if i == 0.0 {
+                    continue;
+                }
+                let mut moment = filtered[c].data[p];
+                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
+                // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
+                if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
+                    moment = 0.0;
+                }
+                rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
+            }
+            ImageLevelScore {
+                nu: g.nu,
+                connections: g.connections,
+                merge: g.merge,
+                relative_moment: rel,
+                cost: total_cost,
+            }
+        })
+        .collect();
+    let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
+        let score = |g: usize| scores[g].relative_moment * scores[g].cost;
+        score(a).total_cmp(&score(b))
+    });
+    // nothing finite: path tracing (as every candidate, it cannot sample some pixel's paths)
+    let chosen = best.or_else(|| groups.iter().position(|g| g.nu == 0.0));
+    let (nu, connections) = chosen.map_or((0.0, 0), |g| (groups[g].nu, groups[g].connections));
+    let merge_mask = match pixel_mask {
+        Some(mask) => mask,
+        None => Image::filled(w, h, chosen.is_some_and(|g| groups[g].merge == Some(true)) as u8 as f32),
+    };
+    let relative_moment = Image::from_data(
+        w,
+        h,
+        (0..w * h)
+            .map(|p| {
+                let merge = merge_mask.data[p] > 0.1;
+                let i = input.image.data[p] as f64;
+                chosen
+                    .and_then(|g| groups[g].variant(merge))
+                    .map_or(0.0, |c| (filtered[c].data[p] as f64 / (i * i + 1e-4)) as f32)
+            })
+            .collect(),
+    );
+    Decision { nu, connections, merge_mask, scores, relative_moment }
+}
+
+/// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered
+/// moment × cost, dilated and blurred into χ.
+fn pixel_level(input: &OptimizerInput, filtered: &[Image], cost: &(dyn Fn(&Candidate, f64) -> f64 + Sync)) -> Image {
+    let (w, h) = (input.moments.width as usize, input.moments.height as usize);
     let costs: Vec<f64> = input.candidates.iter().map(|c| cost(c, if c.merge { 1.0 } else { 0.0 })).collect();
     let bits: Vec<f32> = (0..w * h)
         .into_par_iter()
@@ -222,84 +320,48 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
             }
         })
         .collect();
-    let merge_bits = Image::from_data(w, h, bits);
-    let merge_mask = merge_bits.dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box);
-    // ---- image level ----
-    let thresholds: Vec<f32> = filtered
-        .par_iter()
-        .map(|img| {
-            let basis: Vec<f32> = img.data.iter().zip(&norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
-            Image::from_data(w, h, basis).histogram_quantile(input.filters.outlier_quantile)
-        })
-        .collect();
-    let mut groups: Vec<(f32, u32)> = Vec::new();
-    for c in input.candidates {
-        if !groups.contains(&(c.nu, c.connections)) {
-            groups.push((c.nu, c.connections));
-        }
+    Image::from_data(w, h, bits).dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box)
+}
+
+/// An image-level candidate.
+struct Group {
+    nu: f32,
+    connections: u32,
+    /// `Some`: merges everywhere or nowhere; `None`: where the pixel-level mask says.
+    merge: Option<bool>,
+    /// The candidate a pixel uses where it does not merge and where it does.
+    variants: [Option<usize>; 2],
+}
+
+impl Group {
+    fn variant(&self, merge: bool) -> Option<usize> {
+        self.variants[merge as usize]
+    }
+}
+
+/// The image-level candidates: per distinct (ν, c) with per-pixel merging, or every candidate
+/// with global merging.
+fn image_level_groups(candidates: &[Candidate], scope: MergeScope) -> Vec<Group> {
+    if scope == MergeScope::Global {
+        return candidates
+            .iter()
+            .enumerate()
+            .map(|(i, c)| Group { nu: c.nu, connections: c.connections, merge: Some(c.merge), variants: [Some(i); 2] })
+            .collect();
     }
     let position = |nu: f32, conn: u32, merge: bool| {
-        input
-            .candidates
-            .iter()
-            .position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()))
+        candidates.iter().position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()))
     };
-    // per group, the candidate used where the pixel merges and where it does not; a group
-    // without the variant a pixel needs falls back to its other one
-    let variants: Vec<[Option<usize>; 2]> = groups
-        .iter()
-        .map(|&(nu, conn)| {
-            let (off, on) = (position(nu, conn, false), position(nu, conn, true));
-            [off.or(on), on.or(off)]
-        })
-        .collect();
-    let find = |group: usize, merge: bool| variants[group][merge as usize];
-    let scores: Vec<ImageLevelScore> = groups
-        .par_iter()
-        .enumerate()
-        .map(|(g, &(nu, conn))| {
-            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
-            for p in 0..w * h {
-                let chi = merge_mask.data[p] as f64;
-                let merge = chi > 0.1;
-                let Some(c) = find(g, merge) else { continue };
-                total_cost +=
-                    cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
-                let i = input.image.data[p] as f64;
-                if i == 0.0 {
-                    continue;
-                }
-                let mut moment = filtered[c].data[p];
-                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
-                // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
-                if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
-                    moment = 0.0;
-                }
-                rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
-            }
-            ImageLevelScore { nu, connections: conn, relative_moment: rel, cost: total_cost }
-        })
-        .collect();
-    let best = scores
-        .iter()
-        .filter(|s| s.relative_moment.is_finite())
-        .min_by(|a, b| (a.relative_moment * a.cost).total_cmp(&(b.relative_moment * b.cost)));
-    let (nu, connections) = best.map_or((0.0, 0), |s| (s.nu, s.connections));
-    let chosen = groups.iter().position(|&g| g == (nu, connections));
-    let relative_moment = Image::from_data(
-        w,
-        h,
-        (0..w * h)
-            .map(|p| {
-                let merge = merge_mask.data[p] > 0.1;
-                let i = input.image.data[p] as f64;
-                chosen
-                    .and_then(|g| find(g, merge))
-                    .map_or(0.0, |c| (filtered[c].data[p] as f64 / (i * i + 1e-4)) as f32)
-            })
-            .collect(),
-    );
-    Decision { nu, connections, merge_mask, scores, relative_moment }
+    let mut groups: Vec<Group> = Vec::new();
+    for c in candidates {
+        if groups.iter().any(|g| (g.nu, g.connections) == (c.nu, c.connections)) {
+            continue;
+        }
+        // a group without the variant a pixel needs falls back to its other one
+        let (off, on) = (position(c.nu, c.connections, false), position(c.nu, c.connections, true));
+        groups.push(Group { nu: c.nu, connections: c.connections, merge: None, variants: [off.or(on), on.or(off)] });
+    }
+    groups
 }
 
 #[cfg(test)]
@@ -338,6 +400,7 @@ mod tests {
             statistics: PathStatistics::default(),
             constants: CostConstants::default(),
             filters: FilterSettings { order, ..FilterSettings::default() },
+            merge_scope: MergeScope::PerPixel,
         })
     }
 
@@ -409,6 +472,47 @@ mod tests {
         let scaled = run(&candidates, &buffer(32, 32, &candidates, |p, c| 1e6 * m(p, c)), &img);
         assert_eq!((scaled.nu, scaled.connections), (d.nu, d.connections), "scaling all moments changes no decision");
         assert!(d.merge_mask.data.iter().all(|&v| v == 0.0), "bdpt never merges");
+    }
+
+    /// The path-tracing start's decisions: every reduced candidate is an image-level one, and
+    /// the winner merges everywhere or nowhere, whatever the per-pixel picture.
+    #[test]
+    fn global_merge_scope_scores_every_candidate_and_gives_a_constant_mask() {
+        let candidates = CandidateConfig::vcm().reduced().candidates();
+        let (w, h) = (48u32, 48u32);
+        let stats = PathStatistics::default();
+        let cost = |c: &Candidate| {
+            let chi = if c.merge { 1.0 } else { 0.0 };
+            pixel_cost(&CostConstants::default(), &stats, c, chi, !c.is_path_tracing(), w * h)
+        };
+        let img = Image::filled(w as usize, h as usize, 0.5);
+        for target in [
+            Candidate { nu: 0.5, connections: 1, merge: true },
+            Candidate { nu: 1.0, connections: 0, merge: false },
+            Candidate::PATH_TRACING,
+        ] {
+            // the target's moment × cost is half everyone else's, varying over the image; in
+            // a small corner merging is 10× worse (a per-pixel decision would not merge there)
+            let b = buffer(w, h, &candidates, |p, c| {
+                let corner = p % w < 4 && p / w < 4;
+                let v = if *c == target { 0.5 } else { 1.0 } * (1.0 + (p % 7) as f64 * 0.1);
+                if corner && c.merge { 10.0 * v / cost(c) } else { v / cost(c) }
+            });
+            let d = optimize(&OptimizerInput {
+                candidates: &candidates,
+                moments: &b,
+                image: &img,
+                statistics: stats,
+                constants: CostConstants::default(),
+                filters: FilterSettings::default(),
+                merge_scope: MergeScope::Global,
+            });
+            assert_eq!((d.nu, d.connections), (target.nu, target.connections), "{target:?}");
+            assert_eq!(d.scores.len(), 9);
+            assert!(d.scores.iter().all(|s| s.merge.is_some()));
+            let chi = if target.merge { 1.0 } else { 0.0 };
+            assert!(d.merge_mask.data.iter().all(|&v| v == chi), "χ = {chi} everywhere for {target:?}");
+        }
     }
 
     #[test]

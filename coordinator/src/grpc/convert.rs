@@ -5,6 +5,7 @@ use crate::job::emis::{MergeSpec, TileStrategy};
 use crate::job::model::{JobState, LeaseRef};
 use crate::job::service::{JobView, LeaseGrant};
 use tessera_common::film::Rect;
+use tessera_common::integrator::emis::CandidateSet;
 use tessera_common::settings::RenderSettings;
 use tessera_proto::v1 as pb;
 use tonic::Status;
@@ -55,6 +56,7 @@ fn strategy_to_pb(s: &TileStrategy) -> pb::TileStrategy {
             MergeSpec::Mask(digest) => Some(pb::tile_strategy::Merge::MergeMaskDigest(digest.clone())),
         },
         collect_moments: s.collect,
+        reduced_candidates: s.candidates == CandidateSet::Reduced,
     }
 }
 

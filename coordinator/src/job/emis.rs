@@ -8,7 +8,7 @@ use super::model::{JobSpec, TileSpec};
 use super::view::StrategyView;
 use crate::storage::BlobStore;
 use tessera_common::film::Film;
-use tessera_common::integrator::emis::{EmisState, PilotData, collects_moments};
+use tessera_common::integrator::emis::{CandidateSet, EmisState, PilotData, collects_moments};
 use tessera_common::integrator::vcm::MergeMask;
 
 /// Where a tile's merge probability comes from.
@@ -33,6 +33,8 @@ pub struct TileStrategy {
     pub merge: MergeSpec,
     /// Record and return pilot data.
     pub collect: bool,
+    /// The candidates the pilot data is for.
+    pub candidates: CandidateSet,
 }
 
 /// The size of an EMIS job's pilot data, copied out so that decoding a result (megabytes)
@@ -118,7 +120,7 @@ impl EmisJob {
                 MergeSpec::Mask(digest)
             }
         };
-        Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect })
+        Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect, candidates: self.state.candidate_set })
     }
 
     /// What this job's pilot data must look like.
@@ -144,10 +146,11 @@ impl EmisJob {
     }
 
     /// The update at a barrier after `iterations` iterations: denoise the film's image,
-    /// optimise, switch the strategy.
-    pub fn update(&mut self, film: &Film, iterations: u32) {
-        self.state.update(&film.average(), iterations);
+    /// optimise, switch the strategy. True if it ended a path-tracing start: the caller must
+    /// clear the film.
+    pub fn update(&mut self, film: &Film, iterations: u32) -> bool {
         self.mask_digest = None;
+        self.state.update(&film.average(), iterations).restarted
     }
 
     /// The decisions so far, for status views (`None` before the first update).

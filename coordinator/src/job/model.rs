@@ -83,6 +83,10 @@ pub struct Pass {
     /// EMIS: its tiles collect moments for an update at its end.
     #[serde(default)]
     pub collect: bool,
+    /// EMIS: the film was cleared before this pass (a path-tracing start ended), so the
+    /// image keeps only the iterations from here on.
+    #[serde(default)]
+    pub restart: bool,
 }
 
 /// What a tile renders.
@@ -198,9 +202,20 @@ impl Job {
         self.tiles.iter().map(|t| t.spec.pixel_samples()).sum()
     }
 
-    /// Samples per pixel merged (the end of the last merged pass's sample range).
+    /// Samples per pixel merged (the end of the last merged pass's sample range), counting
+    /// iterations a restart discarded.
     pub fn spp_merged(&self) -> u32 {
         self.tiles[..self.merged].iter().map(|t| t.spec.samples.end).max().unwrap_or(0)
+    }
+
+    /// The first iteration the film keeps: where the last restarting pass begins (0 if none).
+    pub fn kept_from(&self) -> u32 {
+        self.passes
+            .iter()
+            .rev()
+            .find(|p| p.restart)
+            .and_then(|p| self.tiles.get(p.tiles.start))
+            .map_or(0, |t| t.spec.samples.start)
     }
 
     /// Tiles accepted or merged.
@@ -218,7 +233,7 @@ impl Job {
         self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
     }
 
-    fn append_pass(&mut self, kind: PassKind, plan: PassPlan) -> Range<usize> {
+    fn append_pass(&mut self, kind: PassKind, plan: PassPlan, restart: bool) -> Range<usize> {
         let start = self.tiles.len();
         self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
             spec,
@@ -227,7 +242,7 @@ impl Job {
             failures: 0,
         }));
         let range = start..self.tiles.len();
-        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect });
+        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart });
         range
     }
 
@@ -317,7 +332,7 @@ impl JobsModel {
             finished_ms: None,
         };
         let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
-        let range = job.append_pass(kind, first);
+        let range = job.append_pass(kind, first, false);
         self.jobs.insert(id.to_string(), job);
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
@@ -476,7 +491,7 @@ impl JobsModel {
         let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
-        plan::after_pass(&j.spec, spp, elapsed_s, collected) == BarrierAction::Finish
+        plan::after_pass(&j.spec, spp, j.kept_from(), elapsed_s, collected) == BarrierAction::Finish
     }
 
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
@@ -497,10 +512,10 @@ impl JobsModel {
         // every planned tile is merged: the last pass's barrier
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
-        let action = plan::after_pass(&j.spec, j.spp_merged(), elapsed_s, collected);
+        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s, collected);
         match &action {
             BarrierAction::NextPass(plan) => {
-                let range = j.append_pass(PassKind::Final, plan.clone());
+                let range = j.append_pass(PassKind::Final, plan.clone(), false);
                 changes.entry(job.to_string()).or_default().extend(range);
             }
             BarrierAction::Optimize => j.state = JobState::Optimizing,
@@ -510,15 +525,19 @@ impl JobsModel {
     }
 
     /// The optimiser has chosen a strategy at an EMIS barrier: plan the next pass with it.
-    pub fn optimized(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+    /// `restart`: the update ended a path-tracing start, and the service cleared the film, so
+    /// a sample budget counts from the next pass on.
+    pub fn optimized(&mut self, job: &str, restart: bool, now_ms: u64) -> Result<Changes, TransitionError> {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state != JobState::Optimizing {
             return Err(TransitionError::NotOptimizing(job.to_string()));
         }
         j.state = JobState::Final;
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
-        let plan = plan::pass_after_update(&j.spec, j.spp_merged(), elapsed_s);
-        let range = j.append_pass(PassKind::Final, plan);
+        let spp = j.spp_merged();
+        let kept_from = if restart { spp } else { j.kept_from() };
+        let plan = plan::pass_after_update(&j.spec, spp, kept_from, elapsed_s);
+        let range = j.append_pass(PassKind::Final, plan, restart);
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());
         Ok(changes)

@@ -49,10 +49,12 @@ fn is_emis(spec: &JobSpec) -> bool {
 }
 
 /// Iterations the budget allows in total, as far as is known after `spp_done` took
-/// `elapsed_s` seconds (a time budget's is unknown before the first iteration).
-fn expected_total(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> u32 {
+/// `elapsed_s` seconds (a time budget's is unknown before the first iteration). A sample
+/// budget counts the iterations the film keeps, from `kept_from` on (EMIS: a path-tracing
+/// start's iterations are discarded when a bidirectional strategy wins).
+fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
     match (spec.settings.spp, spec.settings.time_s) {
-        (Some(n), _) => n,
+        (Some(n), _) => kept_from + n,
         (None, Some(budget)) if spp_done > 0 && elapsed_s > 0.0 => {
             ((budget / (elapsed_s / spp_done as f64)) as u32).max(spp_done)
         }
@@ -62,9 +64,9 @@ fn expected_total(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> u32 {
 
 /// Iterations the next pass may render: the rest of a sample budget, or for a time budget
 /// about a tenth of it, never planned past the deadline (as locally). 0: finished.
-fn next_count(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> u32 {
+fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
     match (spec.settings.spp, spec.settings.time_s) {
-        (Some(n), _) => n.saturating_sub(spp_done),
+        (Some(n), _) => (kept_from + n).saturating_sub(spp_done),
         (None, Some(budget)) => {
             let remaining = budget - elapsed_s;
             if remaining <= 0.0 || spp_done == 0 {
@@ -94,7 +96,7 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
 /// the speed.
 pub fn first_pass(spec: &JobSpec) -> PassPlan {
     let count = spec.settings.spp.unwrap_or(1);
-    plan_from(spec, 0, count, true, expected_total(spec, 0, 0.0))
+    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0))
 }
 
 /// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take
@@ -116,26 +118,27 @@ pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32, per_tile: u32) -> Vec<
     }
 }
 
-/// What to do at the barrier after a pass. `spp_done` samples per pixel are merged, rendering
-/// has run for `elapsed_s` seconds, and `collected` says whether the pass collected moments.
+/// What to do at the barrier after a pass. `spp_done` samples per pixel are merged (the film
+/// keeps those from `kept_from` on), rendering has run for `elapsed_s` seconds, and
+/// `collected` says whether the pass collected moments.
 /// An EMIS update is due when the pass collected up to an update point and iterations remain
 /// to use it (as `render_emis` decides locally).
-pub fn after_pass(spec: &JobSpec, spp_done: u32, elapsed_s: f64, collected: bool) -> BarrierAction {
-    let total = expected_total(spec, spp_done, elapsed_s);
+pub fn after_pass(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64, collected: bool) -> BarrierAction {
+    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
     if collected && spec.settings.emis_updates.contains(&spp_done) && spp_done < total {
         return BarrierAction::Optimize;
     }
-    match next_count(spec, spp_done, elapsed_s) {
+    match next_count(spec, spp_done, kept_from, elapsed_s) {
         0 => BarrierAction::Finish,
         count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total)),
     }
 }
 
 /// The pass after an EMIS update at `spp_done` (at least one iteration: the update was run
-/// because iterations remain).
-pub fn pass_after_update(spec: &JobSpec, spp_done: u32, elapsed_s: f64) -> PassPlan {
-    let total = expected_total(spec, spp_done, elapsed_s);
-    plan_from(spec, spp_done, next_count(spec, spp_done, elapsed_s).max(1), true, total)
+/// because iterations remain; `kept_from` is `spp_done` if the update restarted the film).
+pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> PassPlan {
+    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
+    plan_from(spec, spp_done, next_count(spec, spp_done, kept_from, elapsed_s).max(1), true, total)
 }
 
 #[cfg(test)]
@@ -172,18 +175,18 @@ mod tests {
             assert_eq!(t.rect, Rect::full(130, 70));
             assert_eq!(t.samples, i as u32..i as u32 + 1);
         }
-        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 1.0, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 0, 1.0, false), BarrierAction::Finish);
     }
 
     #[test]
     fn plan_time_budget_adds_passes_until_the_time_is_used() {
         let s = spec(IntegratorName::Pt, None, Some(10.0));
         assert!(first_pass(&s).tiles.iter().all(|t| t.samples == (0..1)));
-        match after_pass(&s, 1, 0.1, false) {
+        match after_pass(&s, 1, 0, 0.1, false) {
             BarrierAction::NextPass(p) => assert_eq!(p.tiles[0].samples, 1..11),
             other => panic!("{other:?}"),
         }
-        assert_eq!(after_pass(&s, 50, 10.5, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&s, 50, 0, 10.5, false), BarrierAction::Finish);
     }
 
     /// The passes and barriers of an EMIS job with a sample budget, as `render_emis` does
@@ -195,28 +198,47 @@ mod tests {
         let first = first_pass(&s);
         assert_eq!(first.tiles.len(), 1);
         assert!(first.collect);
-        assert_eq!(after_pass(&s, 1, 1.0, true), BarrierAction::Optimize);
-        let second = pass_after_update(&s, 1, 1.0);
+        assert_eq!(after_pass(&s, 1, 0, 1.0, true), BarrierAction::Optimize);
+        let second = pass_after_update(&s, 1, 0, 1.0);
         assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
-        assert_eq!(after_pass(&s, 4, 1.0, true), BarrierAction::Optimize);
-        let third = pass_after_update(&s, 4, 1.0);
+        assert_eq!(after_pass(&s, 4, 0, 1.0, true), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 0, 1.0);
         // after the last update the pass is cut into calls of FINAL_ITERATIONS_PER_CALL
         assert_eq!(third.collect, false);
         let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12]);
-        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 1.0);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0);
         let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
-        assert_eq!(after_pass(&s, 12, 1.0, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&s, 12, 0, 1.0, false), BarrierAction::Finish);
         // a budget that ends at an update point runs no update there, and collects nothing
         // for it
         let s = spec(IntegratorName::EmisBdpt, Some(4), None);
-        let after = pass_after_update(&s, 1, 1.0);
+        let after = pass_after_update(&s, 1, 0, 1.0);
         assert!(!after.collect);
         assert_eq!(after.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [1..4]);
         let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
         assert!(!one.collect);
         // other integrators never collect
         assert!(!first_pass(&spec(IntegratorName::Vcm, Some(12), None)).collect);
+    }
+
+    /// A path-tracing start discarded at the update after iteration 1: the sample budget
+    /// counts the 12 iterations the film keeps, 1..13, and the update schedule stays on the
+    /// iteration count (the next update after 4).
+    #[test]
+    fn plan_after_a_restart_renders_the_whole_budget_into_the_new_film() {
+        let s = spec(IntegratorName::EmisVcm, Some(12), None);
+        let second = pass_after_update(&s, 1, 1, 1.0);
+        let ranges: Vec<_> = second.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!((ranges, second.collect), (vec![1..2, 2..3, 3..4], true));
+        assert_eq!(after_pass(&s, 4, 1, 1.0, true), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 1, 1.0);
+        assert_eq!(third.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..12, 12..13]);
+        assert!(matches!(after_pass(&s, 12, 1, 1.0, false), BarrierAction::NextPass(_)));
+        assert_eq!(after_pass(&s, 13, 1, 1.0, false), BarrierAction::Finish);
+        // a time budget is wall time, whatever was discarded
+        let t = spec(IntegratorName::EmisVcm, None, Some(10.0));
+        assert_eq!(after_pass(&t, 40, 1, 10.5, false), BarrierAction::Finish);
     }
 }

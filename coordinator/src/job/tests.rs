@@ -36,7 +36,7 @@ fn merge_all(m: &mut JobsModel, job: &str, merges: &mut Vec<u32>, now: u64) {
         }
         if let (Some(BarrierAction::Optimize), _) = m.merged(job, r.end, now) {
             // the service runs the optimiser here
-            m.optimized(job, now).unwrap();
+            m.optimized(job, false, now).unwrap();
         }
     }
 }
@@ -157,7 +157,7 @@ fn time_budget_plans_passes_at_barriers() {
 fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     let mut m = JobsModel::default();
     m.submit("a", spec(IntegratorName::EmisVcm, 6, 0), 0).unwrap();
-    assert_eq!(m.optimized("a", 0), Err(TransitionError::NotOptimizing("a".into())));
+    assert_eq!(m.optimized("a", false, 0), Err(TransitionError::NotOptimizing("a".into())));
     let job = &m.jobs["a"];
     assert_eq!((job.passes.len(), job.passes[0].kind, job.collects(0)), (1, PassKind::Pilot, true));
     let (l, _) = m.lease("w", 8, 0, TTL);
@@ -167,7 +167,7 @@ fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     assert_eq!(action, Some(BarrierAction::Optimize));
     assert_eq!(m.jobs["a"].state, JobState::Optimizing);
     assert!(m.lease("w", 8, 1, TTL).0.is_empty(), "nothing to render while optimising");
-    m.optimized("a", 2).unwrap();
+    m.optimized("a", false, 2).unwrap();
     let job = &m.jobs["a"];
     assert_eq!(job.state, JobState::Final);
     assert_eq!((job.passes[1].tiles.clone(), job.passes[1].collect), (1..4, true));

@@ -12,6 +12,13 @@
 //! stays in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
 //!
+//! [`PilotStart::PathTracing`] starts with path tracing instead (the reference's
+//! `OnDemandVcm`; decision 5's option, checklist 13): its updates choose from a reduced set
+//! (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt wins. The first
+//! update a bidirectional candidate wins discards the image so far, restarts the moments for
+//! the full set and renders a sample budget's iterations in full after it; the updates that
+//! follow keep the schedule (their iteration counts include the discarded ones).
+//!
 //! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
 //! merges what workers return and runs the update at each barrier. [`render_emis`] is the
@@ -28,7 +35,7 @@ use super::guides::GuideBuffer;
 use super::vcm::{MergeConfig, MergeMask};
 use super::{Bidir, Integrator, PathSettings, TileRequest};
 use crate::film::{Film, Rect, TileAccum};
-use crate::mis::candidate::CandidateConfig;
+use crate::mis::candidate::{Candidate, CandidateConfig};
 use crate::mis::cost::{CostConstants, StatisticsSums};
 use crate::mis::denoise::DenoiseSettings;
 use crate::mis::estimator::{MomentEstimator, MomentSettings};
@@ -36,6 +43,7 @@ use crate::mis::moments::MomentBuffer;
 use crate::mis::optimize::FilterSettings;
 use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
 use crate::scene::Scene;
+use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::time::Instant;
 
@@ -73,6 +81,31 @@ pub enum EmisMethod {
     Vcm,
 }
 
+/// How an `emis-*` render starts (decision 5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PilotStart {
+    /// The method's own pilot: VCM (or BDPT) with N = P, c = 1 (and χ = 1), kept in the image.
+    #[default]
+    Bidirectional,
+    /// Path tracing first (the reference's `OnDemandVcm`, emis-spec §1 and §4): updates
+    /// choose from the reduced set ([`CandidateSet::Reduced`]) while path tracing wins. The
+    /// first update a bidirectional candidate wins discards the iterations rendered so far
+    /// (the image restarts with the new strategy, and a sample budget counts the kept
+    /// iterations only) and switches to the full set for the updates that follow.
+    PathTracing,
+}
+
+/// Which candidates moments are recorded for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CandidateSet {
+    /// The method's full set (decision 1): 51 for VCM, 26 for BDPT.
+    Full,
+    /// The path-tracing start's reduced set (see `CandidateConfig::reduced`), decided with
+    /// global merging.
+    Reduced,
+}
+
 /// Everything `emis-*` can be configured with.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EmisConfig {
@@ -92,6 +125,8 @@ pub struct EmisConfig {
     pub filters: FilterSettings,
     /// The denoiser (decision 7).
     pub denoise: DenoiseSettings,
+    /// The pilot: the method's own, or path tracing first.
+    pub pilot: PilotStart,
 }
 
 impl EmisConfig {
@@ -112,6 +147,15 @@ impl EmisConfig {
             constants: CostConstants::default(),
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
+            pilot: PilotStart::default(),
+        }
+    }
+
+    /// The candidates of `set`, in moment-buffer order.
+    pub fn candidates_of(&self, set: CandidateSet) -> Vec<Candidate> {
+        match set {
+            CandidateSet::Full => self.candidates.candidates(),
+            CandidateSet::Reduced => self.candidates.reduced().candidates(),
         }
     }
 
@@ -139,6 +183,19 @@ impl Strategy {
     /// Pure path tracing (rendered by the `pt` integrator when no moments are collected).
     pub fn path_tracing() -> Self {
         Strategy { nu: 0.0, connections: 0, merge: None }
+    }
+
+    /// Path tracing as the start of `method`: rendered by the VCM engine with χ = 0 for
+    /// `emis-vcm`, so that collecting iterations carry the merge densities the estimator
+    /// needs for the merging candidates.
+    pub fn path_tracing_start(method: EmisMethod) -> Self {
+        Strategy {
+            merge: match method {
+                EmisMethod::Bdpt => None,
+                EmisMethod::Vcm => Some(MergeMask::Constant(0.0)),
+            },
+            ..Self::path_tracing()
+        }
     }
 
     /// The pilot strategy of decision 5.
@@ -175,9 +232,10 @@ pub struct PilotData {
     pub guides: GuideBuffer,
 }
 
-/// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments,
-/// statistics and guides of those iterations, if [`collects_moments`] says so (the pilot
-/// data is `Some` exactly then). Deterministic for any thread count.
+/// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments of
+/// that set's candidates, the statistics and the guides of those iterations, if
+/// [`collects_moments`] says so (the pilot data is `Some` exactly then). Deterministic for
+/// any thread count.
 pub fn render_iterations(
     scene: &Scene,
     settings: PathSettings,
@@ -185,14 +243,14 @@ pub fn render_iterations(
     strategy: &Strategy,
     seed: u64,
     iterations: Range<u32>,
-    collect: bool,
+    collect: Option<CandidateSet>,
 ) -> (TileAccum, Option<PilotData>) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let rect = Rect::full(w, h);
     let mut accum = TileAccum::new(rect);
     let request = TileRequest { rect, samples: iterations.clone(), seed };
-    let collect = collect && collects_moments(strategy.nu, &iterations);
-    if !collect && strategy.nu == 0.0 {
+    let collect = collect.filter(|_| collects_moments(strategy.nu, &iterations));
+    if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), row by row in parallel and merged in order, so deterministic
         let pt = super::PathTracer { settings };
@@ -219,11 +277,11 @@ pub fn render_iterations(
         return (accum, None);
     }
     let integrator = strategy.integrator(settings, config.correlation_aware);
-    if !collect {
+    let Some(set) = collect else {
         integrator.render_tile(scene, &request, &mut accum);
         return (accum, None);
-    }
-    let candidates = config.candidates.candidates();
+    };
+    let candidates = config.candidates_of(set);
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
     integrator.with_observer(&estimator).render_tile(scene, &request, &mut accum);
     let (moments, statistics) = estimator.into_snapshot();
@@ -258,15 +316,17 @@ pub fn render_emis(
     let mut film = Film::new(w, h);
     let start = Instant::now();
     let mut done = 0u32;
-    // iterations the budget allows at the rate so far (unknown before the first)
-    let expected_total = |done: u32| match opts.budget {
-        Budget::Samples(n) => n,
+    // iterations the budget allows at the rate so far (unknown before the first); a sample
+    // budget counts the iterations the image keeps, from `kept_from` (after a path-tracing
+    // start was discarded) on
+    let expected_total = |done: u32, kept_from: u32| match opts.budget {
+        Budget::Samples(n) => kept_from + n,
         Budget::Time(_) if done == 0 => u32::MAX,
         Budget::Time(t) => ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32).max(done),
     };
     loop {
         let more = match opts.budget {
-            Budget::Samples(n) => done < n,
+            Budget::Samples(n) => done < state.kept_from + n,
             Budget::Time(t) => {
                 done == 0
                     || start.elapsed().as_secs_f64() + start.elapsed().as_secs_f64() / done as f64 <= t.as_secs_f64()
@@ -276,15 +336,15 @@ pub fn render_emis(
             break;
         }
         // moments are only worth collecting while another update can still come
-        if state.next_update().is_none_or(|u| u >= expected_total(done)) {
+        if state.next_update().is_none_or(|u| u >= expected_total(done, state.kept_from)) {
             state.stop_collecting();
         }
-        let collect = state.collecting();
-        let count = if collect {
+        let collect = state.collecting().then_some(state.candidate_set);
+        let count = if collect.is_some() {
             1
         } else {
             let left = match opts.budget {
-                Budget::Samples(n) => n - done,
+                Budget::Samples(n) => state.kept_from + n - done,
                 Budget::Time(_) if done == 0 => 1,
                 Budget::Time(t) => {
                     let per_iteration = start.elapsed().as_secs_f64() / done as f64;
@@ -301,12 +361,12 @@ pub fn render_emis(
             state.absorb(&p).expect("invariant: a local pilot has the state's shape");
         }
         done += count;
-        let total = expected_total(done);
+        let total = expected_total(done, state.kept_from);
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
-        if state.update_due(done) && done < total {
-            pool.install(|| state.update(&film.average(), done));
+        if state.update_due(done) && done < total && pool.install(|| state.update(&film.average(), done)).restarted {
+            film = Film::new(w, h);
         }
     }
-    Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done }, state })
+    Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })
 }

@@ -1,8 +1,14 @@
 //! The coordinator's side of `emis-*`: merges the pilot data of full-frame iteration ranges,
 //! and at each update barrier denoises the image, runs the optimiser and switches the strategy.
 //! Pure and synchronous (the farm calls it between passes); reports every update.
+//!
+//! A path-tracing start ([`PilotStart::PathTracing`]) decides from the reduced candidate set
+//! with global merging until a bidirectional candidate wins. That update restarts: the
+//! caller discards its image (the report says `restarted`), the moments and statistics
+//! start again for the full set, and [`EmisState::kept_from`] records the first iteration
+//! the image keeps.
 
-use super::{EmisConfig, EmisMethod, PilotData, Strategy};
+use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
 use crate::integrator::guides::GuideBuffer;
 use crate::integrator::vcm::MergeMask;
 use crate::mis::candidate::Candidate;
@@ -10,7 +16,7 @@ use crate::mis::cost::{PathStatistics, StatisticsSums};
 use crate::mis::denoise::{Guides, denoised_intensity};
 use crate::mis::filter::Image;
 use crate::mis::moments::MomentBuffer;
-use crate::mis::optimize::{ImageLevelScore, OptimizerInput, optimize};
+use crate::mis::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::time::Instant;
@@ -20,6 +26,12 @@ use std::time::Instant;
 pub struct UpdateReport {
     /// Iterations rendered before the update.
     pub iteration: u32,
+    /// The candidate set decided from (the path-tracing start's reduced one, or the full).
+    #[serde(default)]
+    pub reduced: bool,
+    /// A path-tracing start ended: the iterations so far were discarded.
+    #[serde(default)]
+    pub restarted: bool,
     /// Chosen light paths per pixel (0: path tracing).
     pub nu: f32,
     /// Chosen connections per camera vertex.
@@ -45,6 +57,9 @@ pub struct ScoreReport {
     pub nu: f32,
     /// c.
     pub connections: u32,
+    /// Reduced set only: whether the candidate merges (everywhere).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub merge: Option<bool>,
     /// Predicted mean relative second moment.
     pub relative_moment: f64,
     /// Mean cost per pixel (camera-vertex units).
@@ -58,6 +73,7 @@ impl From<&ImageLevelScore> for ScoreReport {
         ScoreReport {
             nu: s.nu,
             connections: s.connections,
+            merge: s.merge,
             relative_moment: s.relative_moment,
             cost: s.cost,
             work_normalised: s.relative_moment * s.cost,
@@ -69,8 +85,12 @@ impl From<&ImageLevelScore> for ScoreReport {
 pub struct EmisState {
     /// The configuration.
     pub config: EmisConfig,
+    /// Which candidates the moments are for.
+    pub candidate_set: CandidateSet,
     /// The candidates, in the moment buffer's order.
     pub candidates: Vec<Candidate>,
+    /// The first iteration the image keeps (0 unless a path-tracing start was discarded).
+    pub kept_from: u32,
     /// What the next iterations render with.
     pub strategy: Strategy,
     /// Merged moments.
@@ -92,10 +112,16 @@ pub struct EmisState {
 impl EmisState {
     /// The state before the pilot.
     pub fn new(config: EmisConfig, width: u32, height: u32) -> Self {
-        let candidates = config.candidates.candidates();
+        let (candidate_set, strategy) = match config.pilot {
+            PilotStart::Bidirectional => (CandidateSet::Full, Strategy::pilot(config.method)),
+            PilotStart::PathTracing => (CandidateSet::Reduced, Strategy::path_tracing_start(config.method)),
+        };
+        let candidates = config.candidates_of(candidate_set);
         let collecting = !config.updates.is_empty();
         EmisState {
-            strategy: Strategy::pilot(config.method),
+            strategy,
+            candidate_set,
+            kept_from: 0,
             moments: MomentBuffer::new(width, height, candidates.len()),
             statistics: StatisticsSums::default(),
             guides: GuideBuffer::new(width, height),
@@ -138,6 +164,8 @@ impl EmisState {
 
     /// Runs an update on the image so far (per-pixel means, row-major): denoise, optimise,
     /// switch the strategy. After the last configured update, moments are no longer collected.
+    /// When the report says `restarted`, the caller must discard its image: the iterations
+    /// before `iteration` are no longer part of the render.
     pub fn update(&mut self, image: &[[f32; 3]], iteration: u32) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
@@ -147,6 +175,7 @@ impl EmisState {
         let denoise_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let statistics = self.statistics.statistics((w * h) as u32);
+        let reduced = self.candidate_set == CandidateSet::Reduced;
         let decision = optimize(&OptimizerInput {
             candidates: &self.candidates,
             moments: &self.moments,
@@ -154,11 +183,15 @@ impl EmisState {
             statistics,
             constants: self.config.constants,
             filters: self.config.filters,
+            merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
         });
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
+        let restarted = reduced && decision.nu > 0.0;
         let report = UpdateReport {
             iteration,
+            reduced,
+            restarted,
             nu: decision.nu,
             connections: decision.connections,
             mean_merge_probability: mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len().max(1) as f64,
@@ -173,16 +206,25 @@ impl EmisState {
             nu = decision.nu,
             connections = decision.connections,
             merging = report.merging_pixels,
+            restarted,
             "emis update"
         );
-        self.strategy = Strategy {
-            nu: decision.nu,
-            connections: decision.connections,
-            merge: match self.config.method {
-                EmisMethod::Bdpt => None,
-                EmisMethod::Vcm => Some(MergeMask::PerPixel(Arc::new(decision.merge_mask.data.clone()))),
-            },
+        let merge = match (self.config.method, reduced) {
+            (EmisMethod::Bdpt, _) => None,
+            // merging everywhere or nowhere
+            (EmisMethod::Vcm, true) => Some(MergeMask::Constant(mask.first().copied().unwrap_or(0.0))),
+            (EmisMethod::Vcm, false) => Some(MergeMask::PerPixel(Arc::new(decision.merge_mask.data.clone()))),
         };
+        self.strategy = Strategy { nu: decision.nu, connections: decision.connections, merge };
+        if restarted {
+            // the path-tracing start is over: what follows is sampled with a bidirectional
+            // strategy, and later updates choose from the full set on its moments alone
+            self.candidate_set = CandidateSet::Full;
+            self.candidates = self.config.candidates_of(CandidateSet::Full);
+            self.moments = MomentBuffer::new(w as u32, h as u32, self.candidates.len());
+            self.statistics = StatisticsSums::default();
+            self.kept_from = iteration;
+        }
         self.relative_moment = Some(decision.relative_moment);
         self.updates_done += 1;
         if self.updates_done >= self.config.updates.len() {
@@ -199,5 +241,76 @@ impl EmisState {
             None => vec![0.0; n],
             Some(m) => (0..n as u32).map(|p| m.at(p)).collect(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SIDE: u32 = 16;
+
+    /// One iteration of pilot data in which every pixel has `moment(candidate)`.
+    fn pilot(state: &EmisState, moment: impl Fn(&Candidate) -> f32) -> PilotData {
+        let k = state.candidates.len();
+        let mut moments = MomentBuffer::new(SIDE, SIDE, k);
+        for (i, sum) in moments.sums.iter_mut().enumerate() {
+            *sum = moment(&state.candidates[i % k]);
+        }
+        moments.iterations = 1;
+        let statistics =
+            StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
+        PilotData { moments, statistics, guides: GuideBuffer::new(SIDE, SIDE) }
+    }
+
+    /// A path-tracing start: path tracing stays while it wins (nothing discarded); the update a
+    /// bidirectional candidate wins restarts (full set, empty moments and statistics, the
+    /// image kept from that iteration on) with that candidate's global merge decision.
+    #[test]
+    fn a_path_tracing_start_restarts_when_a_bidirectional_candidate_wins() {
+        let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+        let mut state = EmisState::new(config, SIDE, SIDE);
+        assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
+        assert_eq!(state.strategy, Strategy::path_tracing_start(EmisMethod::Vcm));
+        let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+        let pt_wins = pilot(&state, |c| if c.is_path_tracing() { 1.0 } else { 1e3 });
+        state.absorb(&pt_wins).unwrap();
+        let report = state.update(&image, 1).clone();
+        assert!(report.reduced && !report.restarted, "{report:?}");
+        assert_eq!(report.candidates.len(), 9);
+        assert_eq!((state.strategy.nu, state.candidate_set, state.kept_from), (0.0, CandidateSet::Reduced, 0));
+        assert_eq!(state.moments.iterations, 1, "moments are kept while path tracing stays");
+        // merged with the first iteration's moments, the target's mean is 10× lower than pt's
+        let target = Candidate { nu: 1.0, connections: 0, merge: true };
+        state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
+        let report = state.update(&image, 4).clone();
+        assert!(report.reduced && report.restarted, "{report:?}");
+        assert_eq!(
+            state.strategy,
+            Strategy { nu: 1.0, connections: 0, merge: Some(MergeMask::Constant(1.0)) },
+            "merging everywhere"
+        );
+        assert_eq!((state.candidate_set, state.candidates.len(), state.kept_from), (CandidateSet::Full, 51, 4));
+        assert_eq!((state.moments.iterations, state.moments.sums.len()), (0, 51 * (SIDE * SIDE) as usize));
+        assert!(state.moments.sums.iter().all(|&s| s == 0.0));
+        assert_eq!(state.statistics, StatisticsSums::default());
+        assert!(state.collecting(), "the update after 16 follows, on the full set");
+        state.absorb(&pilot(&state, |c| if c.nu == 0.5 && c.connections == 2 { 1e-3 } else { 1.0 })).unwrap();
+        let report = state.update(&image, 16).clone();
+        assert!(!report.reduced && !report.restarted, "{report:?}");
+        assert_eq!((state.strategy.nu, state.strategy.connections, state.kept_from), (0.5, 2, 4));
+        assert!(matches!(state.strategy.merge, Some(MergeMask::PerPixel(_))));
+    }
+
+    /// The bidirectional pilot (the default) never restarts, even when its first update
+    /// chooses a bidirectional strategy.
+    #[test]
+    fn the_default_pilot_never_restarts() {
+        let mut state = EmisState::new(EmisConfig::new(EmisMethod::Bdpt), SIDE, SIDE);
+        assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Full, 26));
+        state.absorb(&pilot(&state, |c| if c.nu == 2.0 && c.connections == 1 { 1e-3 } else { 1.0 })).unwrap();
+        let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1).clone();
+        assert!(!report.reduced && !report.restarted);
+        assert_eq!((state.strategy.nu, state.kept_from, state.moments.iterations), (2.0, 0, 1));
     }
 }

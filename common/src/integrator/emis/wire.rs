@@ -4,7 +4,7 @@
 //! every value's range, so a corrupt or hostile payload is refused with a reason instead of
 //! reaching the optimiser (or panicking).
 
-use super::{EmisConfig, EmisState, PilotData, Strategy, UpdateReport};
+use super::{CandidateSet, EmisConfig, EmisState, PilotData, Strategy, UpdateReport};
 use crate::integrator::guides::GuideBuffer;
 use crate::integrator::vcm::MergeMask;
 use crate::mis::cost::StatisticsSums;
@@ -166,6 +166,12 @@ struct StateMeta {
     collecting: bool,
     relative_moment: bool,
     reports: Vec<UpdateReport>,
+    /// The path-tracing start's reduced candidate set is still in use.
+    #[serde(default)]
+    reduced: bool,
+    /// The first iteration the image keeps.
+    #[serde(default)]
+    kept_from: u32,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -190,6 +196,8 @@ impl EmisState {
             collecting: self.collecting(),
             relative_moment: self.relative_moment.is_some(),
             reports: self.reports.clone(),
+            reduced: self.candidate_set == CandidateSet::Reduced,
+            kept_from: self.kept_from,
         };
         let json = serde_json::to_vec(&meta).expect("invariant: plain data serialises");
         let mut w = Writer(Vec::new());
@@ -216,6 +224,9 @@ impl EmisState {
         let meta: StateMeta =
             serde_json::from_slice(r.take(len, "the header")?).map_err(|e| format!("EMIS checkpoint: {e}"))?;
         let mut state = EmisState::new(config, width, height);
+        state.candidate_set = if meta.reduced { CandidateSet::Reduced } else { CandidateSet::Full };
+        state.candidates = state.config.candidates_of(state.candidate_set);
+        state.kept_from = meta.kept_from;
         let pilot = read_pilot(&mut r, width, height, state.candidates.len())?;
         let pixels = width as usize * height as usize;
         let merge = match meta.merge {
@@ -311,5 +322,25 @@ mod tests {
         assert!(!back.collecting());
         assert_eq!(back.relative_moment.as_ref().map(|i| &i.data), state.relative_moment.as_ref().map(|i| &i.data));
         assert!(EmisState::decode(config, 2, 3, &state.encode()).is_err());
+    }
+
+    /// A path-tracing start keeps its reduced candidate set across a checkpoint, and after the
+    /// restart the full set and the first kept iteration.
+    #[test]
+    fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() {
+        let config = EmisConfig { pilot: super::super::PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+        let mut state = EmisState::new(config.clone(), 3, 2);
+        assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
+        state.absorb(&pilot(3, 2, 9)).unwrap();
+        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
+        assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Reduced, 9, 0));
+        assert_eq!(back.moments, state.moments);
+        assert_eq!(back.strategy, state.strategy);
+        state.candidate_set = CandidateSet::Full;
+        state.candidates = config.candidates_of(CandidateSet::Full);
+        state.moments = MomentBuffer::new(3, 2, 51);
+        state.kept_from = 4;
+        let back = EmisState::decode(config, 3, 2, &state.encode()).unwrap();
+        assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Full, 51, 4));
     }
 }

@@ -77,8 +77,15 @@ impl JobService {
             return self.persist(inner, &changes, &[]);
         };
         let span = tracing::info_span!("emis_update", job_id = %job, iterations);
-        span.in_scope(|| emis.update(film, iterations));
-        let changes = inner.model.optimized(job, now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
+        let restarted = span.in_scope(|| emis.update(film, iterations));
+        if restarted {
+            // a path-tracing start ended: its iterations leave the image (the checkpoint
+            // below stores the empty film with the new strategy)
+            let (w, h) = (film.width, film.height);
+            inner.films.insert(job.to_string(), Film::new(w, h));
+        }
+        let changes =
+            inner.model.optimized(job, restarted, now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
         let upto = inner.model.jobs[job].merged;
         self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
         self.work.notify_waiters();
