@@ -259,12 +259,11 @@ fn sigterm_drains_a_worker_it_finishes_and_uploads_its_tile() {
 
 /// Kills the coordinator once `kill_after` (but fewer than `kill_before`) tiles are done,
 /// restarts it on the same data dir and checks that the job completes with every sample merged
-/// once and the local image. `more`: further options of `tessera submit` and `tessera render`.
+/// once and the local image. `more`: further options of `tessera submit` and `tessera render`;
+/// `discarded`: the iterations an EMIS path-tracing start must have discarded.
 fn coordinator_killed_mid_job(
-    name: &str,
-    integrator: &str,
-    spp: u32,
-    more: &[&str],
+    (name, integrator, spp, more): (&str, &str, u32, &[&str]),
+    discarded: u64,
     kill_after: u64,
     kill_before: u64,
 ) {
@@ -303,24 +302,29 @@ fn coordinator_killed_mid_job(
     let done = wait_done(&c, &id, None);
     // iterations a path-tracing start discarded were rendered (and merged) too
     let updates = done["strategy"]["updates"].as_array().cloned().unwrap_or_default();
-    let discarded = updates.iter().find(|u| u["restarted"] == true).map_or(0, |u| u["iteration"].as_u64().unwrap());
+    let restart = updates.iter().find(|u| u["restarted"] == true).map_or(0, |u| u["iteration"].as_u64().unwrap());
+    assert_eq!(restart, discarded, "the path-tracing start ends where expected: {updates:?}");
     let samples = 256 * 256 * (discarded + spp as u64);
     assert_eq!(done["samples_done"], samples, "every pixel sample merged exactly once: {done}");
     let status = wait_for(TIMEOUT, "tessera submit --wait to finish", || submit.try_wait().unwrap());
     assert!(status.success(), "submit --wait did not survive the restart: {status:?}");
     assert_same_image(&out, &local_render_with(dir.path(), &scene(name), integrator, spp, 8, more));
+    if discarded > 0 {
+        let kept_from = tessera_common::film::exr::read_attribute(&out, "tessera/emis_kept_from").unwrap();
+        assert_eq!(kept_from, Some(discarded as f64));
+    }
 }
 
 #[test]
 fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
-    coordinator_killed_mid_job("cornell-box", "pt", 24, &[], 3, 16);
+    coordinator_killed_mid_job(("cornell-box", "pt", 24, &[]), 0, 3, 16);
 }
 
 /// The EMIS state (merged moments, statistics, guides, strategy) survives the crash too: killed
 /// after the updates at 1 and 4, inside the pass that collects moments for the update at 16.
 #[test]
 fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
-    coordinator_killed_mid_job("cornell-box", "emis-vcm", 20, &[], 6, 16);
+    coordinator_killed_mid_job(("cornell-box", "emis-vcm", 20, &[]), 0, 6, 16);
 }
 
 /// A path-tracing start survives the crash with its restart: on caustic-glass (seed 8) the
@@ -330,7 +334,7 @@ fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
 #[test]
 fn coordinator_killed_mid_emis_job_after_a_restart_resumes_with_the_new_film() {
     let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4,16"];
-    coordinator_killed_mid_job("caustic-glass", "emis-vcm", 20, &more, 6, 16);
+    coordinator_killed_mid_job(("caustic-glass", "emis-vcm", 20, &more), 1, 6, 16);
 }
 
 #[test]

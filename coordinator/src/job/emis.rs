@@ -148,8 +148,16 @@ impl EmisJob {
     /// The update at a barrier after `iterations` iterations: denoise the film's image,
     /// optimise, switch the strategy. True if it ended a path-tracing start: the caller must
     /// clear the film.
+    ///
+    /// Idempotent: the update's checkpoint can land before the transition it belongs to is
+    /// committed (both name the same merged count), and a restart in between comes back to
+    /// the barrier with the state the update already produced. That state's last report is
+    /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
     pub fn update(&mut self, film: &Film, iterations: u32) -> bool {
         self.mask_digest = None;
+        if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
+            return done.restarted;
+        }
         self.state.update(&film.average(), iterations).restarted
     }
 
@@ -192,6 +200,24 @@ mod tests {
         moments.iterations = iterations;
         let statistics = StatisticsSums { iterations: iterations as u64, ..Default::default() };
         PilotData { moments, statistics, guides: GuideBuffer::new(4, 2) }
+    }
+
+    /// Running the update of a barrier again (a restart between its checkpoint and the commit
+    /// of its transition) leaves the state as the first run made it.
+    #[test]
+    fn an_update_runs_once_per_barrier() {
+        let mut job = EmisJob::new(&spec()).unwrap();
+        job.absorb(&pilot(&job, 1)).unwrap();
+        let film = Film::new(4, 2);
+        let restarted = job.update(&film, 1);
+        let (strategy, reports) = (job.state.strategy.clone(), job.state.reports.len());
+        assert_eq!(job.update(&film, 1), restarted);
+        assert_eq!(
+            (job.state.strategy.clone(), job.state.reports.len(), job.state.updates_done),
+            (strategy, reports, 1)
+        );
+        job.update(&film, 4);
+        assert_eq!(job.state.reports.len(), 2, "the next barrier's update runs");
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! every value's range, so a corrupt or hostile payload is refused with a reason instead of
 //! reaching the optimiser (or panicking).
 
-use super::{CandidateSet, EmisConfig, EmisState, PilotData, Strategy, UpdateReport};
+use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
 use crate::integrator::guides::GuideBuffer;
 use crate::integrator::vcm::MergeMask;
 use crate::mis::cost::StatisticsSums;
@@ -223,6 +223,9 @@ impl EmisState {
         let len = r.u32("the header")? as usize;
         let meta: StateMeta =
             serde_json::from_slice(r.take(len, "the header")?).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+        if meta.reduced && (config.pilot != PilotStart::PathTracing || meta.kept_from > 0) {
+            return Err("EMIS checkpoint: a reduced candidate set without a path-tracing start in progress".into());
+        }
         let mut state = EmisState::new(config, width, height);
         state.candidate_set = if meta.reduced { CandidateSet::Reduced } else { CandidateSet::Full };
         state.candidates = state.config.candidates_of(state.candidate_set);
@@ -328,7 +331,7 @@ mod tests {
     /// restart the full set and the first kept iteration.
     #[test]
     fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() {
-        let config = EmisConfig { pilot: super::super::PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+        let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
         let mut state = EmisState::new(config.clone(), 3, 2);
         assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
         state.absorb(&pilot(3, 2, 9)).unwrap();
@@ -340,7 +343,13 @@ mod tests {
         state.candidates = config.candidates_of(CandidateSet::Full);
         state.moments = MomentBuffer::new(3, 2, 51);
         state.kept_from = 4;
-        let back = EmisState::decode(config, 3, 2, &state.encode()).unwrap();
+        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
         assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Full, 51, 4));
+        // a reduced set after a restart, or with the default pilot, is corrupt
+        state.candidate_set = CandidateSet::Reduced;
+        assert!(EmisState::decode(config, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
+        state.kept_from = 0;
+        let bidirectional = EmisConfig::new(EmisMethod::Vcm);
+        assert!(EmisState::decode(bidirectional, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
     }
 }

@@ -192,13 +192,16 @@ impl JobService {
         };
         {
             for id in svc_ids {
-                if svc.lock().model.jobs[&id].state == JobState::Optimizing {
-                    // stopped between a barrier and its update: run the update now
-                    svc.optimize(&mut svc.lock(), &id, now_ms)?;
-                }
+                // accepted tiles after the checkpoint first: an update must see the whole
+                // pass (merging the pass's last tile runs its barrier, and the update, again)
                 let finishing = svc.merge_ready(&mut svc.lock(), &id, now_ms, Changes::new(), Vec::new())?;
                 if let Some(f) = finishing {
                     svc.finish(f)?;
+                }
+                if svc.lock().model.jobs[&id].state == JobState::Optimizing {
+                    // stopped between a barrier and its update, with the pass in the
+                    // checkpoint: run the update now
+                    svc.optimize(&mut svc.lock(), &id, now_ms)?;
                 }
             }
             let ticket = svc.lock().ticket;
