@@ -7,7 +7,7 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Duration;
 use tessera_tests::{
-    Coordinator, Worker, assert_same_image, local_render, local_render_with, rest, scene, tessera, wait_for,
+    Coordinator, Worker, assert_same_image, farm, local_render, local_render_with, rest, scene, tessera, wait_for,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -44,8 +44,7 @@ fn download(url: &str, token: Option<&str>, path: &Path) {
 #[test]
 fn grpc_submit_pt_with_two_workers_equals_local_render() {
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
-    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let (c, _w) = farm(dir.path(), 2);
     let out = dir.path().join("farm.exr");
     let box_scene = scene("cornell-box");
     let (ok, stdout, stderr) = tessera(&[
@@ -76,8 +75,7 @@ fn grpc_submit_pt_with_two_workers_equals_local_render() {
 #[test]
 fn rest_submit_vcm_equals_local_render_and_reports_progress() {
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
-    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let (c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     let (status, job) =
         rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "vcm", "spp": 3, "seed": 9}));
@@ -107,8 +105,7 @@ fn rest_submit_vcm_equals_local_render_and_reports_progress() {
 fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     use tessera_common::film::exr::{read_attribute, read_layer};
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
-    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let (c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     // updates after 1 and 4; the 10 final iterations are two calls (8 + 2) on both sides
     let settings = json!({"integrator": "emis-vcm", "spp": 14, "seed": 4});
@@ -141,8 +138,7 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
 fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() {
     use tessera_common::film::exr::{read_attribute, read_sample_counts};
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
-    let _w: Vec<_> = (0..2).map(|_| Worker::start(&c.url, &dir.path().join("cache"), &[])).collect();
+    let (c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("caustic-glass")).unwrap();
     let gem = std::fs::read(scene("caustic-glass").with_file_name("gem.obj")).unwrap();
     let settings = json!({

@@ -122,6 +122,14 @@ impl Drop for Worker {
     }
 }
 
+/// A coordinator on a free loopback port with its data in `dir/data`, and `workers` workers
+/// sharing `dir/cache` (stopped when dropped, workers first).
+pub fn farm(dir: &Path, workers: usize) -> (Coordinator, Vec<Worker>) {
+    let c = Coordinator::start(&dir.join("data"), "127.0.0.1:0", &[]);
+    let w = (0..workers).map(|_| Worker::start(&c.url, &dir.join("cache"), &[])).collect();
+    (c, w)
+}
+
 /// Runs `tessera ARGS` and returns (success, stdout, stderr).
 pub fn tessera(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(bin("tessera")).args(args).output().expect("run tessera");
