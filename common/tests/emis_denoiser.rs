@@ -6,13 +6,11 @@
 mod common;
 
 use common::scene_path;
+use tessera_common::film::Film;
 use tessera_common::film::exr::read_rgb;
-use tessera_common::film::{Film, Rect, TileAccum};
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy};
-use tessera_common::integrator::guides::GuideBuffer;
-use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::integrator::PathSettings;
+use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
 use tessera_common::mis::denoise::{Guides, denoised_intensity};
-use tessera_common::mis::estimator::MomentEstimator;
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::optimize::{Decision, MergeScope, OptimizerInput, optimize};
 use tessera_common::scene::Scene;
@@ -23,17 +21,13 @@ fn check(name: &str) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let config = EmisConfig::new(EmisMethod::Vcm);
     let candidates = config.candidates.candidates();
-    let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
-    let full = Rect::full(w, h);
-    let mut accum = TileAccum::new(full);
-    Strategy::pilot(EmisMethod::Vcm)
-        .integrator(PathSettings::from_scene(&scene, None), config.correlation_aware)
-        .with_observer(&estimator)
-        .render_tile(&scene, &TileRequest { rect: full, samples: 0..1, seed: 3 }, &mut accum);
+    let settings = PathSettings::from_scene(&scene, None);
+    let pilot = Strategy::pilot(EmisMethod::Vcm);
+    let (accum, data) = render_iterations(&scene, settings, &config, &pilot, 3, 0..1, Some(CandidateSet::Full));
+    let PilotData { moments, statistics, guides } = data.expect("the pilot collects moments");
     let mut film = Film::new(w, h);
     film.merge_tile(&accum);
-    let (moments, statistics) = estimator.snapshot();
-    let (albedo, normal, depth) = GuideBuffer::render(&scene, 3, 0..1).means();
+    let (albedo, normal, depth) = guides.means();
     let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
     let denoised = denoised_intensity(w as usize, h as usize, &film.average(), &guides, &config.denoise);
     let converged =

@@ -163,3 +163,38 @@ fn pt_strategy_records_moments_in_even_iterations_only() {
     );
     assert!(bidir.is_some());
 }
+
+/// The denoiser's guides come from the pilot's own primary vertices: on cornell-box, where
+/// every surface is diffuse, a one-sample albedo is exactly a reflectance of the scene;
+/// normals are unit, distances positive, and two calls merge into the guides of one.
+#[test]
+fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
+    use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let settings = PathSettings::from_scene(&scene, None);
+    let config = EmisConfig::new(EmisMethod::Bdpt);
+    let pilot = Strategy::pilot(EmisMethod::Bdpt);
+    let guides = |iterations| {
+        let (_, data) = render_iterations(&scene, settings, &config, &pilot, 7, iterations, Some(CandidateSet::Full));
+        data.expect("the pilot collects").guides
+    };
+    let one = guides(0..1);
+    assert_eq!(one.samples, 1);
+    let reflectances = [[0.885809, 0.698859, 0.666422], [0.105421, 0.37798, 0.076425], [0.570068, 0.043014, 0.044371]];
+    let mut hits = 0;
+    for ((albedo, normal), depth) in one.albedo.iter().zip(&one.normal).zip(&one.depth) {
+        if *depth == 0.0 {
+            assert_eq!((*albedo, *normal), ([0.0; 3], [0.0; 3]), "an escaped camera ray has no guides");
+            continue;
+        }
+        hits += 1;
+        assert!(*depth > 0.0);
+        assert!((glam::Vec3::from_array(*normal).length() - 1.0).abs() < 1e-4, "unit normal {normal:?}");
+        let is = |r: &[f32; 3]| r.iter().zip(albedo).all(|(a, b)| (a - b).abs() < 1e-4);
+        assert!(*albedo == [0.0; 3] || reflectances.iter().any(is), "albedo {albedo:?} is a reflectance");
+    }
+    assert!(hits > one.depth.len() / 2, "most camera rays hit the box");
+    let mut merged = one.clone();
+    merged.merge(&guides(1..2)).unwrap();
+    assert_eq!(merged, guides(0..2), "guides of two calls add up to one call's, bit for bit");
+}

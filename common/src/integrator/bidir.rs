@@ -21,7 +21,7 @@
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
 use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
-use super::observer::{IterationStart, NoObserver, PathCounters, SampleObserver};
+use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver};
 use super::path::light_path::trace_light_path;
 use super::path::mis::{MergeCounts, SampleCounts};
 use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
@@ -273,7 +273,12 @@ impl<O: SampleObserver> Bidir<O> {
                     }
                 }
             }
+            // the denoiser's guides: reported once the primary vertex's BSDF sample is known
+            let primary = |albedo: Rgb| PrimaryHit { pixel, albedo, normal: hit.frame.n, distance: hit.t };
             if depth >= max_edges {
+                if depth == 1 {
+                    self.observer.on_primary_hit(&primary(Rgb::ZERO));
+                }
                 break;
             }
             let material = &scene.materials[shape.material as usize];
@@ -316,7 +321,12 @@ impl<O: SampleObserver> Bidir<O> {
             let frame = hit.frame;
             let wo = frame.to_local(hit.wo);
             let (uc, u) = (sampler.next_1d(), sampler.next_2d());
-            let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            let sampled = material.sample(wo, uc, u, TransportMode::Radiance);
+            if depth == 1 {
+                let albedo = sampled.as_ref().map_or(Rgb::ZERO, |bs| bs.weight);
+                self.observer.on_primary_hit(&primary(if albedo.is_finite() { albedo } else { Rgb::ZERO }));
+            }
+            let Some(bs) = sampled else { break };
             beta *= bs.weight;
             eta *= bs.eta;
             // Russian roulette as in Mitsuba's path (the MIS weights still sum to one per path,

@@ -1,15 +1,12 @@
 //! Denoiser guides (emis-spec §5, decision 7): per pixel, the albedo and shading normal at the
 //! primary hit and its distance, averaged over the pilot iterations. Albedo is a one-sample
 //! estimate of the directional albedo (the weight of one BSDF sample), which works for every
-//! material, delta lobes included. Sums with a sample count, so buffers from workers add up.
+//! material, delta lobes included. The pilot's own camera paths supply them through the
+//! sample hooks ([`GuideCollector`]), so guides cost no extra rays. Sums with a sample count,
+//! so buffers from workers add up.
 
-use crate::bsdf::TransportMode;
-use crate::math::Rgb;
-use crate::sampler::Sampler;
-use crate::scene::Scene;
-use glam::Vec2;
-use rayon::prelude::*;
-use std::ops::Range;
+use super::observer::{IterationStart, PrimaryHit, SampleObserver, SampleRecord};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 /// Guide sums of a full frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,23 +37,6 @@ impl GuideBuffer {
             depth: vec![0.0; n],
             samples: 0,
         }
-    }
-
-    /// Renders one guide sample per pixel for each iteration in `iterations`.
-    pub fn render(scene: &Scene, seed: u64, iterations: Range<u32>) -> Self {
-        let (w, h) = (scene.camera.width, scene.camera.height);
-        let mut out = GuideBuffer::new(w, h);
-        let rows: Vec<Vec<([f32; 3], [f32; 3], f32)>> = (0..h)
-            .into_par_iter()
-            .map(|y| (0..w).map(|x| pixel_guides(scene, seed, y * w + x, x, y, iterations.clone())).collect())
-            .collect();
-        for (i, (a, n, d)) in rows.into_iter().flatten().enumerate() {
-            out.albedo[i] = a;
-            out.normal[i] = n;
-            out.depth[i] = d;
-        }
-        out.samples = iterations.len() as u32;
-        out
     }
 
     /// Adds another buffer of the same size.
@@ -97,29 +77,70 @@ impl GuideBuffer {
     }
 }
 
-fn pixel_guides(
-    scene: &Scene,
-    seed: u64,
-    pixel: u32,
-    x: u32,
-    y: u32,
-    iterations: Range<u32>,
-) -> ([f32; 3], [f32; 3], f32) {
-    let (mut albedo, mut normal, mut depth) = (Rgb::ZERO, glam::Vec3::ZERO, 0.0f32);
-    for it in iterations {
-        let mut s = Sampler::for_guide(seed, pixel, it);
-        let ray = scene.camera.generate_ray(Vec2::new(x as f32, y as f32) + s.next_2d());
-        let Some(hit) = scene.intersect(&ray) else { continue };
-        let material = &scene.materials[scene.shapes[hit.shape as usize].material as usize];
-        let wo = hit.frame.to_local(hit.wo);
-        let (uc, u) = (s.next_1d(), s.next_2d());
-        if let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) {
-            if bs.weight.is_finite() {
-                albedo += bs.weight;
-            }
+/// Values per pixel: albedo (3), normal (3), distance.
+const PER_PIXEL: usize = 7;
+
+/// Sums the guides of the camera paths of iterations before `until` (a sample observer).
+pub struct GuideCollector {
+    width: u32,
+    height: u32,
+    until: u32,
+    active: AtomicBool,
+    /// f32 bits, [`PER_PIXEL`] per pixel.
+    sums: Vec<AtomicU32>,
+    samples: AtomicU32,
+}
+
+impl GuideCollector {
+    /// A collector for a `width × height` image that keeps iterations before `until`.
+    pub fn new(width: u32, height: u32, until: u32) -> Self {
+        GuideCollector {
+            width,
+            height,
+            until,
+            active: AtomicBool::new(false),
+            sums: (0..width as usize * height as usize * PER_PIXEL).map(|_| AtomicU32::new(0)).collect(),
+            samples: AtomicU32::new(0),
         }
-        normal += hit.frame.n;
-        depth += hit.t;
     }
-    (albedo.to_array(), normal.to_array(), depth)
+
+    /// The sums collected.
+    pub fn into_buffer(self) -> GuideBuffer {
+        let mut out = GuideBuffer::new(self.width, self.height);
+        out.samples = self.samples.into_inner();
+        let sums: Vec<f32> = self.sums.into_iter().map(|a| f32::from_bits(a.into_inner())).collect();
+        for (i, v) in sums.chunks_exact(PER_PIXEL).enumerate() {
+            out.albedo[i] = [v[0], v[1], v[2]];
+            out.normal[i] = [v[3], v[4], v[5]];
+            out.depth[i] = v[6];
+        }
+        out
+    }
+}
+
+impl SampleObserver for GuideCollector {
+    #[inline(always)]
+    fn on_sample(&self, _record: &SampleRecord) {}
+
+    fn on_iteration_start(&self, start: &IterationStart) {
+        let active = start.iteration < self.until;
+        self.active.store(active, Ordering::Relaxed);
+        if active {
+            self.samples.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    #[inline]
+    fn on_primary_hit(&self, hit: &PrimaryHit) {
+        if !self.active.load(Ordering::Relaxed) {
+            return;
+        }
+        let values = [hit.albedo.x, hit.albedo.y, hit.albedo.z, hit.normal.x, hit.normal.y, hit.normal.z, hit.distance];
+        let base = hit.pixel as usize * PER_PIXEL;
+        for (slot, v) in self.sums[base..base + PER_PIXEL].iter().zip(values) {
+            // one camera path per pixel and iteration, iterations one after another: one writer
+            let old = f32::from_bits(slot.load(Ordering::Relaxed));
+            slot.store((old + v).to_bits(), Ordering::Relaxed);
+        }
+    }
 }

@@ -6,6 +6,7 @@
 
 use super::path::mis::{PathPdfs, SampleCounts, Technique};
 use crate::math::Rgb;
+use glam::Vec3;
 
 /// One sample as the integrator produced it.
 #[derive(Debug)]
@@ -28,6 +29,20 @@ pub struct SampleRecord<'a> {
     pub pdfs: &'a PathPdfs,
     /// The sample counts of the strategy that produced the sample.
     pub counts: &'a SampleCounts,
+}
+
+/// A camera path's first surface vertex, for the denoiser's guides (emis-spec §10).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrimaryHit {
+    /// The pixel the camera path goes through.
+    pub pixel: u32,
+    /// The weight (f·cos/pdf) of the BSDF sample that continues the path: a one-sample
+    /// estimate of the directional albedo; zero when nothing was sampled or the path ended.
+    pub albedo: Rgb,
+    /// World-space shading normal.
+    pub normal: Vec3,
+    /// Distance from the camera.
+    pub distance: f32,
 }
 
 /// What an iteration's light subpaths look like, known before its camera paths start.
@@ -71,6 +86,10 @@ pub trait SampleObserver: Send + Sync {
     /// Called before an iteration's light tracing, once its light subpaths are traced.
     #[inline(always)]
     fn on_iteration_start(&self, _start: &IterationStart) {}
+    /// Called on the camera path's thread once its first surface vertex is sampled (not for
+    /// camera rays that escape).
+    #[inline(always)]
+    fn on_primary_hit(&self, _hit: &PrimaryHit) {}
     /// Called on the camera path's thread after its last sample.
     #[inline(always)]
     fn on_camera_path_end(&self, _pixel: u32) {}
@@ -87,6 +106,10 @@ impl<T: SampleObserver + ?Sized> SampleObserver for &T {
     #[inline(always)]
     fn on_iteration_start(&self, start: &IterationStart) {
         (**self).on_iteration_start(start)
+    }
+    #[inline(always)]
+    fn on_primary_hit(&self, hit: &PrimaryHit) {
+        (**self).on_primary_hit(hit)
     }
     #[inline(always)]
     fn on_camera_path_end(&self, pixel: u32) {
@@ -107,11 +130,44 @@ impl<T: SampleObserver> SampleObserver for [T] {
     fn on_iteration_start(&self, start: &IterationStart) {
         self.iter().for_each(|o| o.on_iteration_start(start))
     }
+    fn on_primary_hit(&self, hit: &PrimaryHit) {
+        self.iter().for_each(|o| o.on_primary_hit(hit))
+    }
     fn on_camera_path_end(&self, pixel: u32) {
         self.iter().for_each(|o| o.on_camera_path_end(pixel))
     }
     fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
         self.iter().for_each(|o| o.on_iteration_end(start, counters))
+    }
+}
+
+/// Two observers of different kinds watching one render (e.g. moments and guides), each
+/// told everything in the same order.
+impl<A: SampleObserver, B: SampleObserver> SampleObserver for (A, B) {
+    #[inline(always)]
+    fn on_sample(&self, record: &SampleRecord) {
+        self.0.on_sample(record);
+        self.1.on_sample(record);
+    }
+    #[inline(always)]
+    fn on_iteration_start(&self, start: &IterationStart) {
+        self.0.on_iteration_start(start);
+        self.1.on_iteration_start(start);
+    }
+    #[inline(always)]
+    fn on_primary_hit(&self, hit: &PrimaryHit) {
+        self.0.on_primary_hit(hit);
+        self.1.on_primary_hit(hit);
+    }
+    #[inline(always)]
+    fn on_camera_path_end(&self, pixel: u32) {
+        self.0.on_camera_path_end(pixel);
+        self.1.on_camera_path_end(pixel);
+    }
+    #[inline(always)]
+    fn on_iteration_end(&self, start: &IterationStart, counters: &PathCounters) {
+        self.0.on_iteration_end(start, counters);
+        self.1.on_iteration_end(start, counters);
     }
 }
 

@@ -9,7 +9,6 @@ use glam::Vec2;
 /// Domain tags keep camera and light-path streams independent even for equal indices.
 const DOMAIN_CAMERA: u64 = 0x43414d;
 const DOMAIN_LIGHT: u64 = 0x4c4954;
-const DOMAIN_GUIDE: u64 = 0x475549;
 
 /// The closed set of samplers (Mitsuba's `independent` is the only one so far).
 #[derive(Clone, Debug)]
@@ -38,18 +37,6 @@ impl Sampler {
             seed,
             path_index as u64,
             iteration as u64,
-        ])))
-    }
-
-    /// Sampler for the denoiser-guide sample `sample_index` of pixel `pixel_index` (a stream of
-    /// its own, so rendering guides changes no camera path).
-    #[inline]
-    pub fn for_guide(seed: u64, pixel_index: u32, sample_index: u32) -> Self {
-        Sampler::Independent(IndependentSampler::new(hash_words(&[
-            DOMAIN_GUIDE,
-            seed,
-            pixel_index as u64,
-            sample_index as u64,
         ])))
     }
 

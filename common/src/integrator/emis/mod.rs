@@ -31,7 +31,7 @@ mod wire;
 
 pub use state::{EmisState, UpdateReport};
 
-use super::guides::GuideBuffer;
+use super::guides::{GuideBuffer, GuideCollector};
 use super::vcm::{MergeConfig, MergeMask};
 use super::{Bidir, Integrator, PathSettings, TileRequest};
 use crate::film::{Film, Rect, TileAccum};
@@ -66,10 +66,11 @@ pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
     nu > 0.0 || iterations.clone().any(|i| i % 2 == 0)
 }
 
-/// Denoiser guides are rendered in collecting iterations below this count only: they are
-/// a per-pixel average of first-hit albedo and normal, converged long before moments are,
-/// and cost about 14 % of a pt iteration each (the reference computes its denoised image
-/// once, at the first update).
+/// Denoiser guides are summed in collecting iterations below this count only: they are a
+/// per-pixel average of first-hit albedo and normal, converged long before moments are (the
+/// reference computes its denoised image once, at the first update). They come from the
+/// pilot's own primary vertices, so the limit saves little time; it keeps the guides of a
+/// render independent of how long it runs.
 pub const GUIDE_ITERATIONS: u32 = 16;
 
 /// Which bidirectional method the candidates come from.
@@ -283,11 +284,10 @@ pub fn render_iterations(
     };
     let candidates = config.candidates_of(set);
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
-    integrator.with_observer(&estimator).render_tile(scene, &request, &mut accum);
+    let guides = GuideCollector::new(w, h, GUIDE_ITERATIONS);
+    integrator.with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
     let (moments, statistics) = estimator.into_snapshot();
-    let guided = iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS);
-    let guides = if guided.is_empty() { GuideBuffer::new(w, h) } else { GuideBuffer::render(scene, seed, guided) };
-    (accum, Some(PilotData { moments, statistics, guides }))
+    (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
 }
 
 /// A finished `emis-*` render.
