@@ -8,7 +8,7 @@
 //!   iterations with and without the estimator, interleaved), optimiser and denoiser time at
 //!   256² and 1920×1080 on synthetic inputs, and the memory of the moment buffers.
 
-use crate::bench::BenchArgs;
+use crate::bench::{BenchArgs, cpu_seconds};
 use crate::chart::{Group, write_bar_chart};
 use crate::cli::IntegratorKind;
 use crate::local::{make_renderer, scene_name};
@@ -169,21 +169,32 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
     Ok(())
 }
 
+/// What [`accumulation_overhead`] measured for one pilot.
+struct Overhead {
+    /// Fastest round's wall time per iteration: without moments, with moments and guides, with
+    /// moments alone.
+    best: [f64; 3],
+    /// Medians over rounds of the two overheads (with guides, alone), as ratios of wall time.
+    wall: [f64; 2],
+    /// The same as ratios of process CPU time (user + system): time the host's other load
+    /// takes from this process does not count, its own work does.
+    cpu: [f64; 2],
+}
+
 /// Pilot iteration time without moment accumulation, with it in the first
-/// [`GUIDE_ITERATIONS`] (which also render the denoiser's guides), and with it after them:
-/// the calls a render makes ([`render_iterations`] without and with collection), so the
-/// estimator's buffer and its hand-over are counted. Returns the fastest of `repeats` rounds
-/// for each, and the median over rounds of the two overheads, each a ratio of runs made
-/// back to back within one round (robust to the host's load changing between rounds, which
-/// separate fastest times are not).
-fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> ([f64; 3], [f64; 2]) {
+/// [`GUIDE_ITERATIONS`] (which also sum the denoiser's guides), and with it after them: the
+/// calls a render makes ([`render_iterations`] without and with collection), so the
+/// estimator's buffer and its hand-over are counted. Each overhead is the median over
+/// `repeats` rounds of a ratio of runs made back to back within one round (robust to the
+/// host's load changing between rounds, which separate fastest times are not).
+fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> Overhead {
     let config = EmisConfig::new(method);
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
     let mut best = [f64::INFINITY; 3];
-    let mut ratios = [Vec::new(), Vec::new()];
+    let (mut wall, mut cpu) = ([Vec::new(), Vec::new()], [Vec::new(), Vec::new()]);
     for r in 0..repeats {
-        let mut round = [0.0; 3];
+        let (mut round_wall, mut round_cpu) = ([0.0; 3], [0.0; 3]);
         // the same iterations' samples for the plain and the guided run; the unguided run's
         // come after the guided iterations (a different sample, the same expected work)
         let guided = (r * iterations) % GUIDE_ITERATIONS;
@@ -194,20 +205,25 @@ fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, rep
                 .into_iter()
                 .enumerate()
         {
-            let t = Instant::now();
+            let (t, c) = (Instant::now(), cpu_seconds());
             let n = samples.len() as f64;
             std::hint::black_box(render_iterations(scene, settings, &config, &strategy, 1, samples, collect));
-            round[i] = t.elapsed().as_secs_f64() / n;
-            best[i] = best[i].min(round[i]);
+            round_wall[i] = t.elapsed().as_secs_f64() / n;
+            round_cpu[i] = (cpu_seconds() - c) / n;
+            best[i] = best[i].min(round_wall[i]);
         }
-        ratios[0].push(round[1] / round[0]);
-        ratios[1].push(round[2] / round[0]);
+        for k in 0..2 {
+            wall[k].push(round_wall[k + 1] / round_wall[0]);
+            cpu[k].push(round_cpu[k + 1] / round_cpu[0]);
+        }
     }
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
     };
-    (best, [median(&mut ratios[0]), median(&mut ratios[1])])
+    let [w0, w1] = &mut wall;
+    let [c0, c1] = &mut cpu;
+    Overhead { best, wall: [median(w0), median(w1)], cpu: [median(c0), median(c1)] }
 }
 
 /// One optimiser and one denoiser run on synthetic inputs of `w × h` with the VCM candidates.
@@ -252,26 +268,28 @@ pub fn overheads(args: &BenchArgs, scenes: &[PathBuf]) -> anyhow::Result<()> {
     let threads = args.threads.unwrap_or(0);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
     println!(
-        "moment accumulation (51 VCM / 26 BDPT candidates), {} rounds of 2 iterations: time per pilot iteration (fastest round) without moments, with moments and the denoiser's guides (the first {GUIDE_ITERATIONS} iterations), with moments alone (the later ones); overheads are medians over rounds of ratios within a round:",
+        "moment accumulation (51 VCM / 26 BDPT candidates), {} rounds of 2 iterations: time per pilot iteration (fastest round) without moments, with moments and the denoiser's guides (the first {GUIDE_ITERATIONS} iterations), with moments alone (the later ones); overheads are medians over rounds of ratios within a round, of wall time and of process CPU time:",
         args.repeats.max(1)
     );
     println!(
-        "| scene | vcm pilot ms/it | + moments, guides | overhead | + moments | overhead | bdpt pilot ms/it | + moments, guides | overhead | + moments | overhead |"
+        "| scene | vcm pilot ms/it | + moments, guides | + moments | overhead, guides (wall / CPU) | overhead, moments (wall / CPU) | bdpt pilot ms/it | + moments, guides | + moments | overhead, guides (wall / CPU) | overhead, moments (wall / CPU) |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let percent = |ratio: f64| (ratio - 1.0) * 100.0;
     for path in scenes {
         let scene = Scene::load(path)?;
         let mut cells = Vec::new();
         for method in [EmisMethod::Vcm, EmisMethod::Bdpt] {
-            let ([plain, guided, moments], [guided_ratio, moments_ratio]) =
-                pool.install(|| accumulation_overhead(&scene, method, 2, args.repeats.max(1)));
+            let o = pool.install(|| accumulation_overhead(&scene, method, 2, args.repeats.max(1)));
             cells.push(format!(
-                "{:.0} | {:.0} | {:.0} % | {:.0} | {:.0} %",
-                plain * 1e3,
-                guided * 1e3,
-                (guided_ratio - 1.0) * 100.0,
-                moments * 1e3,
-                (moments_ratio - 1.0) * 100.0
+                "{:.0} | {:.0} | {:.0} | {:.0} % / {:.0} % | {:.0} % / {:.0} %",
+                o.best[0] * 1e3,
+                o.best[1] * 1e3,
+                o.best[2] * 1e3,
+                percent(o.wall[0]),
+                percent(o.cpu[0]),
+                percent(o.wall[1]),
+                percent(o.cpu[1])
             ));
         }
         println!("| {} | {} |", scene_name(path), cells.join(" | "));

@@ -140,28 +140,71 @@ fn can_connect(p: &PathPdfs, s: usize) -> bool {
 
 /// The correlation-aware factor c_i of a merge at vertex i (Grittmann et al. 2021; emis-spec
 /// §3): the probability that the camera side reaches vertex i, against both sides, clamped
-/// below at 1/N.
+/// below at 1/N. The probabilities are products of up to 63 factors, so they are formed in
+/// f64: in f32 both underflow on long paths and their ratio is noise.
 pub fn correlation_factor(p: &PathPdfs, i: usize, m: &MergeCounts) -> f32 {
     let k = p.len - 1;
-    let a = m.correlation_area;
-    let mut p_cam = 1.0f32;
+    let a = m.correlation_area as f64;
+    let mut p_cam = 1.0f64;
     for j in i..k {
-        p_cam *= (p.from_camera[j] * a).min(1.0);
+        p_cam *= (p.from_camera[j] as f64 * a).min(1.0);
     }
-    let mut p_light = (p.from_light[0] * p.from_light[1] * a * a).min(1.0);
+    let mut p_light = (p.from_light[0] as f64 * p.from_light[1] as f64 * a * a).min(1.0);
     for j in 2..=i {
-        p_light *= (p.from_light[j] * a).min(1.0);
+        p_light *= (p.from_light[j] as f64 * a).min(1.0);
     }
     if m.light_paths <= 0.0 || (p_cam == 0.0 && p_light == 0.0) {
         return 1.0;
     }
-    (p_cam / (p_cam + p_light - p_cam * p_light)).max(1.0 / m.light_paths)
+    ((p_cam / (p_cam + p_light - p_cam * p_light)) as f32).max(1.0 / m.light_paths)
+}
+
+/// [`correlation_factor`] of every merge vertex i = 1..k−2 at `out[i]` (1 elsewhere), in O(k)
+/// for the whole path instead of O(k) per vertex: the camera side's probabilities are suffix
+/// products, the light side's prefix products. Equal to the per-vertex function up to rounding.
+pub fn correlation_factors(p: &PathPdfs, m: &MergeCounts, out: &mut [f32; MAX_VERTICES]) {
+    let k = p.len - 1;
+    out.fill(1.0);
+    if k < 3 || m.light_paths <= 0.0 {
+        return;
+    }
+    let a = m.correlation_area as f64;
+    // camera[i] = Π_{j=i}^{k−1} min(from_camera[j]·a, 1)
+    let mut camera = [1.0f64; MAX_VERTICES + 1];
+    for j in (1..k).rev() {
+        camera[j] = (p.from_camera[j] as f64 * a).min(1.0) * camera[j + 1];
+    }
+    let floor = 1.0 / m.light_paths;
+    let mut light = (p.from_light[0] as f64 * p.from_light[1] as f64 * a * a).min(1.0);
+    for i in 1..k - 1 {
+        if i >= 2 {
+            light *= (p.from_light[i] as f64 * a).min(1.0);
+        }
+        let cam = camera[i];
+        if !(cam == 0.0 && light == 0.0) {
+            out[i] = ((cam / (cam + light - cam * light)) as f32).max(floor);
+        }
+    }
 }
 
 /// n_T · p_T / p_0 of every technique, written to `out` in the order emitter hit, next event,
 /// connections s = 2..k−1, light tracing (index max(k, 2)), merges i = 1..k−2 (zero where a
 /// technique cannot sample the path or is not used). Returns the number of entries written.
 pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 2 * MAX_VERTICES]) -> usize {
+    let mut factors = [1.0f32; MAX_VERTICES];
+    if let Some(m) = counts.merge.filter(|m| m.correlation_aware) {
+        correlation_factors(p, &m, &mut factors);
+    }
+    densities(p, counts, &factors, out)
+}
+
+/// [`technique_densities`] with the merges' correlation-aware factors given.
+fn densities(
+    p: &PathPdfs,
+    counts: &SampleCounts,
+    factors: &[f32; MAX_VERTICES],
+    out: &mut [f32; 2 * MAX_VERTICES],
+) -> usize {
     let k = p.len - 1;
     let mut ratio = [0.0f32; MAX_VERTICES + 1];
     prefix_ratios(p, &mut ratio);
@@ -188,8 +231,7 @@ pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 
     n += 1;
     if let Some(m) = &counts.merge {
         for i in 1..k.saturating_sub(1) {
-            let c_i = if m.correlation_aware { correlation_factor(p, i, m) } else { 1.0 };
-            out[n] = if p.delta[i] { 0.0 } else { m.count * c_i * ratio[i] * remap0(p.from_light[i]) * m.area };
+            out[n] = if p.delta[i] { 0.0 } else { m.count * factors[i] * ratio[i] * remap0(p.from_light[i]) * m.area };
             n += 1;
         }
     }
@@ -228,32 +270,34 @@ pub fn weight(p: &PathPdfs, counts: &SampleCounts, t: Technique) -> f32 {
 /// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
 /// technique of the proxy can sample counts as path tracing's (the reference's convention).
 pub fn proxy_weights(p: &PathPdfs, proxy: &SampleCounts) -> ProxyWeights {
-    // densities without the correlation-aware factor; each merge's factor is computed once
-    // below (it is a walk over the path) and used for both the density and the correlated sum
-    let plain = SampleCounts { merge: proxy.merge.map(|m| MergeCounts { correlation_aware: false, ..m }), ..*proxy };
-    let mut d = [0.0f32; 2 * MAX_VERTICES];
-    let n = technique_densities(p, &plain, &mut d);
-    let k = p.len - 1;
-    let lt_index = k.max(2);
+    // each merge's correlation-aware factor enters its density and, once more, the
+    // correlated sum
     let mut factors = [1.0f32; MAX_VERTICES];
     if let Some(m) = proxy.merge.filter(|m| m.correlation_aware) {
-        for (j, density) in d[lt_index + 1..n].iter_mut().enumerate() {
-            factors[j] = correlation_factor(p, j + 1, &m);
-            *density *= factors[j];
-        }
+        correlation_factors(p, &m, &mut factors);
     }
-    let total: f64 = d[..n].iter().map(|&v| v as f64).sum();
+    let mut d = [0.0f32; 2 * MAX_VERTICES];
+    let n = densities(p, proxy, &factors, &mut d);
+    let k = p.len - 1;
+    let lt_index = k.max(2);
+    let sum = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>();
+    let (pt, con, lt) = (sum(0..2), sum(2..lt_index), d[lt_index] as f64);
+    let (mut vm, mut vm_correlated) = (0.0f64, 0.0f64);
+    for (i, &density) in d[lt_index + 1..n].iter().enumerate() {
+        vm += density as f64;
+        vm_correlated += factors[i + 1] as f64 * density as f64;
+    }
+    let total = pt + con + lt + vm;
     if !(total > 0.0 && total.is_finite()) {
         return ProxyWeights { pt: 1.0, lt: 0.0, con: 0.0, vm: 0.0, vm_correlated: 0.0 };
     }
-    let share = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>() / total;
-    let (mut vm, mut vm_correlated) = (0.0, 0.0);
-    for (j, &density) in d[lt_index + 1..n].iter().enumerate() {
-        let w = density as f64 / total;
-        vm += w;
-        vm_correlated += factors[j] as f64 * w;
+    ProxyWeights {
+        pt: pt / total,
+        lt: lt / total,
+        con: con / total,
+        vm: vm / total,
+        vm_correlated: vm_correlated / total,
     }
-    ProxyWeights { pt: share(0..2), lt: share(lt_index..lt_index + 1), con: share(2..lt_index), vm, vm_correlated }
 }
 
 /// Weight of an emitter hit by the camera path.

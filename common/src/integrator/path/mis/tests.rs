@@ -278,3 +278,33 @@ fn proxy_weights_sum_to_one_and_match_brute_force() {
         }
     }
 }
+
+/// The O(k) correlation-aware factors equal the per-vertex definition up to rounding, on
+/// paths up to the longest the integrators build.
+#[test]
+fn correlation_factors_match_the_per_vertex_definition() {
+    for light_paths in [1.0, 1000.0] {
+        let merge = MergeCounts {
+            area: 1e-3,
+            count: light_paths,
+            correlation_aware: true,
+            correlation_area: 3e-2,
+            light_paths,
+        };
+        for len in [2, 3, 4, 7, 12, MAX_VERTICES] {
+            for seed in 0..50 {
+                let p = random_path(seed, len, seed % 2 == 0);
+                let mut all = [0.0f32; MAX_VERTICES];
+                correlation_factors(&p, &merge, &mut all);
+                for i in 1..(len - 1).saturating_sub(1) {
+                    let one = correlation_factor(&p, i, &merge);
+                    assert!(
+                        (all[i] - one).abs() <= 1e-5 * one,
+                        "len {len} seed {seed} vertex {i}: {} vs {one}",
+                        all[i]
+                    );
+                }
+            }
+        }
+    }
+}
