@@ -215,23 +215,47 @@ pub fn pixel_cost(
     map_built: bool,
     pixels: u32,
 ) -> f64 {
-    let (lc, ll) = (s.camera_vertices, s.light_vertices);
-    if candidate.is_path_tracing() {
-        return lc * k.path_tracing;
-    }
-    let nu = candidate.nu as f64;
-    let n = candidate.light_paths(pixels) as f64;
-    let connection = k.connection + k.connection_walk * (lc + ll);
-    let light_vertex = k.light_vertex + k.light_vertex_walk * ll;
-    let mut cost = lc * k.camera_vertex + lc * candidate.connections as f64 * connection + light_vertex * ll * nu;
-    if map_built && n > 0.0 {
+    CostTerms::new(k, s, candidate, map_built, pixels).at(chi)
+}
+
+/// [`pixel_cost`] as a function of χ, with everything else evaluated once: the optimiser
+/// prices every pixel of every image-level candidate, and the map terms take a logarithm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostTerms {
+    /// Camera vertices, connections and light paths.
+    fixed: f64,
+    /// Building the photon map.
+    build: f64,
+    /// Querying it and shading the photons found, at χ = 1.
+    merge: f64,
+}
+
+impl CostTerms {
+    /// The terms of `candidate`'s cost (see [`pixel_cost`]).
+    pub fn new(k: &CostConstants, s: &PathStatistics, candidate: &Candidate, map_built: bool, pixels: u32) -> Self {
+        let (lc, ll) = (s.camera_vertices, s.light_vertices);
+        if candidate.is_path_tracing() {
+            return CostTerms { fixed: lc * k.path_tracing, build: 0.0, merge: 0.0 };
+        }
+        let nu = candidate.nu as f64;
+        let n = candidate.light_paths(pixels) as f64;
+        let connection = k.connection + k.connection_walk * (lc + ll);
+        let light_vertex = k.light_vertex + k.light_vertex_walk * ll;
+        let fixed = lc * k.camera_vertex + lc * candidate.connections as f64 * connection + light_vertex * ll * nu;
+        if !(map_built && n > 0.0) {
+            return CostTerms { fixed, build: 0.0, merge: 0.0 };
+        }
         let log = if n * ll > 1.0 { (n * ll).ln() } else { 0.0 };
-        let build = k.build * ll * nu * log;
         let query = k.query * lc * log;
         let shade = k.photon_shading * s.photons_per_query_per_path * lc * n;
-        cost += build + chi * (query + shade);
+        CostTerms { fixed, build: k.build * ll * nu * log, merge: query + shade }
     }
-    cost
+
+    /// The cost at merge probability `chi`.
+    #[inline]
+    pub fn at(&self, chi: f64) -> f64 {
+        self.fixed + (self.build + chi * self.merge)
+    }
 }
 
 #[cfg(test)]

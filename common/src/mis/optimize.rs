@@ -35,7 +35,7 @@
 //! (15.0–19.5 for every merging candidate after 4 iterations) and ν = 0.25 wins a near-tie.
 
 use super::candidate::Candidate;
-use super::cost::{CostConstants, PathStatistics, pixel_cost};
+use super::cost::{CostConstants, CostTerms, PathStatistics};
 use super::filter::Image;
 use super::moments::MomentBuffer;
 use rayon::prelude::*;
@@ -219,12 +219,14 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let norm: Vec<f32> = input.image.data.iter().map(|&i| i * i + 1e-4).collect();
     let filtered: Vec<Image> =
         moment_planes(m).into_par_iter().map(|plane| order.filter(&plane, &norm, input.filters.moment_box)).collect();
-    let cost = |cand: &Candidate, chi: f64| {
-        pixel_cost(&input.constants, &input.statistics, cand, chi, !cand.is_path_tracing(), pixels)
-    };
+    let costs: Vec<CostTerms> = input
+        .candidates
+        .iter()
+        .map(|c| CostTerms::new(&input.constants, &input.statistics, c, !c.is_path_tracing(), pixels))
+        .collect();
     // ---- pixel level: the merge bit of the best full candidate ----
     let pixel_mask = match input.merge_scope {
-        MergeScope::PerPixel => Some(pixel_level(input, &filtered, &cost)),
+        MergeScope::PerPixel => Some(pixel_level(input, &filtered, &costs)),
         MergeScope::Global => None,
     };
     // ---- image level ----
@@ -249,8 +251,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
             for p in 0..w * h {
                 let chi = chi_at(g, p) as f64;
                 let Some(c) = g.variant(chi > 0.1) else { continue };
-                total_cost +=
-                    cost(&input.candidates[c], if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
+                total_cost += costs[c].at(if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
                 let i = input.image.data[p] as f64;
                 if i == 0.0 {
                     continue;
@@ -301,9 +302,10 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
 
 /// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered
 /// moment × cost, dilated and blurred into χ.
-fn pixel_level(input: &OptimizerInput, filtered: &[Image], cost: &(dyn Fn(&Candidate, f64) -> f64 + Sync)) -> Image {
+fn pixel_level(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Image {
     let (w, h) = (input.moments.width as usize, input.moments.height as usize);
-    let costs: Vec<f64> = input.candidates.iter().map(|c| cost(c, if c.merge { 1.0 } else { 0.0 })).collect();
+    let costs: Vec<f64> =
+        input.candidates.iter().zip(terms).map(|(c, t)| t.at(if c.merge { 1.0 } else { 0.0 })).collect();
     let bits: Vec<f32> = (0..w * h)
         .into_par_iter()
         .map(|p| {
@@ -368,6 +370,7 @@ fn image_level_groups(candidates: &[Candidate], scope: MergeScope) -> Vec<Group>
 mod tests {
     use super::*;
     use crate::mis::candidate::CandidateConfig;
+    use crate::mis::cost::pixel_cost;
     use crate::mis::delta::Delta;
 
     /// A moment buffer with `value(pixel, candidate)` as every candidate's per-iteration moment.
