@@ -6,6 +6,7 @@
 //! so buffers from workers add up.
 
 use super::observer::{IterationStart, PrimaryHit, SampleObserver, SampleRecord};
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 /// Guide sums of a full frame.
@@ -80,26 +81,27 @@ impl GuideBuffer {
 /// Values per pixel: albedo (3), normal (3), distance.
 const PER_PIXEL: usize = 7;
 
-/// Sums the guides of the camera paths of iterations before `until` (a sample observer).
+/// Sums the guides of the camera paths of the iterations in a range (a sample observer).
 pub struct GuideCollector {
     width: u32,
     height: u32,
-    until: u32,
+    iterations: Range<u32>,
     active: AtomicBool,
-    /// f32 bits, [`PER_PIXEL`] per pixel.
+    /// f32 bits, [`PER_PIXEL`] per pixel; empty when no iteration is kept.
     sums: Vec<AtomicU32>,
     samples: AtomicU32,
 }
 
 impl GuideCollector {
-    /// A collector for a `width × height` image that keeps iterations before `until`.
-    pub fn new(width: u32, height: u32, until: u32) -> Self {
+    /// A collector for a `width × height` image that keeps the iterations in `iterations`.
+    pub fn new(width: u32, height: u32, iterations: Range<u32>) -> Self {
+        let len = if iterations.is_empty() { 0 } else { width as usize * height as usize * PER_PIXEL };
         GuideCollector {
             width,
             height,
-            until,
+            iterations,
             active: AtomicBool::new(false),
-            sums: (0..width as usize * height as usize * PER_PIXEL).map(|_| AtomicU32::new(0)).collect(),
+            sums: (0..len).map(|_| AtomicU32::new(0)).collect(),
             samples: AtomicU32::new(0),
         }
     }
@@ -108,8 +110,8 @@ impl GuideCollector {
     pub fn into_buffer(self) -> GuideBuffer {
         let mut out = GuideBuffer::new(self.width, self.height);
         out.samples = self.samples.into_inner();
-        let sums: Vec<f32> = self.sums.into_iter().map(|a| f32::from_bits(a.into_inner())).collect();
-        for (i, v) in sums.chunks_exact(PER_PIXEL).enumerate() {
+        for (i, v) in self.sums.chunks_exact(PER_PIXEL).enumerate() {
+            let v: [f32; PER_PIXEL] = std::array::from_fn(|k| f32::from_bits(v[k].load(Ordering::Relaxed)));
             out.albedo[i] = [v[0], v[1], v[2]];
             out.normal[i] = [v[3], v[4], v[5]];
             out.depth[i] = v[6];
@@ -123,7 +125,7 @@ impl SampleObserver for GuideCollector {
     fn on_sample(&self, _record: &SampleRecord) {}
 
     fn on_iteration_start(&self, start: &IterationStart) {
-        let active = start.iteration < self.until;
+        let active = self.iterations.contains(&start.iteration);
         self.active.store(active, Ordering::Relaxed);
         if active {
             self.samples.fetch_add(1, Ordering::Relaxed);

@@ -284,7 +284,8 @@ pub fn render_iterations(
     };
     let candidates = config.candidates_of(set);
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
-    let guides = GuideCollector::new(w, h, GUIDE_ITERATIONS);
+    let guided = iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS);
+    let guides = GuideCollector::new(w, h, guided);
     integrator.with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
     let (moments, statistics) = estimator.into_snapshot();
     (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
