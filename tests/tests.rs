@@ -130,7 +130,7 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
 }
 
 /// The path-tracing start on the farm. On caustic-glass (seed 4) the updates after 1 and 2
-/// keep path tracing (pt passes: odd iterations return no moments), the one after 4 picks a
+/// keep path tracing (pt passes: iterations 1 and 3 return no moments), the one after 4 picks a
 /// bidirectional strategy: the coordinator discards its film and renders the budget's 6
 /// iterations, 4..10, into a new one. The image, its sample counts and the decisions equal a
 /// local render's, bit for bit.

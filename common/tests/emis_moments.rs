@@ -124,11 +124,11 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
     }
 }
 
-/// While path tracing is the strategy, a collecting call records moments in even iterations
-/// only (`collects_moments`), its pilot data counts exactly those, and guides stop after
-/// `GUIDE_ITERATIONS`; an odd iteration's image is `pt`'s own.
+/// While path tracing is the strategy, a collecting call records moments in iteration 0 and
+/// those ≡ 2 mod 4 only (`collects_moments`), its pilot data counts exactly those, and guides
+/// stop after `GUIDE_ITERATIONS`; another iteration's image is `pt`'s own.
 #[test]
-fn pt_strategy_records_moments_in_even_iterations_only() {
+fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
     use tessera_common::integrator::PathTracer;
     use tessera_common::integrator::emis::{
         CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations,
@@ -137,19 +137,29 @@ fn pt_strategy_records_moments_in_even_iterations_only() {
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
     let pt = Strategy { nu: 0.0, connections: 0, merge: None };
-    let (odd, none) = render_iterations(&scene, settings, &config, &pt, 3, 3..4, Some(CandidateSet::Full));
-    assert!(none.is_none(), "odd iterations of a pt strategy record nothing");
+    for skipped in [1, 3, 4, 5, 8] {
+        let (_, none) =
+            render_iterations(&scene, settings, &config, &pt, 3, skipped..skipped + 1, Some(CandidateSet::Full));
+        assert!(none.is_none(), "iteration {skipped} of a pt strategy records nothing");
+    }
+    let (odd, _) = render_iterations(&scene, settings, &config, &pt, 3, 3..4, Some(CandidateSet::Full));
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut direct = TileAccum::new(Rect::full(w, h));
     let request = TileRequest { rect: Rect::full(w, h), samples: 3..4, seed: 3 };
     PathTracer { settings }.render_tile(&scene, &request, &mut direct);
     assert_eq!(odd.sum, direct.sum, "a non-recording iteration is rendered by pt");
-    let (_, even) = render_iterations(&scene, settings, &config, &pt, 3, 4..5, Some(CandidateSet::Full));
-    let even = even.expect("even iterations record");
-    assert_eq!((even.moments.iterations, even.statistics.iterations, even.guides.samples), (1, 1, 1));
-    let late = GUIDE_ITERATIONS + GUIDE_ITERATIONS % 2;
+    for recorded in [0, 2, 6] {
+        let (_, data) =
+            render_iterations(&scene, settings, &config, &pt, 3, recorded..recorded + 1, Some(CandidateSet::Full));
+        let data = data.unwrap_or_else(|| panic!("iteration {recorded} records"));
+        assert_eq!((data.moments.iterations, data.statistics.iterations, data.guides.samples), (1, 1, 1));
+    }
+    // a call that contains a recording iteration records all of its iterations
+    let (_, two) = render_iterations(&scene, settings, &config, &pt, 3, 5..7, Some(CandidateSet::Full));
+    assert_eq!(two.expect("5..7 contains 6").moments.iterations, 2);
+    let late = (GUIDE_ITERATIONS..).find(|i| i % 4 == 2).expect("some iteration is ≡ 2 mod 4");
     let (_, late) = render_iterations(&scene, settings, &config, &pt, 3, late..late + 1, Some(CandidateSet::Full));
-    let late = late.expect("even iterations record");
+    let late = late.expect("iterations ≡ 2 mod 4 record");
     assert_eq!((late.moments.iterations, late.guides.samples), (1, 0), "no guides after GUIDE_ITERATIONS");
     // a bidirectional strategy records every iteration
     let (_, bidir) = render_iterations(

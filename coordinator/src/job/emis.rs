@@ -233,13 +233,15 @@ mod tests {
         let two = pilot(&job, 2).encode();
         assert!(job.decode_pilot(&tile, true, &two).unwrap_err().contains("covers 2 iterations"));
         assert!(job.decode_pilot(&tile, true, &good[..good.len() - 4]).is_err());
-        // with path tracing as the strategy only even iterations record moments
+        // with path tracing as the strategy only iteration 0 and those ≡ 2 mod 4 record moments
         let mut pt = EmisJob::new(&spec()).unwrap();
         pt.state.strategy.nu = 0.0;
         assert!(pt.decode_pilot(&tile, true, &[]).unwrap().is_none());
         assert!(pt.decode_pilot(&tile, true, &good).unwrap_err().contains("does not collect"));
-        let even = TileSpec { samples: 2..3, ..tile };
-        assert!(pt.decode_pilot(&even, true, &good).unwrap().is_some());
-        assert!(pt.decode_pilot(&even, true, &[]).unwrap_err().contains("no pilot data"));
+        let skipped = TileSpec { samples: 4..5, ..tile.clone() };
+        assert!(pt.decode_pilot(&skipped, true, &[]).unwrap().is_none());
+        let recorded = TileSpec { samples: 2..3, ..tile };
+        assert!(pt.decode_pilot(&recorded, true, &good).unwrap().is_some());
+        assert!(pt.decode_pilot(&recorded, true, &[]).unwrap_err().contains("no pilot data"));
     }
 }
