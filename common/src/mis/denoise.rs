@@ -55,17 +55,16 @@ pub fn denoise(width: usize, height: usize, color: &[[f32; 3]], guides: &Guides,
     let modulation: Vec<[f32; 3]> = guides.albedo.iter().map(|a| a.map(|c| c.max(1e-3))).collect();
     let mut current: Vec<[f32; 3]> =
         color.iter().zip(&modulation).map(|(c, a)| [c[0] / a[0], c[1] / a[1], c[2] / a[2]]).collect();
+    let mut next = vec![[0.0f32; 3]; n];
     let gradient = depth_gradient(width, height, guides);
     for level in 0..s.levels {
-        let step = 1i64 << level;
-        current = (0..height)
-            .into_par_iter()
-            .flat_map_iter(|y| {
-                let current = &current;
-                let gradient = &gradient;
-                (0..width).map(move |x| filter_pixel(width, height, x, y, step, current, guides, gradient, s))
-            })
-            .collect();
+        let pass = Pass { width, height, step: 1 << level, guides, gradient: &gradient, settings: s };
+        next.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                *out = pass.filter_pixel(x, y, &current);
+            }
+        });
+        std::mem::swap(&mut current, &mut next);
     }
     current.iter().zip(&modulation).map(|(c, a)| [c[0] * a[0], c[1] * a[1], c[2] * a[2]]).collect()
 }
@@ -95,54 +94,101 @@ fn depth_gradient(width: usize, height: usize, g: &Guides) -> Vec<f32> {
         .collect()
 }
 
-#[allow(clippy::too_many_arguments)]
-#[inline]
-fn filter_pixel(
+/// One à-trous level: what every pixel's filter at this step reads.
+struct Pass<'a> {
     width: usize,
     height: usize,
-    x: usize,
-    y: usize,
-    step: i64,
-    img: &[[f32; 3]],
-    g: &Guides,
-    gradient: &[f32],
-    s: &DenoiseSettings,
-) -> [f32; 3] {
-    let p = y * width + x;
-    let (np, ap, zp) = (g.normal[p], g.albedo[p], g.depth[p]);
-    let escaped_p = np == [0.0; 3];
-    let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
-    for (j, ky) in B3.iter().enumerate() {
-        let yy = y as i64 + (j as i64 - 2) * step;
-        if yy < 0 || yy >= height as i64 {
-            continue;
-        }
-        for (i, kx) in B3.iter().enumerate() {
-            let xx = x as i64 + (i as i64 - 2) * step;
-            if xx < 0 || xx >= width as i64 {
+    step: usize,
+    guides: &'a Guides<'a>,
+    gradient: &'a [f32],
+    settings: &'a DenoiseSettings,
+}
+
+impl Pass<'_> {
+    #[inline]
+    fn filter_pixel(&self, x: usize, y: usize, img: &[[f32; 3]]) -> [f32; 3] {
+        let (g, s, step) = (self.guides, self.settings, self.step);
+        let p = y * self.width + x;
+        let (np, ap, zp) = (g.normal[p], g.albedo[p], g.depth[p]);
+        let escaped_p = np == [0.0; 3];
+        // the depth term's denominator is σz·|∇z_p|·step·|offset| + ε: its per-pixel parts
+        // once here, |offset| per tap below
+        let depth_scale = s.depth_sigma * self.gradient[p] * step as f32;
+        let depth_epsilon = 1e-4 * zp.max(1e-3);
+        let inv_albedo_sigma = 1.0 / s.albedo_sigma;
+        let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+        for (j, ky) in B3.iter().enumerate() {
+            let Some(yy) = (y + 2 * step).checked_sub((4 - j) * step).filter(|&yy| yy < self.height) else {
                 continue;
-            }
-            let q = yy as usize * width + xx as usize;
-            let nq = g.normal[q];
-            let w = if escaped_p || nq == [0.0; 3] {
-                if escaped_p && nq == [0.0; 3] { 1.0 } else { 0.0 }
-            } else {
-                let dot = (np[0] * nq[0] + np[1] * nq[1] + np[2] * nq[2]).max(0.0);
-                let aq = g.albedo[q];
-                let da = (ap[0] - aq[0]).abs() + (ap[1] - aq[1]).abs() + (ap[2] - aq[2]).abs();
-                let offset = (((i as i64 - 2).pow(2) + (j as i64 - 2).pow(2)) as f32).sqrt() * step as f32;
-                let dz = (zp - g.depth[q]).abs() / (s.depth_sigma * gradient[p] * offset + 1e-4 * zp.max(1e-3));
-                if dot <= 0.0 { 0.0 } else { dot.powi(s.normal_power) * (-(da / s.albedo_sigma + dz)).exp() }
             };
-            let k = kx * ky * w;
-            if k > 0.0 {
-                let c = img[q];
-                sum = [sum[0] + k * c[0], sum[1] + k * c[1], sum[2] + k * c[2]];
-                wsum += k;
+            for (i, kx) in B3.iter().enumerate() {
+                let Some(xx) = (x + 2 * step).checked_sub((4 - i) * step).filter(|&xx| xx < self.width) else {
+                    continue;
+                };
+                let q = yy * self.width + xx;
+                let nq = g.normal[q];
+                let w = if escaped_p || nq == [0.0; 3] {
+                    if escaped_p && nq == [0.0; 3] { 1.0 } else { 0.0 }
+                } else {
+                    let dot = np[0] * nq[0] + np[1] * nq[1] + np[2] * nq[2];
+                    if dot <= 0.0 {
+                        0.0
+                    } else {
+                        let aq = g.albedo[q];
+                        let da = (ap[0] - aq[0]).abs() + (ap[1] - aq[1]).abs() + (ap[2] - aq[2]).abs();
+                        let dz = (zp - g.depth[q]).abs() / (depth_scale * TAP_DISTANCE[j][i] + depth_epsilon);
+                        power(dot, s.normal_power) * (-(da * inv_albedo_sigma + dz)).exp()
+                    }
+                };
+                let k = kx * ky * w;
+                if k > 0.0 {
+                    let c = img[q];
+                    sum = [sum[0] + k * c[0], sum[1] + k * c[1], sum[2] + k * c[2]];
+                    wsum += k;
+                }
             }
         }
+        if wsum > 0.0 { sum.map(|v| v / wsum) } else { img[p] }
     }
-    if wsum > 0.0 { sum.map(|v| v / wsum) } else { img[p] }
+}
+
+/// |offset| of tap (i, j) in units of the step.
+const TAP_DISTANCE: [[f32; 5]; 5] = {
+    let mut d = [[0.0f32; 5]; 5];
+    let mut j = 0;
+    while j < 5 {
+        let mut i = 0;
+        while i < 5 {
+            let (dx, dy) = (i as i32 - 2, j as i32 - 2);
+            // the distances that occur: 0, 1, √2, 2, √5, √8
+            d[j][i] = match dx * dx + dy * dy {
+                0 => 0.0,
+                1 => 1.0,
+                2 => std::f32::consts::SQRT_2,
+                4 => 2.0,
+                5 => 2.236_068,
+                _ => 2.0 * std::f32::consts::SQRT_2,
+            };
+            i += 1;
+        }
+        j += 1;
+    }
+    d
+};
+
+/// x^n for n ≥ 0 by squaring, inline: `powi` with an exponent known only at run time is a
+/// library call per tap, the denoiser's largest single cost.
+#[inline]
+fn power(mut x: f32, mut n: i32) -> f32 {
+    let mut result = 1.0;
+    while n > 0 {
+        if n & 1 == 1 {
+            result *= x;
+        }
+        x *= x;
+        n >>= 1;
+    }
+    result
 }
 
 #[cfg(test)]
