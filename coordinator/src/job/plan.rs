@@ -18,7 +18,7 @@
 
 use super::model::{JobSpec, TileSpec};
 use tessera_common::film::Rect;
-use tessera_common::integrator::emis::FINAL_ITERATIONS_PER_CALL;
+use tessera_common::integrator::emis::{FINAL_ITERATIONS_PER_CALL, collecting_call};
 
 /// Edge of the rectangles of image-tile integrators.
 pub const TILE_SIZE: u32 = 64;
@@ -87,8 +87,18 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
     let update = update.filter(|_| may_collect && is_emis(spec));
     let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
     let collect = update.is_some();
-    // as `render_emis` does: a full-frame call per collecting iteration, larger calls after
-    let per_tile = if is_emis(spec) && !collect { FINAL_ITERATIONS_PER_CALL } else { 1 };
+    if collect {
+        // as `render_emis` does: the calls of `collecting_call`
+        let mut tiles = Vec::new();
+        let mut begin = spp_done;
+        while begin < end {
+            let samples = collecting_call(begin..end);
+            begin = samples.end;
+            tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
+        }
+        return PassPlan { tiles, collect };
+    }
+    let per_tile = if is_emis(spec) { FINAL_ITERATIONS_PER_CALL } else { 1 };
     PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done, per_tile), collect }
 }
 
@@ -207,6 +217,12 @@ mod tests {
         assert_eq!(third.collect, false);
         let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12]);
+        // a collecting pass: a call per iteration that records under path tracing (0 and
+        // ≡ 2 mod 4), one per run between them
+        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0);
+        let ranges: Vec<_> = collecting.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [4..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..16]);
+        assert!(collecting.collect);
         let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0);
         let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
