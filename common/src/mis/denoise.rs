@@ -53,20 +53,25 @@ pub fn denoise(width: usize, height: usize, color: &[[f32; 3]], guides: &Guides,
         "invariant: image and guides have width × height pixels"
     );
     let modulation: Vec<[f32; 3]> = guides.albedo.iter().map(|a| a.map(|c| c.max(1e-3))).collect();
-    let mut current: Vec<[f32; 3]> =
-        color.iter().zip(&modulation).map(|(c, a)| [c[0] / a[0], c[1] / a[1], c[2] / a[2]]).collect();
-    let mut next = vec![[0.0f32; 3]; n];
-    let gradient = depth_gradient(width, height, guides);
+    let mut current: [Vec<f32>; 3] =
+        std::array::from_fn(|c| color.iter().zip(&modulation).map(|(v, a)| v[c] / a[c]).collect());
+    let mut next: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0; n]);
+    let planes = Planes::new(width, height, guides);
     for level in 0..s.levels {
-        let pass = Pass { width, height, step: 1 << level, guides, gradient: &gradient, settings: s };
-        next.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-            for (x, out) in row.iter_mut().enumerate() {
-                *out = pass.filter_pixel(x, y, &current);
-            }
-        });
+        let pass = Pass { planes: &planes, step: 1 << level, settings: s };
+        let [r, g, b] = &mut next;
+        r.par_chunks_mut(width).zip(g.par_chunks_mut(width)).zip(b.par_chunks_mut(width)).enumerate().for_each_init(
+            || Scratch::new(width),
+            |scratch, (y, ((r, g), b))| pass.filter_row(y, &current, [r, g, b], scratch),
+        );
         std::mem::swap(&mut current, &mut next);
     }
-    current.iter().zip(&modulation).map(|(c, a)| [c[0] * a[0], c[1] * a[1], c[2] * a[2]]).collect()
+    (0..n)
+        .map(|p| {
+            let a = modulation[p];
+            [current[0][p] * a[0], current[1][p] * a[1], current[2][p] * a[2]]
+        })
+        .collect()
 }
 
 /// The scalar Ī of the optimiser: the denoised image's channel mean, box-filtered.
@@ -81,74 +86,154 @@ pub fn denoised_intensity(
     Image::from_data(width, height, d.iter().map(|c| (c[0] + c[1] + c[2]) / 3.0).collect()).box_blur(s.final_box)
 }
 
-/// |∇z| per pixel by central differences within the same surface class.
-fn depth_gradient(width: usize, height: usize, g: &Guides) -> Vec<f32> {
-    let at = |x: usize, y: usize| g.depth[y * width + x];
-    (0..height)
-        .flat_map(|y| (0..width).map(move |x| (x, y)))
-        .map(|(x, y)| {
-            let dx = (at((x + 1).min(width - 1), y) - at(x.saturating_sub(1), y)).abs() * 0.5;
-            let dy = (at(x, (y + 1).min(height - 1)) - at(x, y.saturating_sub(1))).abs() * 0.5;
-            dx.max(dy)
-        })
-        .collect()
-}
-
-/// One à-trous level: what every pixel's filter at this step reads.
-struct Pass<'a> {
+/// The guides as planes, one value per pixel each, so that a tap's loop over a row reads
+/// contiguous memory and compiles to vector code.
+struct Planes {
     width: usize,
     height: usize,
+    normal: [Vec<f32>; 3],
+    albedo: [Vec<f32>; 3],
+    depth: Vec<f32>,
+    /// |∇z| by central differences.
+    gradient: Vec<f32>,
+    /// 1 where the camera ray escaped (zero normal), else 0.
+    escaped: Vec<f32>,
+}
+
+impl Planes {
+    fn new(width: usize, height: usize, g: &Guides) -> Self {
+        let at = |x: usize, y: usize| g.depth[y * width + x];
+        let gradient = (0..height)
+            .flat_map(|y| (0..width).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let dx = (at((x + 1).min(width - 1), y) - at(x.saturating_sub(1), y)).abs() * 0.5;
+                let dy = (at(x, (y + 1).min(height - 1)) - at(x, y.saturating_sub(1))).abs() * 0.5;
+                dx.max(dy)
+            })
+            .collect();
+        Planes {
+            width,
+            height,
+            normal: std::array::from_fn(|c| g.normal.iter().map(|v| v[c]).collect()),
+            albedo: std::array::from_fn(|c| g.albedo.iter().map(|v| v[c]).collect()),
+            depth: g.depth.to_vec(),
+            gradient,
+            escaped: g.normal.iter().map(|&v| (v == [0.0; 3]) as u8 as f32).collect(),
+        }
+    }
+}
+
+/// Per-thread row buffers.
+struct Scratch {
+    sum: [Vec<f32>; 3],
+    weight_sum: Vec<f32>,
+    cosine: Vec<f32>,
+    exponent: Vec<f32>,
+    weight: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(width: usize) -> Self {
+        Scratch {
+            sum: std::array::from_fn(|_| vec![0.0; width]),
+            weight_sum: vec![0.0; width],
+            cosine: vec![0.0; width],
+            exponent: vec![0.0; width],
+            weight: vec![0.0; width],
+        }
+    }
+}
+
+/// One à-trous level.
+struct Pass<'a> {
+    planes: &'a Planes,
     step: usize,
-    guides: &'a Guides<'a>,
-    gradient: &'a [f32],
     settings: &'a DenoiseSettings,
 }
 
-impl Pass<'_> {
-    #[inline]
-    fn filter_pixel(&self, x: usize, y: usize, img: &[[f32; 3]]) -> [f32; 3] {
-        let (g, s, step) = (self.guides, self.settings, self.step);
-        let p = y * self.width + x;
-        let (np, ap, zp) = (g.normal[p], g.albedo[p], g.depth[p]);
-        let escaped_p = np == [0.0; 3];
-        // the depth term's denominator is σz·|∇z_p|·step·|offset| + ε: its per-pixel parts
-        // once here, |offset| per tap below
-        let depth_scale = s.depth_sigma * self.gradient[p] * step as f32;
-        let depth_epsilon = 1e-4 * zp.max(1e-3);
+impl<'a> Pass<'a> {
+    /// Filters row `y` of `img` into `out`: per tap, the edge-stopping weights of the whole
+    /// row, then their products with the kernel summed per pixel (in the same tap order for
+    /// every pixel, so the result does not depend on how rows are split among threads).
+    fn filter_row(&self, y: usize, img: &[Vec<f32>; 3], out: [&mut [f32]; 3], scratch: &mut Scratch) {
+        let (g, s, step) = (self.planes, self.settings, self.step);
+        let width = g.width;
         let inv_albedo_sigma = 1.0 / s.albedo_sigma;
-        let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+        for v in scratch.sum.iter_mut().chain([&mut scratch.weight_sum]) {
+            v.fill(0.0);
+        }
         for (j, ky) in B3.iter().enumerate() {
-            let Some(yy) = (y + 2 * step).checked_sub((4 - j) * step).filter(|&yy| yy < self.height) else {
+            let Some(yy) = (y + 2 * step).checked_sub((4 - j) * step).filter(|&yy| yy < g.height) else {
                 continue;
             };
             for (i, kx) in B3.iter().enumerate() {
-                let Some(xx) = (x + 2 * step).checked_sub((4 - i) * step).filter(|&xx| xx < self.width) else {
+                // pixels x of this row whose tap x + dx lies inside the image
+                let dx = (i as isize - 2) * step as isize;
+                let (x0, x1) = ((-dx).max(0) as usize, (width as isize - dx).clamp(0, width as isize) as usize);
+                if x0 >= x1 {
                     continue;
-                };
-                let q = yy * self.width + xx;
-                let nq = g.normal[q];
-                let w = if escaped_p || nq == [0.0; 3] {
-                    if escaped_p && nq == [0.0; 3] { 1.0 } else { 0.0 }
-                } else {
-                    let dot = np[0] * nq[0] + np[1] * nq[1] + np[2] * nq[2];
-                    if dot <= 0.0 {
-                        0.0
-                    } else {
-                        let aq = g.albedo[q];
-                        let da = (ap[0] - aq[0]).abs() + (ap[1] - aq[1]).abs() + (ap[2] - aq[2]).abs();
-                        let dz = (zp - g.depth[q]).abs() / (depth_scale * TAP_DISTANCE[j][i] + depth_epsilon);
-                        power(dot, s.normal_power) * (-(da * inv_albedo_sigma + dz)).exp()
+                }
+                let len = x1 - x0;
+                let p = y * width + x0..y * width + x1;
+                let q0 = (yy * width + x0).wrapping_add_signed(dx);
+                let q = q0..q0 + len;
+                let depth_scale = s.depth_sigma * step as f32 * TAP_DISTANCE[j][i];
+                let (cosine, exponent, weight) =
+                    (&mut scratch.cosine[..len], &mut scratch.exponent[..len], &mut scratch.weight[..len]);
+                {
+                    // every slice exactly `len` long, so the loop needs no bounds checks and
+                    // compiles to vector code
+                    let at_p = |v: &'a [f32]| &v[p.start..][..len];
+                    let at_q = |v: &'a [f32]| &v[q.start..][..len];
+                    let (zp, zq, grad) = (at_p(&g.depth), at_q(&g.depth), at_p(&g.gradient));
+                    let np = g.normal.each_ref().map(|v| at_p(v));
+                    let nq = g.normal.each_ref().map(|v| at_q(v));
+                    let ap = g.albedo.each_ref().map(|v| at_p(v));
+                    let aq = g.albedo.each_ref().map(|v| at_q(v));
+                    for x in 0..len {
+                        let dot = np[0][x] * nq[0][x] + np[1][x] * nq[1][x] + np[2][x] * nq[2][x];
+                        let da =
+                            (ap[0][x] - aq[0][x]).abs() + (ap[1][x] - aq[1][x]).abs() + (ap[2][x] - aq[2][x]).abs();
+                        let dz = (zp[x] - zq[x]).abs() / (depth_scale * grad[x] + 1e-4 * zp[x].max(1e-3));
+                        cosine[x] = dot.max(0.0);
+                        // a normal at 90° or more cuts the tap whatever the power
+                        exponent[x] = if dot > 0.0 { -(da * inv_albedo_sigma + dz) } else { f32::NEG_INFINITY };
                     }
-                };
-                let k = kx * ky * w;
-                if k > 0.0 {
-                    let c = img[q];
-                    sum = [sum[0] + k * c[0], sum[1] + k * c[1], sum[2] + k * c[2]];
-                    wsum += k;
+                }
+                power(cosine, s.normal_power, weight);
+                for (w, e) in weight.iter_mut().zip(exponent.iter()) {
+                    *w *= e.exp();
+                }
+                let kernel = kx * ky;
+                let (ep, eq) = (&g.escaped[p.clone()][..len], &g.escaped[q.clone()][..len]);
+                let c = img.each_ref().map(|v| &v[q.clone()][..len]);
+                let weight = &weight[..len];
+                let [sr, sg, sb] = &mut scratch.sum;
+                let (sr, sg, sb) = (&mut sr[x0..x1][..len], &mut sg[x0..x1][..len], &mut sb[x0..x1][..len]);
+                let sw = &mut scratch.weight_sum[x0..x1][..len];
+                for x in 0..len {
+                    // escaped pixels mix with escaped pixels only
+                    let w = if ep[x] + eq[x] > 0.0 { ep[x] * eq[x] } else { weight[x] };
+                    let k = kernel * w;
+                    if k > 0.0 {
+                        sr[x] += k * c[0][x];
+                        sg[x] += k * c[1][x];
+                        sb[x] += k * c[2][x];
+                        sw[x] += k;
+                    }
                 }
             }
         }
-        if wsum > 0.0 { sum.map(|v| v / wsum) } else { img[p] }
+        let [or, og, ob] = out;
+        let row = y * width..(y + 1) * width;
+        let own = [&img[0][row.clone()], &img[1][row.clone()], &img[2][row]];
+        for x in 0..width {
+            let w = scratch.weight_sum[x];
+            let k = if w > 0.0 { 1.0 / w } else { 0.0 };
+            or[x] = if w > 0.0 { scratch.sum[0][x] * k } else { own[0][x] };
+            og[x] = if w > 0.0 { scratch.sum[1][x] * k } else { own[1][x] };
+            ob[x] = if w > 0.0 { scratch.sum[2][x] * k } else { own[2][x] };
+        }
     }
 }
 
@@ -176,19 +261,23 @@ const TAP_DISTANCE: [[f32; 5]; 5] = {
     d
 };
 
-/// x^n for n ≥ 0 by squaring, inline: `powi` with an exponent known only at run time is a
-/// library call per tap, the denoiser's largest single cost.
-#[inline]
-fn power(mut x: f32, mut n: i32) -> f32 {
-    let mut result = 1.0;
+/// `out[x] = base[x]^n` for n ≥ 0 by squaring, a pass over the row per bit of n (`powi` with
+/// an exponent known only at run time is a library call per tap). Consumes `base`.
+fn power(base: &mut [f32], mut n: i32, out: &mut [f32]) {
+    out.fill(1.0);
     while n > 0 {
         if n & 1 == 1 {
-            result *= x;
+            for (o, b) in out.iter_mut().zip(base.iter()) {
+                *o *= b;
+            }
         }
-        x *= x;
         n >>= 1;
+        if n > 0 {
+            for b in base.iter_mut() {
+                *b *= *b;
+            }
+        }
     }
-    result
 }
 
 #[cfg(test)]
