@@ -207,7 +207,6 @@ impl<'a> Pass<'a> {
                 let kernel = kx * ky;
                 let (ep, eq) = (&g.escaped[p.clone()][..len], &g.escaped[q.clone()][..len]);
                 let c = img.each_ref().map(|v| &v[q.clone()][..len]);
-                let weight = &weight[..len];
                 let [sr, sg, sb] = &mut scratch.sum;
                 let (sr, sg, sb) = (&mut sr[x0..x1][..len], &mut sg[x0..x1][..len], &mut sb[x0..x1][..len]);
                 let sw = &mut scratch.weight_sum[x0..x1][..len];
@@ -229,10 +228,8 @@ impl<'a> Pass<'a> {
         let own = [&img[0][row.clone()], &img[1][row.clone()], &img[2][row]];
         for x in 0..width {
             let w = scratch.weight_sum[x];
-            let k = if w > 0.0 { 1.0 / w } else { 0.0 };
-            or[x] = if w > 0.0 { scratch.sum[0][x] * k } else { own[0][x] };
-            og[x] = if w > 0.0 { scratch.sum[1][x] * k } else { own[1][x] };
-            ob[x] = if w > 0.0 { scratch.sum[2][x] * k } else { own[2][x] };
+            let [r, g, b] = if w > 0.0 { scratch.sum.each_ref().map(|s| s[x] / w) } else { own.map(|c| c[x]) };
+            (or[x], og[x], ob[x]) = (r, g, b);
         }
     }
 }
