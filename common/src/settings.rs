@@ -19,7 +19,7 @@ use crate::integrator::vcm::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use crate::mis::cost::CostModel;
 use crate::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
-use crate::mis::optimize::MomentFilter;
+use crate::mis::optimize::{MomentFilter, OutlierStage};
 use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -132,6 +132,8 @@ pub struct RenderSettings {
     pub cost_model: CostModel,
     /// EMIS: whether moments are made relative before or after the box filter.
     pub moment_filter: MomentFilter,
+    /// EMIS: the outlier rejection of the image-level sums.
+    pub moment_outliers: OutlierStage,
     /// EMIS: the method's own pilot, or path tracing first.
     pub emis_pilot: PilotStart,
 }
@@ -154,6 +156,7 @@ impl Default for RenderSettings {
             merge_kernel: MomentSettings::default().merge_kernel,
             cost_model: CostModel::default(),
             moment_filter: MomentFilter::default(),
+            moment_outliers: OutlierStage::default(),
             emis_pilot: PilotStart::default(),
         }
     }
@@ -301,6 +304,7 @@ impl RenderSettings {
         config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
         config.constants = self.cost_model.constants();
         config.filters.order = self.moment_filter;
+        config.filters.outliers = self.moment_outliers;
         config.pilot = self.emis_pilot;
         config
     }

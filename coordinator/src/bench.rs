@@ -47,12 +47,19 @@ pub struct BenchArgs {
     /// scene's reference.exr, speed-ups and the EMIS targets.
     #[arg(long, value_delimiter = ',')]
     pub equal_time: Vec<f64>,
+    /// Equal-time mode: render every cell once per seed; relMSE is the mean over seeds, and
+    /// the floor is also reported per seed, so that a verdict shows the run-to-run spread.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    pub seeds: Vec<u64>,
     /// Equal-time mode: the EMIS cost heuristic's constants.
     #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: crate::cli::CostModelArg,
     /// Equal-time mode: the EMIS moment filter order.
     #[arg(long, value_enum, default_value = "relative")]
     pub moment_filter: crate::cli::MomentFilterArg,
+    /// Equal-time mode: the EMIS outlier rejection.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: crate::cli::MomentOutliersArg,
     /// `--equal-time`: the pilots each `emis-*` integrator runs with (each a column).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "bidirectional")]
     pub emis_pilot: Vec<crate::cli::EmisPilotArg>,

@@ -28,8 +28,23 @@ use tessera_common::sampler::Sampler;
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
-/// One scene's equal-time results: (integrator, relMSE, samples/s).
-type Row = Vec<(String, f64, f64)>;
+/// One integrator's equal-time results on one scene.
+struct Cell {
+    name: String,
+    /// relMSE per seed of `--seeds`.
+    relmse: Vec<f64>,
+    /// Mean samples per second over the seeds.
+    samples_per_s: f64,
+}
+
+impl Cell {
+    fn mean(&self) -> f64 {
+        self.relmse.iter().sum::<f64>() / self.relmse.len().max(1) as f64
+    }
+}
+
+/// One scene's equal-time results, a cell per column.
+type Row = Vec<Cell>;
 
 /// The columns: each integrator of `--integrators`, the `emis-*` ones once per pilot of
 /// `--emis-pilot` (a path-tracing start is named `emis-vcm/pt-start`).
@@ -61,20 +76,25 @@ fn equal_time_scene(args: &BenchArgs, path: &Path, seconds: f64) -> anyhow::Resu
                 integrator: kind.into(),
                 cost_model: args.cost_model.into(),
                 moment_filter: args.moment_filter.into(),
+                moment_outliers: args.moment_outliers.into(),
                 emis_pilot: pilot,
                 ..RenderSettings::default()
             },
             &scene,
         )?;
-        let opts = RenderOptions {
-            budget: Budget::Time(Duration::from_secs_f64(seconds)),
-            seed: 1,
-            threads: args.threads.unwrap_or(0),
-            tile_size: 32,
-        };
-        let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
-        let relmse = tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001);
-        rows.push((name, relmse, out.film.total_samples() as f64 / out.elapsed.as_secs_f64()));
+        let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
+        for &seed in &args.seeds {
+            let opts = RenderOptions {
+                budget: Budget::Time(Duration::from_secs_f64(seconds)),
+                seed,
+                threads: args.threads.unwrap_or(0),
+                tile_size: 32,
+            };
+            let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
+            cell.relmse.push(tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001));
+            cell.samples_per_s += out.film.total_samples() as f64 / out.elapsed.as_secs_f64() / args.seeds.len() as f64;
+        }
+        rows.push(cell);
     }
     Ok(rows)
 }
@@ -88,7 +108,8 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
     for &seconds in durations {
         println!("\n## equal time {seconds} s ({} threads)\n", args.threads.map_or("all".into(), |t| t.to_string()));
         println!(
-            "relMSE against the reference (top 0.1 % dropped), speed-up over pt = relMSE(pt) / relMSE, samples/s\n"
+            "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}), speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
+            args.seeds
         );
         let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
         println!("| scene | {} |", names.join(" | "));
@@ -96,18 +117,23 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
         let mut table = Vec::new();
         for path in scenes {
             let rows = equal_time_scene(args, path, seconds)?;
-            let pt = rows.iter().find(|r| r.0 == "pt").map(|r| r.1);
+            let pt = rows.iter().find(|c| c.name == "pt").map(Cell::mean);
             let cells: Vec<String> = rows
                 .iter()
-                .map(|(_, e, sps)| match pt {
-                    Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
-                    None => format!("{e:.5} ({:.2e} S/s)", sps),
+                .map(|c| {
+                    let (e, sps) = (c.mean(), c.samples_per_s);
+                    match pt {
+                        Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
+                        None => format!("{e:.5} ({:.2e} S/s)", sps),
+                    }
                 })
                 .collect();
             println!("| {} | {} |", scene_name(path), cells.join(" | "));
             table.push((scene_name(path), rows));
         }
-        let err = |rows: &Row, n: &str| rows.iter().find(|r| r.0 == n).map(|r| r.1);
+        let err = |rows: &Row, n: &str| rows.iter().find(|c| c.name == n).map(Cell::mean);
+        // the relMSE of seed number `i`
+        let err_at = |rows: &Row, n: &str, i: usize| rows.iter().find(|c| c.name == n).map(|c| c.relmse[i]);
         let ratio = |a: &str, b: &str| -> Vec<f64> {
             table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect::<Vec<f64>>()
         };
@@ -148,6 +174,18 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
                 worst.iter().map(|(s, x)| format!("{s} {x:.2}x")).collect::<Vec<_>>().join(", "),
                 if below.is_empty() { "met" } else { "NOT met" }
             );
+            if args.seeds.len() > 1 {
+                for (i, seed) in args.seeds.iter().enumerate() {
+                    let per_seed: Vec<String> = table
+                        .iter()
+                        .filter_map(|(s, r)| {
+                            let best = err_at(r, "pt", i)?.min(err_at(r, "vcm", i)?);
+                            Some(format!("{s} {:.2}x", best / err_at(r, "emis-vcm", i)?))
+                        })
+                        .collect();
+                    println!("  seed {seed} alone: {}", per_seed.join(", "));
+                }
+            }
         }
         if let Some(chart) = &args.chart {
             let file = chart.with_file_name(format!(
@@ -159,7 +197,7 @@ pub fn equal_time(args: &BenchArgs, scenes: &[PathBuf], durations: &[f64]) -> an
                 .iter()
                 .map(|(s, r)| {
                     let pt = err(r, "pt").unwrap_or(f64::NAN);
-                    Group { label: s.clone(), values: r.iter().map(|(_, e, _)| pt / e).collect() }
+                    Group { label: s.clone(), values: r.iter().map(|c| pt / c.mean()).collect() }
                 })
                 .collect();
             write_bar_chart(&file, &format!("speed-up over pt at equal time {seconds} s"), &names, &groups)?;

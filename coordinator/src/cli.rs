@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use tessera_common::integrator::emis::PilotStart;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
-use tessera_common::mis::optimize::MomentFilter;
+use tessera_common::mis::optimize::{MomentFilter, OutlierStage};
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// Tessera: a distributed renderer for Mitsuba 3 scenes.
@@ -103,6 +103,12 @@ pub struct IntegratorArgs {
     /// reference, which lets bright features spread into dark neighbours).
     #[arg(long, value_enum, default_value = "relative")]
     pub moment_filter: MomentFilterArg,
+    /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
+    /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
+    /// candidate shares (rare samples no strategy can change), before the box filter spreads
+    /// it over the neighbours; or apply the reference's rule alone.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: MomentOutliersArg,
     /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
     /// switches to the full candidate set, discarding the iterations so far, once a
     /// bidirectional strategy wins.
@@ -126,6 +132,25 @@ pub enum EmisPilotArg {
     Bidirectional,
     /// Path tracing, choosing from a reduced candidate set until a bidirectional one wins.
     PathTracing,
+}
+
+/// Where the EMIS image-level sums reject outlier pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MomentOutliersArg {
+    /// First the outliers of the part every candidate shares, per pixel before the box
+    /// filter; then as `filtered`.
+    Shared,
+    /// The reference: each candidate's box-filtered moments above their 99.9 % quantile.
+    Filtered,
+}
+
+impl From<MomentOutliersArg> for OutlierStage {
+    fn from(arg: MomentOutliersArg) -> OutlierStage {
+        match arg {
+            MomentOutliersArg::Filtered => OutlierStage::Filtered,
+            MomentOutliersArg::Shared => OutlierStage::Shared,
+        }
+    }
 }
 
 /// The order of the EMIS moment filter and the division by the image.
@@ -183,6 +208,7 @@ impl IntegratorArgs {
         };
         settings.cost_model = self.cost_model.into();
         settings.moment_filter = self.moment_filter.into();
+        settings.moment_outliers = self.moment_outliers.into();
         settings.emis_pilot = self.emis_pilot.into();
     }
 }

@@ -13,8 +13,10 @@
 //! equal-time benchmark measures, which at small K hides rare large errors (caustics seen by
 //! path tracing) that a long render does not drop. Predictions are image-level relative
 //! moments the way the optimiser forms them (box radius 3, relative to the reference in the
-//! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed), times the cost model
-//! of `--cost-model`: from the candidate's own samples (Σ y², "measured") and from the pilot.
+//! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed; with
+//! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says),
+//! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
+//! and from the pilot.
 //!
 //! Reported per variant: the candidate it chooses and its **regret**, the true work-normalised
 //! error of that choice over the best candidate's (1 = perfect), plus how well its predictions
@@ -34,7 +36,7 @@ use tessera_common::mis::cost::{CostModel, pixel_cost};
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
 use tessera_common::mis::filter::Image;
 use tessera_common::mis::moments::MomentBuffer;
-use tessera_common::mis::optimize::MomentFilter;
+use tessera_common::mis::optimize::{MomentFilter, OutlierStage, remove_shared_outliers};
 use tessera_common::scene::Scene;
 
 const VARIANTS: [(MergeRatio, MergeKernel); 4] = [
@@ -106,6 +108,7 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
     let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads.unwrap_or(0)).build()?;
     let candidates = reduced_candidates();
     let pilot_iterations = args.ground_truth_pilot;
+    let outliers: OutlierStage = args.moment_outliers.into();
     println!(
         "ground truth: pilot {pilot_iterations} vcm iterations; {} candidates × {k} iterations each",
         candidates.len()
@@ -200,8 +203,17 @@ pub fn ground_truth(args: &BenchArgs, scenes: &[PathBuf], k: u32) -> anyhow::Res
         };
         let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
         let predict = |snapshot: usize, order: MomentFilter| -> Vec<f64> {
-            (0..candidates.len())
-                .map(|ci| relative_mean(wu, hu, moments_of(&snapshots[snapshot].0, ci), &ref_mean, order) * costs[ci])
+            let mut planes: Vec<Image> = (0..candidates.len())
+                .map(|ci| Image::from_data(wu, hu, moments_of(&snapshots[snapshot].0, ci)))
+                .collect();
+            if outliers == OutlierStage::Shared {
+                let norm: Vec<f32> = ref_mean.iter().map(|&r| r * r + 1e-4).collect();
+                remove_shared_outliers(&mut planes, &norm, 0.999);
+            }
+            planes
+                .into_iter()
+                .enumerate()
+                .map(|(ci, plane)| relative_mean(wu, hu, plane.data, &ref_mean, order) * costs[ci])
                 .collect()
         };
         let by_order: Vec<Vec<f64>> = MomentFilter::ALL.iter().map(|&order| predict(0, order)).collect();

@@ -7,7 +7,7 @@ use tessera_common::film::Rect;
 use tessera_common::integrator::emis::PilotStart;
 use tessera_common::mis::cost::CostModel;
 use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
-use tessera_common::mis::optimize::MomentFilter;
+use tessera_common::mis::optimize::{MomentFilter, OutlierStage};
 use tessera_common::settings::RenderSettings;
 
 fn parse_json_name<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> Result<T, String> {
@@ -59,6 +59,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<MomentFilter>("moment_filter", v)?,
             None => d.moment_filter,
         },
+        moment_outliers: match &s.moment_outliers {
+            Some(v) => parse_json_name::<OutlierStage>("moment_outliers", v)?,
+            None => d.moment_outliers,
+        },
         emis_pilot: match &s.emis_pilot {
             Some(v) => parse_json_name::<PilotStart>("emis_pilot", v)?,
             None => d.emis_pilot,
@@ -84,6 +88,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         merge_kernel: Some(json_name(&s.merge_kernel)),
         cost_model: Some(json_name(&s.cost_model)),
         moment_filter: Some(json_name(&s.moment_filter)),
+        moment_outliers: Some(json_name(&s.moment_outliers)),
         emis_pilot: Some(json_name(&s.emis_pilot)),
     }
 }
