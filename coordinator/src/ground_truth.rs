@@ -14,7 +14,8 @@
 //! path tracing) that a long render does not drop. Predictions are image-level relative
 //! moments the way the optimiser forms them (box radius 3, relative to the reference in the
 //! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed; with
-//! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says),
+//! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says, the
+//! shared part being the minimum over the reduced set),
 //! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
 //! and from the pilot.
 //!

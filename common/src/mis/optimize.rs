@@ -75,7 +75,7 @@ pub struct FilterSettings {
     pub outlier_quantile: f64,
     /// Whether moments are made relative before or after the box filter.
     pub order: MomentFilter,
-    /// Where the image-level sums take their outliers out.
+    /// The outlier rule of the image-level sums.
     pub outliers: OutlierStage,
 }
 
@@ -158,7 +158,7 @@ impl Default for FilterSettings {
 /// selection, not a histogram: one rare sample can be 1e6 times the rest, and a histogram's
 /// bins over [min, max] would then put every other pixel in its first bin); +∞ if none is
 /// finite.
-pub fn raw_outlier_threshold(moments: &[f32], norm: &[f32], quantile: f64) -> f32 {
+fn relative_quantile(moments: &[f32], norm: &[f32], quantile: f64) -> f32 {
     let mut v: Vec<f32> = moments.iter().zip(norm).map(|(&m, &n)| m / n).filter(|v| v.is_finite()).collect();
     if v.is_empty() {
         return f32::INFINITY;
@@ -185,7 +185,7 @@ pub fn remove_shared_outliers(planes: &mut [Image], norm: &[f32], quantile: f64)
             }
         }
     });
-    let threshold = raw_outlier_threshold(&shared, norm, quantile);
+    let threshold = relative_quantile(&shared, norm, quantile);
     planes.par_iter_mut().for_each(|plane| {
         for ((v, &s), &n) in plane.data.iter_mut().zip(&shared).zip(norm) {
             if s.is_finite() && s / n > threshold && v.is_finite() {

@@ -167,16 +167,8 @@ fn rare_samples_every_candidate_shares_do_not_decide() {
         own + if spikes.contains(&p) { 2e4 } else { 0.0 }
     });
     let img = Image::filled(w as usize, h as usize, 1.0);
-    let decide = |outliers: OutlierStage| {
-        let d = optimize(&OptimizerInput {
-            candidates: &candidates,
-            moments: &b,
-            image: &img,
-            statistics: stats,
-            constants: CostConstants::default(),
-            filters: FilterSettings { outliers, ..FilterSettings::default() },
-            merge_scope: MergeScope::PerPixel,
-        });
+    let decide = |outliers| {
+        let d = run_with(&candidates, &b, &img, FilterSettings { outliers, ..FilterSettings::default() });
         (d.nu, d.connections)
     };
     assert_eq!(decide(OutlierStage::Shared), (target.nu, target.connections));
