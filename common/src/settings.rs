@@ -14,12 +14,12 @@
 //! assert!(s.validate().is_ok());
 //! ```
 
-use crate::integrator::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
-use crate::integrator::vcm::{MergeConfig, MergeMask};
+use crate::emis::cost::CostModel;
+use crate::emis::estimator::{MergeKernel, MergeRatio, MomentSettings};
+use crate::emis::optimize::{MomentFilter, OutlierStage};
+use crate::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
+use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
-use crate::mis::cost::CostModel;
-use crate::mis::estimator::{MergeKernel, MergeRatio, MomentSettings};
-use crate::mis::optimize::{MomentFilter, OutlierStage};
 use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};

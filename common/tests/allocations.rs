@@ -4,12 +4,15 @@
 use glam::Vec2;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use tessera_common::integrator::bidir::LightCache;
 use tessera_common::integrator::observer::NoObserver;
+use tessera_common::integrator::path::light_cache::LightCache;
 use tessera_common::integrator::path::mis::SampleCounts;
 use tessera_common::integrator::path::techniques::{Report, camera_vertex, connect, next_event};
 use tessera_common::integrator::path::vertex::{PathVertex, VertexKind, solid_angle_to_area};
-use tessera_common::integrator::vcm::{PhotonMap, merge, merge_radius_max};
+use tessera_common::integrator::path::{
+    merge::{merge, merge_radius_max},
+    photon_map::PhotonMap,
+};
 use tessera_common::scene::Scene;
 
 struct Counting;

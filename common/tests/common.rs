@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
-use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
+use tessera_common::integrator::path::merge::{MergeConfig, MergeMask};
 use tessera_common::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
 use tessera_common::render::{Budget, RenderOptions, render};
 use tessera_common::scene::Scene;
@@ -70,12 +70,12 @@ pub fn render_with(scene: &Scene, integrator: &dyn Integrator, spp: u32, seed: u
 /// `iterations` iterations; returns the film and the final state.
 pub fn render_emis_state(
     scene: &Scene,
-    method: tessera_common::integrator::emis::EmisMethod,
+    method: tessera_common::emis::EmisMethod,
     iterations: u32,
     seed: u64,
     threads: usize,
-) -> (Film, tessera_common::integrator::emis::EmisState) {
-    use tessera_common::integrator::emis::{EmisConfig, render_emis};
+) -> (Film, tessera_common::emis::EmisState) {
+    use tessera_common::emis::{EmisConfig, render_emis};
     let opts = RenderOptions { budget: Budget::Samples(iterations), seed, threads, tile_size: 32 };
     let out = render_emis(scene, PathSettings::from_scene(scene, None), &EmisConfig::new(method), &opts, &|_, _| {})
         .expect("render");
@@ -84,10 +84,10 @@ pub fn render_emis_state(
 
 /// `emis-bdpt` for `iterations` iterations.
 pub fn render_emis_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
-    render_emis_state(scene, tessera_common::integrator::emis::EmisMethod::Bdpt, iterations, seed, threads).0
+    render_emis_state(scene, tessera_common::emis::EmisMethod::Bdpt, iterations, seed, threads).0
 }
 
 /// `emis-vcm` for `iterations` iterations.
 pub fn render_emis_vcm(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
-    render_emis_state(scene, tessera_common::integrator::emis::EmisMethod::Vcm, iterations, seed, threads).0
+    render_emis_state(scene, tessera_common::emis::EmisMethod::Vcm, iterations, seed, threads).0
 }

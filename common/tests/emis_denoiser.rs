@@ -6,13 +6,13 @@
 mod common;
 
 use common::scene_path;
+use tessera_common::emis::denoise::{Guides, denoised_intensity};
+use tessera_common::emis::filter::Image;
+use tessera_common::emis::optimize::{Decision, MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
 use tessera_common::film::Film;
 use tessera_common::film::exr::read_rgb;
 use tessera_common::integrator::PathSettings;
-use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
-use tessera_common::mis::denoise::{Guides, denoised_intensity};
-use tessera_common::mis::filter::Image;
-use tessera_common::mis::optimize::{Decision, MergeScope, OptimizerInput, optimize};
 use tessera_common::scene::Scene;
 
 fn check(name: &str) {

@@ -12,11 +12,11 @@
 mod common;
 
 use common::scene_path;
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::estimator::{MomentEstimator, MomentSettings};
+use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::{Bidir, Integrator, PathSettings, TileRequest};
-use tessera_common::mis::candidate::Candidate;
-use tessera_common::mis::estimator::{MomentEstimator, MomentSettings};
-use tessera_common::mis::moments::MomentBuffer;
 use tessera_common::scene::Scene;
 
 /// Iterations per render: 10, or `EMIS_IT` for longer manual checks.
@@ -91,12 +91,12 @@ fn pilot_moments_agree_with_each_candidate_rendered_directly() {
 fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
     let scene = Scene::load(&scene_path("caustic-glass")).expect("scene loads");
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let candidates = tessera_common::mis::candidate::CandidateConfig::vcm().candidates();
+    let candidates = tessera_common::emis::candidate::CandidateConfig::vcm().candidates();
     let settings = PathSettings::from_scene(&scene, None);
     let render = |iterations: std::ops::Range<u32>, threads: usize| -> MomentBuffer {
         let estimator = MomentEstimator::new(w, h, &candidates, MomentSettings::default());
-        let merge = tessera_common::integrator::vcm::MergeConfig {
-            mask: tessera_common::integrator::vcm::MergeMask::Constant(1.0),
+        let merge = tessera_common::integrator::path::merge::MergeConfig {
+            mask: tessera_common::integrator::path::merge::MergeMask::Constant(1.0),
             correlation_aware: true,
         };
         let vcm = Bidir::vcm(settings, 1.0, 1, merge).with_observer(&estimator);
@@ -129,10 +129,8 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
 /// stop after `GUIDE_ITERATIONS`; another iteration's image is `pt`'s own.
 #[test]
 fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
     use tessera_common::integrator::PathTracer;
-    use tessera_common::integrator::emis::{
-        CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations,
-    };
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
@@ -179,7 +177,7 @@ fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
 /// normals are unit, distances positive, and two calls merge into the guides of one.
 #[test]
 fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
-    use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Bdpt);

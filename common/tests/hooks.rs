@@ -6,8 +6,8 @@ mod common;
 use common::{render_with, scene_path};
 use std::sync::Mutex;
 use tessera_common::integrator::observer::{SampleObserver, SampleRecord};
+use tessera_common::integrator::path::merge::{MergeConfig, MergeMask};
 use tessera_common::integrator::path::mis::Technique;
-use tessera_common::integrator::vcm::{MergeConfig, MergeMask};
 use tessera_common::integrator::{Bidir, PathSettings};
 use tessera_common::scene::Scene;
 

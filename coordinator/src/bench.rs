@@ -178,7 +178,7 @@ fn default_scenes() -> anyhow::Result<Vec<PathBuf>> {
 /// `n` points with a radius that finds about 10 photons each.
 fn photon_map_rates(n: u32) {
     use tessera_common::integrator::path::vertex::PathVertex;
-    use tessera_common::integrator::vcm::PhotonMap;
+    use tessera_common::integrator::path::photon_map::PhotonMap;
     use tessera_common::sampler::Sampler;
     let point = |seed: u64, i: u32| {
         let mut s = Sampler::for_pixel(seed, i, 0);

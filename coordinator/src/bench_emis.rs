@@ -15,14 +15,14 @@ use crate::local::{make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tessera_common::integrator::PathSettings;
-use tessera_common::integrator::emis::{
+use tessera_common::emis::{
     CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, PilotStart, Strategy, render_iterations,
 };
-use tessera_common::mis::cost::PathStatistics;
-use tessera_common::mis::denoise::{Guides, denoised_intensity};
-use tessera_common::mis::filter::Image;
-use tessera_common::mis::moments::MomentBuffer;
-use tessera_common::mis::optimize::{MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::cost::PathStatistics;
+use tessera_common::emis::denoise::{Guides, denoised_intensity};
+use tessera_common::emis::filter::Image;
+use tessera_common::emis::moments::MomentBuffer;
+use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::sampler::Sampler;
 use tessera_common::scene::Scene;

@@ -3,7 +3,7 @@
 //! bidirectional engine, and path tracing through the `pt` integrator, interleaved and the
 //! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units
 //! (time ÷ the bidirectional engine's time at ν = 0 × L̄c); fits the heuristic's constants to
-//! all scenes at once (`tessera_common::mis::calibrate`; path tracing's constant is the
+//! all scenes at once (`tessera_common::emis::calibrate`; path tracing's constant is the
 //! geometric mean of its time ratios); and reports each configuration's error with the
 //! reference and the fitted constants against the ±30 % the authors report for theirs.
 
@@ -12,12 +12,12 @@ use crate::local::scene_name;
 use std::path::PathBuf;
 use std::time::Instant;
 use tessera_common::film::{Rect, TileAccum};
-use tessera_common::integrator::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
-use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
-use tessera_common::mis::calibrate::{CostSample, calibration_configurations, fit_constants};
-use tessera_common::mis::candidate::Candidate;
-use tessera_common::mis::cost::{CostConstants, pixel_cost};
+use tessera_common::emis::calibrate::{CostSample, calibration_configurations, fit_constants};
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::cost::{CostConstants, pixel_cost};
 use tessera_common::scene::Scene;
 
 fn label(c: &Candidate) -> String {

@@ -2,10 +2,10 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
-use tessera_common::integrator::emis::PilotStart;
-use tessera_common::mis::cost::CostModel;
-use tessera_common::mis::estimator::{MergeKernel, MergeRatio};
-use tessera_common::mis::optimize::{MomentFilter, OutlierStage};
+use tessera_common::emis::PilotStart;
+use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::emis::optimize::{MomentFilter, OutlierStage};
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// Tessera: a distributed renderer for Mitsuba 3 scenes.

@@ -29,15 +29,15 @@ use crate::local::scene_name;
 use std::path::PathBuf;
 use tessera_common::film::compare::relmse;
 use tessera_common::film::{Film, Rect, TileAccum};
-use tessera_common::integrator::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
-use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
-use tessera_common::mis::candidate::Candidate;
-use tessera_common::mis::cost::{CostModel, pixel_cost};
-use tessera_common::mis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
-use tessera_common::mis::filter::Image;
-use tessera_common::mis::moments::MomentBuffer;
-use tessera_common::mis::optimize::{MomentFilter, OutlierStage, remove_shared_outliers};
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::cost::{CostModel, pixel_cost};
+use tessera_common::emis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
+use tessera_common::emis::filter::Image;
+use tessera_common::emis::moments::MomentBuffer;
+use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_shared_outliers};
 use tessera_common::scene::Scene;
 
 const VARIANTS: [(MergeRatio, MergeKernel); 4] = [

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
 use tessera_common::film::png::write_png;
-use tessera_common::integrator::emis::EmisState;
+use tessera_common::emis::EmisState;
 use tessera_common::render::{Budget, RenderOptions, RenderOutput};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{RenderSettings, Renderer, SettingsError};

@@ -12,7 +12,7 @@
 //!
 //! `vcm`: the same plus vertex merging (Georgiev et al. 2012): at every camera vertex but the
 //! primary one, with probability χ of its pixel, photons of the iteration's cache within
-//! radius r are merged (weight 1/χ); see [`super::vcm`] for the radius and kernel. A fixed
+//! radius r are merged (weight 1/χ); see [`super::path::merge`] for the radius and kernel. A fixed
 //! radius makes `vcm` slightly biased (not progressive).
 //!
 //! Parameters: `max_depth`; ν (`--light-paths-per-pixel`, default 1); c (`--connections`,
@@ -20,13 +20,14 @@
 //! factor (`--correlation-aware`). Use them where light arrives along paths camera paths find
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
-use super::lt::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count};
 use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver};
-use super::path::light_path::trace_light_path;
+use super::path::light_cache::LightCache;
+use super::path::light_path::{MAX_BIDIR_EDGES, light_path_count};
+use super::path::merge::{MergeConfig, merge, merge_radius_max, path_radius};
 use super::path::mis::{MergeCounts, SampleCounts};
+use super::path::photon_map::PhotonMap;
 use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
-use super::vcm::{MergeConfig, PhotonMap, merge, merge_radius_max};
 use super::{Integrator, PathSettings, TileRequest};
 use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
@@ -59,49 +60,6 @@ pub struct Iteration {
     pub photons: Option<PhotonMap>,
     /// Largest merge radius.
     pub radius_max: f32,
-}
-
-/// One iteration's light subpaths, stored back to back.
-pub struct LightCache {
-    /// All vertices; a vertex at depth d is preceded by its subpath's d earlier vertices.
-    pub vertices: Vec<PathVertex>,
-    /// Indices of the vertices connections may choose (depth ≥ 1).
-    pub selectable: Vec<u32>,
-    /// Number of light paths.
-    pub paths: u32,
-}
-
-impl LightCache {
-    /// Traces `paths` light paths of iteration `iteration`, in parallel chunks concatenated in
-    /// order, so the cache does not depend on the thread count.
-    pub fn trace(scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32, rr_depth: u32) -> Self {
-        let chunks: Vec<Vec<PathVertex>> = (0..paths.div_ceil(LIGHT_PATH_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut out = Vec::new();
-                for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
-                    trace_light_path(
-                        scene,
-                        &mut Sampler::for_light_path(seed, index, iteration),
-                        max_edges,
-                        rr_depth,
-                        &mut out,
-                    );
-                }
-                out
-            })
-            .collect();
-        let vertices: Vec<PathVertex> = chunks.into_iter().flatten().collect();
-        let selectable = vertices.iter().enumerate().filter(|(_, v)| v.depth >= 1).map(|(i, _)| i as u32).collect();
-        LightCache { vertices, selectable, paths }
-    }
-
-    /// The light subpath ending at vertex `index`.
-    #[inline]
-    pub fn subpath(&self, index: usize) -> &[PathVertex] {
-        let depth = self.vertices[index].depth as usize;
-        &self.vertices[index - depth..=index]
-    }
 }
 
 impl Bidir<NoObserver> {
@@ -139,7 +97,7 @@ impl<O: SampleObserver> Bidir<O> {
         let connect =
             if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
         let merge = self.merge.as_ref().map(|m| {
-            let r = super::vcm::path_radius(d1, it.radius_max);
+            let r = path_radius(d1, it.radius_max);
             let rc = d1 * (1.0f32).to_radians().tan();
             MergeCounts {
                 area: std::f32::consts::PI * r * r,
@@ -262,7 +220,7 @@ impl<O: SampleObserver> Bidir<O> {
             if depth == 1 {
                 let d1 = (hit.p - cam.origin).length();
                 counts = self.counts(it, pixel, d1);
-                radius = super::vcm::path_radius(d1, it.radius_max);
+                radius = path_radius(d1, it.radius_max);
             }
             // ---- emitter hit ----
             if let Some(li) = shape.light {

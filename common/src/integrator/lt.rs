@@ -9,23 +9,14 @@
 //! Use it where light reaches the visible surfaces in ways camera paths find hard (small,
 //! hidden lights) and no specular surface is seen directly.
 
-use super::path::light_path::trace_light_path;
-use super::path::vertex::{PathVertex, VertexKind};
+use super::path::light_path::{LIGHT_PATH_CHUNK, MAX_BIDIR_EDGES, light_path_count, trace_light_path};
+use super::path::techniques::connect_to_camera;
 use super::{Integrator, PathSettings, TileRequest};
-use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
-use crate::light::Light;
 use crate::math::Rgb;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use rayon::prelude::*;
-
-/// Light paths traced per task; splats are merged in task order, so results do not depend on
-/// the thread count.
-pub const LIGHT_PATH_CHUNK: u32 = 256;
-
-/// Longest subpath, in edges, the bidirectional integrators trace.
-pub const MAX_BIDIR_EDGES: u32 = (super::path::mis::MAX_VERTICES - 2) as u32;
 
 /// The light tracer.
 #[derive(Clone, Debug)]
@@ -34,45 +25,6 @@ pub struct LightTracer {
     pub settings: PathSettings,
     /// Light paths per pixel per iteration (ν).
     pub light_paths_per_pixel: f32,
-}
-
-/// Number of light paths per iteration for ν and P pixels: ⌊ν·P⌋, at least 1 unless ν = 0
-/// (no light paths: the bidirectional engine then path traces with hits and NEE only).
-pub fn light_path_count(nu: f32, pixels: u32) -> u32 {
-    if nu <= 0.0 { 0 } else { ((nu as f64 * pixels as f64).floor() as u32).max(1) }
-}
-
-/// Contribution of light-path vertex `v` (whose predecessor on the path is `prev`, if any)
-/// seen by the camera, and the raster position it lands on. Ignores MIS.
-pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, glam::Vec2)> {
-    let cam = &scene.camera;
-    let cs = cam.sample_direct(v.p)?;
-    let value = match v.kind {
-        VertexKind::Light { light } => match &scene.lights[light as usize] {
-            Light::Area { radiance, .. } => {
-                Light::eval_area(*radiance, v.n_geo, cs.wi) * (v.n_geo.dot(cs.wi).abs() * v.beta.x)
-            }
-            Light::Point { intensity, .. } => *intensity * v.beta.x,
-            Light::Constant { .. } => return None,
-        },
-        VertexKind::Camera => return None,
-        VertexKind::Surface { material } => {
-            let frame = v.frame();
-            let f = scene.materials[material as usize].eval(
-                frame.to_local(v.wo),
-                frame.to_local(cs.wi),
-                TransportMode::Importance,
-            );
-            v.beta * f * (v.importance_correction(v.wo, cs.wi) * v.n_shading.dot(cs.wi).abs())
-        }
-    };
-    if value == Rgb::ZERO {
-        return None;
-    }
-    if !super::path::techniques::visible(scene, v, &super::path::techniques::camera_vertex(scene)) {
-        return None;
-    }
-    Some((value * cs.weight, cs.raster))
 }
 
 impl LightTracer {

@@ -5,13 +5,10 @@
 //! sums wherever and however it is rendered.
 
 pub mod bidir;
-pub mod emis;
-pub mod guides;
 pub mod lt;
 pub mod observer;
 pub mod path;
 pub mod pt;
-pub mod vcm;
 
 use crate::film::{Rect, TileAccum};
 use crate::scene::Scene;

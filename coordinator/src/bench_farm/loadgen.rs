@@ -51,10 +51,10 @@ pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
 
 /// Encoded pilot data for an EMIS lease that collects moments (empty otherwise).
 fn pilot_data(lease: &pb::TileLease, width: u32, height: u32, iterations: u32) -> Vec<u8> {
-    use tessera_common::integrator::emis::{self, PilotData};
-    use tessera_common::integrator::guides::GuideBuffer;
-    use tessera_common::mis::cost::StatisticsSums;
-    use tessera_common::mis::moments::MomentBuffer;
+    use tessera_common::emis::{self, PilotData};
+    use tessera_common::emis::guides::GuideBuffer;
+    use tessera_common::emis::cost::StatisticsSums;
+    use tessera_common::emis::moments::MomentBuffer;
     let samples = lease.sample_begin..lease.sample_end;
     let collects =
         |s: &pb::TileStrategy| s.collect_moments && emis::collects_moments(s.light_paths_per_pixel, &samples);

@@ -5,7 +5,7 @@ use crate::job::emis::{MergeSpec, TileStrategy};
 use crate::job::model::{JobState, LeaseRef};
 use crate::job::service::{JobView, LeaseGrant};
 use tessera_common::film::Rect;
-use tessera_common::integrator::emis::CandidateSet;
+use tessera_common::emis::CandidateSet;
 use tessera_common::settings::RenderSettings;
 use tessera_proto::v1 as pb;
 use tonic::Status;

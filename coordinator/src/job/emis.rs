@@ -8,8 +8,8 @@ use super::model::{JobSpec, TileSpec};
 use super::view::StrategyView;
 use crate::storage::BlobStore;
 use tessera_common::film::Film;
-use tessera_common::integrator::emis::{CandidateSet, EmisState, PilotData, collects_moments};
-use tessera_common::integrator::vcm::MergeMask;
+use tessera_common::emis::{CandidateSet, EmisState, PilotData, collects_moments};
+use tessera_common::integrator::path::merge::MergeMask;
 
 /// Where a tile's merge probability comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -177,9 +177,9 @@ impl EmisJob {
 mod tests {
     use super::*;
     use tessera_common::film::Rect;
-    use tessera_common::integrator::guides::GuideBuffer;
-    use tessera_common::mis::cost::StatisticsSums;
-    use tessera_common::mis::moments::MomentBuffer;
+    use tessera_common::emis::guides::GuideBuffer;
+    use tessera_common::emis::cost::StatisticsSums;
+    use tessera_common::emis::moments::MomentBuffer;
     use tessera_common::settings::{IntegratorName, RenderSettings};
 
     fn spec() -> JobSpec {

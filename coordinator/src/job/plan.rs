@@ -18,7 +18,7 @@
 
 use super::model::{JobSpec, TileSpec};
 use tessera_common::film::Rect;
-use tessera_common::integrator::emis::{FINAL_ITERATIONS_PER_CALL, collecting_call};
+use tessera_common::emis::{FINAL_ITERATIONS_PER_CALL, collecting_call};
 
 /// Edge of the rectangles of image-tile integrators.
 pub const TILE_SIZE: u32 = 64;

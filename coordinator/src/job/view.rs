@@ -3,7 +3,7 @@
 
 use super::model::{Job, JobState};
 use serde::Serialize;
-use tessera_common::integrator::emis::UpdateReport;
+use tessera_common::emis::UpdateReport;
 use tessera_common::settings::RenderSettings;
 
 /// What EMIS has chosen so far.

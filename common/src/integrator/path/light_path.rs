@@ -10,6 +10,19 @@ use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::Vec3;
 
+/// Light paths traced per task; splats are merged in task order, so results do not depend on
+/// the thread count.
+pub const LIGHT_PATH_CHUNK: u32 = 256;
+
+/// Longest subpath, in edges, the bidirectional integrators trace.
+pub const MAX_BIDIR_EDGES: u32 = (super::mis::MAX_VERTICES - 2) as u32;
+
+/// Number of light paths per iteration for ν and P pixels: ⌊ν·P⌋, at least 1 unless ν = 0
+/// (no light paths: the bidirectional engine then path traces with hits and NEE only).
+pub fn light_path_count(nu: f32, pixels: u32) -> u32 {
+    if nu <= 0.0 { 0 } else { ((nu as f64 * pixels as f64).floor() as u32).max(1) }
+}
+
 /// Traces one light subpath into `out` (appending), with Russian roulette from `rr_depth` on
 /// (survival min(max throughput relative to emission · η², 0.95), as camera paths use).
 /// Returns the number of vertices appended (0 when the scene has no light or the emission

@@ -19,8 +19,6 @@
 //! products (pbrt's `remap0`); techniques whose connection touches a delta vertex cannot sample
 //! the path and are left out.
 
-use crate::mis::delta::ProxyWeights;
-
 /// Capacity of the stack arrays: the longest path (in vertices) the bidirectional
 /// integrators build.
 pub const MAX_VERTICES: usize = 64;
@@ -195,11 +193,12 @@ pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 
     if let Some(m) = counts.merge.filter(|m| m.correlation_aware) {
         correlation_factors(p, &m, &mut factors);
     }
-    densities(p, counts, &factors, out)
+    technique_densities_with(p, counts, &factors, out)
 }
 
-/// [`technique_densities`] with the merges' correlation-aware factors given.
-fn densities(
+/// [`technique_densities`] with the merges' correlation-aware factors given (from
+/// [`correlation_factors`], or 1 without the correlation-aware factor).
+pub fn technique_densities_with(
     p: &PathPdfs,
     counts: &SampleCounts,
     factors: &[f32; MAX_VERTICES],
@@ -239,7 +238,7 @@ fn densities(
 }
 
 /// Index of `t` in the layout of [`technique_densities`].
-fn technique_index(p: &PathPdfs, t: Technique) -> usize {
+pub fn technique_index(p: &PathPdfs, t: Technique) -> usize {
     let k = p.len - 1;
     match t {
         Technique::EmitterHit => 0,
@@ -263,41 +262,6 @@ pub fn weight(p: &PathPdfs, counts: &SampleCounts, t: Technique) -> f32 {
     let own = d[technique_index(p, t)];
     let total: f32 = d[..n].iter().sum();
     if own > 0.0 && total.is_finite() && total > 0.0 { (own / total).min(1.0) } else { 0.0 }
-}
-
-/// The balance weights of the proxy strategy `proxy` (emis-spec §3.2), aggregated by technique
-/// group: hits and next-event estimation together, light tracing, all connections, all merges,
-/// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
-/// technique of the proxy can sample counts as path tracing's (the reference's convention).
-pub fn proxy_weights(p: &PathPdfs, proxy: &SampleCounts) -> ProxyWeights {
-    // each merge's correlation-aware factor enters its density and, once more, the
-    // correlated sum
-    let mut factors = [1.0f32; MAX_VERTICES];
-    if let Some(m) = proxy.merge.filter(|m| m.correlation_aware) {
-        correlation_factors(p, &m, &mut factors);
-    }
-    let mut d = [0.0f32; 2 * MAX_VERTICES];
-    let n = densities(p, proxy, &factors, &mut d);
-    let k = p.len - 1;
-    let lt_index = k.max(2);
-    let sum = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>();
-    let (pt, con, lt) = (sum(0..2), sum(2..lt_index), d[lt_index] as f64);
-    let (mut vm, mut vm_correlated) = (0.0f64, 0.0f64);
-    for (i, &density) in d[lt_index + 1..n].iter().enumerate() {
-        vm += density as f64;
-        vm_correlated += factors[i + 1] as f64 * density as f64;
-    }
-    let total = pt + con + lt + vm;
-    if !(total > 0.0 && total.is_finite()) {
-        return ProxyWeights { pt: 1.0, lt: 0.0, con: 0.0, vm: 0.0, vm_correlated: 0.0 };
-    }
-    ProxyWeights {
-        pt: pt / total,
-        lt: lt / total,
-        con: con / total,
-        vm: vm / total,
-        vm_correlated: vm_correlated / total,
-    }
 }
 
 /// Weight of an emitter hit by the camera path.
@@ -326,4 +290,4 @@ pub fn weight_merge(p: &PathPdfs, counts: &SampleCounts, i: usize) -> f32 {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -267,6 +267,39 @@ pub fn connect<O: SampleObserver>(
     Some(Weighted { value, weight })
 }
 
+/// Contribution of light-path vertex `v` (whose predecessor on the path is `prev`, if any)
+/// seen by the camera, and the raster position it lands on. Ignores MIS.
+pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
+    let cam = &scene.camera;
+    let cs = cam.sample_direct(v.p)?;
+    let value = match v.kind {
+        VertexKind::Light { light } => match &scene.lights[light as usize] {
+            Light::Area { radiance, .. } => {
+                Light::eval_area(*radiance, v.n_geo, cs.wi) * (v.n_geo.dot(cs.wi).abs() * v.beta.x)
+            }
+            Light::Point { intensity, .. } => *intensity * v.beta.x,
+            Light::Constant { .. } => return None,
+        },
+        VertexKind::Camera => return None,
+        VertexKind::Surface { material } => {
+            let frame = v.frame();
+            let f = scene.materials[material as usize].eval(
+                frame.to_local(v.wo),
+                frame.to_local(cs.wi),
+                TransportMode::Importance,
+            );
+            v.beta * f * (v.importance_correction(v.wo, cs.wi) * v.n_shading.dot(cs.wi).abs())
+        }
+    };
+    if value == Rgb::ZERO {
+        return None;
+    }
+    if !visible(scene, v, &camera_vertex(scene)) {
+        return None;
+    }
+    Some((value * cs.weight, cs.raster))
+}
+
 /// Light tracing: connects the light subpath's last vertex to the camera. Returns the weighted
 /// contribution, multiplied by `scale` (P/N), and the raster position. `sequence` identifies
 /// the sample to observers (the light vertex's cache index).
@@ -279,7 +312,7 @@ pub fn light_trace<O: SampleObserver>(
     sequence: u32,
 ) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
-    let (raw, raster) = crate::integrator::lt::connect_to_camera(scene, y)?;
+    let (raw, raster) = connect_to_camera(scene, y)?;
     let cam = &scene.camera;
     let to_camera = (cam.origin - y.p).normalize_or_zero();
     let camera_vertex = camera_vertex(scene);

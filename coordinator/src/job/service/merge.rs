@@ -11,7 +11,7 @@ use crate::job::validate::{ResultClaim, validate_result};
 use crate::storage::Extra;
 use tessera_common::film::exr::{Attribute, ExrExtras};
 use tessera_common::film::{Film, TileAccum};
-use tessera_common::integrator::emis::PilotData;
+use tessera_common::emis::PilotData;
 
 /// A checkpoint writes the whole film while uploads wait, so consecutive checkpoints of a job
 /// are at least this many times the last one's duration apart: writing them takes at most

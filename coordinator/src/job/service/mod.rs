@@ -19,7 +19,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tessera_common::film::{Film, TileAccum};
-use tessera_common::integrator::emis::PilotData;
+use tessera_common::emis::PilotData;
 use tessera_common::scene::Scene;
 use tessera_common::settings::RenderSettings;
 

@@ -6,7 +6,7 @@ use super::*;
 use crate::sampler::Sampler;
 
 /// A random path of `len` vertices with positive densities, occasionally delta vertices.
-fn random_path(seed: u32, len: usize, with_deltas: bool) -> PathPdfs {
+pub(crate) fn random_path(seed: u32, len: usize, with_deltas: bool) -> PathPdfs {
     let mut s = Sampler::for_pixel(77, seed, len as u32);
     let mut p = PathPdfs::new(len);
     for i in 0..len {
@@ -96,7 +96,7 @@ fn weights_lie_in_unit_interval_and_sum_to_one() {
 }
 
 /// Path pdf of technique s computed directly as a product (no ratios).
-fn brute_force_pdf(p: &PathPdfs, s: usize) -> f64 {
+pub(crate) fn brute_force_pdf(p: &PathPdfs, s: usize) -> f64 {
     let mut pdf = 1.0f64;
     for i in 0..p.len {
         let d = if i < s { if s == 1 && i == 0 { p.next_event0 } else { p.from_light[i] } } else { p.from_camera[i] };
@@ -210,73 +210,6 @@ fn a_light_that_cannot_be_hit_gives_emitter_hits_no_weight() {
     let w = weight(&p, &SampleCounts::PATH_TRACING, Technique::NextEvent);
     assert_eq!(w, 1.0);
     assert_eq!(weight(&p, &SampleCounts::PATH_TRACING, Technique::EmitterHit), 0.0);
-}
-
-/// Checklist §4: the proxy's grouped weights sum to 1, the correlated merge weight never
-/// exceeds the merge weight, and each group equals the brute-force balance weights of the
-/// proxy counts (a = 1 for hits and NEE, P for light tracing, 4 connections, χ = 1 merges).
-#[test]
-fn proxy_weights_sum_to_one_and_match_brute_force() {
-    let pixels = 256.0f64 * 256.0;
-    for correlation_aware in [false, true] {
-        let merge = MergeCounts {
-            area: 3e-4,
-            count: pixels as f32,
-            correlation_aware,
-            correlation_area: 2e-2,
-            light_paths: pixels as f32,
-        };
-        let connect = 4.0 / 3.2;
-        let proxy = SampleCounts {
-            hit: 1.0,
-            next_event: 1.0,
-            connect: connect as f32,
-            light_trace: pixels as f32,
-            merge: Some(merge),
-        };
-        for len in 3..=10 {
-            for seed in 0..100 {
-                let p = random_path(seed, len, false);
-                let w = proxy_weights(&p, &proxy);
-                let sum = w.pt + w.lt + w.con + w.vm;
-                assert!((sum - 1.0).abs() < 1e-5, "sum {sum}");
-                assert!(w.vm_correlated <= w.vm + 1e-12);
-                // brute force over full path pdfs
-                let k = len - 1;
-                let mut groups = [0.0f64; 4]; // pt, lt, con, vm
-                let mut vm_c = 0.0;
-                for s in 0..=k {
-                    let v = brute_force_pdf(&p, s);
-                    match s {
-                        0 | 1 => groups[0] += v,
-                        s if s == k => groups[1] += pixels * v,
-                        _ => groups[2] += connect * v,
-                    }
-                }
-                for i in 1..k - 1 {
-                    let mut pdf = 1.0f64;
-                    for j in 0..=k {
-                        pdf *= if j < i { p.from_light[j] } else { p.from_camera[j] } as f64;
-                    }
-                    let c = if correlation_aware { correlation_factor(&p, i, &merge) as f64 } else { 1.0 };
-                    let v = c * pixels * pdf * p.from_light[i] as f64 * 3e-4;
-                    groups[3] += v;
-                    vm_c += c * v;
-                }
-                let total: f64 = groups.iter().sum();
-                let got = [w.pt, w.lt, w.con, w.vm];
-                for g in 0..4 {
-                    let expected = groups[g] / total;
-                    assert!(
-                        (got[g] - expected).abs() < 1e-4 * expected.max(1e-2),
-                        "group {g}: {} vs {expected}",
-                        got[g]
-                    );
-                }
-                assert!((w.vm_correlated - vm_c / total).abs() < 1e-4 * (vm_c / total).max(1e-2));
-            }
-        }
-    }
 }
 
 /// The O(k) correlation-aware factors equal the per-vertex definition up to rounding, on

@@ -7,20 +7,7 @@
 //! With c ≡ 1 (no correlation-aware factor) δ = S(m) / S(n). A candidate that cannot sample
 //! the path (S(n) = 0) gets an infinite moment, flagged, never NaN (decision 4).
 
-/// The proxy strategy's balance weights of one path, aggregated by technique group.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ProxyWeights {
-    /// Path tracing (hits and NEE together).
-    pub pt: f64,
-    /// Light tracing.
-    pub lt: f64,
-    /// All connections.
-    pub con: f64,
-    /// All merges.
-    pub vm: f64,
-    /// Σ c_t·w̄_t over merges (≤ `vm`).
-    pub vm_correlated: f64,
-}
+use super::proxy::ProxyWeights;
 
 /// A strategy's counts relative to the proxy's, per technique group.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,9 +1,9 @@
 //! Tests of the optimiser on synthetic moments (checklist 11–12).
 
 use super::*;
-use crate::mis::candidate::CandidateConfig;
-use crate::mis::cost::pixel_cost;
-use crate::mis::delta::Delta;
+use crate::emis::candidate::CandidateConfig;
+use crate::emis::cost::pixel_cost;
+use crate::emis::delta::Delta;
 
 /// A moment buffer with `value(pixel, candidate)` as every candidate's per-iteration moment.
 fn buffer(w: u32, h: u32, candidates: &[Candidate], value: impl Fn(u32, &Candidate) -> f64) -> MomentBuffer {

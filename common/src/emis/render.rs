@@ -26,21 +26,17 @@
 //! ([`collecting_call`] while collecting, [`FINAL_ITERATIONS_PER_CALL`] after that), so they
 //! sum the same numbers in the same order and their images are bit-identical.
 
-mod state;
-mod wire;
-
-pub use state::{EmisState, UpdateReport};
-
+use super::EmisState;
+use super::candidate::{Candidate, CandidateConfig};
+use super::cost::{CostConstants, StatisticsSums};
+use super::denoise::DenoiseSettings;
+use super::estimator::{MomentEstimator, MomentSettings};
 use super::guides::{GuideBuffer, GuideCollector};
-use super::vcm::{MergeConfig, MergeMask};
-use super::{Bidir, Integrator, PathSettings, TileRequest};
+use super::moments::MomentBuffer;
+use super::optimize::FilterSettings;
 use crate::film::{Film, Rect, TileAccum};
-use crate::mis::candidate::{Candidate, CandidateConfig};
-use crate::mis::cost::{CostConstants, StatisticsSums};
-use crate::mis::denoise::DenoiseSettings;
-use crate::mis::estimator::{MomentEstimator, MomentSettings};
-use crate::mis::moments::MomentBuffer;
-use crate::mis::optimize::FilterSettings;
+use crate::integrator::path::merge::{MergeConfig, MergeMask};
+use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, TileRequest};
 use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -287,7 +283,7 @@ pub fn render_iterations(
     if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), in small square tiles in parallel, placed in order, so deterministic
-        let pt = super::PathTracer { settings };
+        let pt = PathTracer { settings };
         let tiles: Vec<TileAccum> = {
             use rayon::prelude::*;
             Rect::tiles(w, h, PT_TILE)

@@ -1,4 +1,4 @@
-//! Vertex merging for `vcm` (Georgiev et al. 2012, "Light transport simulation with vertex
+//! Vertex merging, the technique `vcm` adds to `bdpt` (Georgiev et al. 2012, "Light transport simulation with vertex
 //! connection and merging"), with SeeSharp's choices (emis-spec §7):
 //!
 //! * radius: a global maximum r_max = 0.75·√(mean pixel footprint area), measured with 5
@@ -9,18 +9,15 @@
 //! * MIS: a merge at vertex i has density p_light(i)·π r² with count N·χ_j·c_i (c_i the
 //!   optional correlation-aware factor), in the same balance heuristic as every technique.
 
-mod photon_map;
-
-pub use photon_map::PhotonMap;
-
-use super::bidir::LightCache;
-use super::observer::{SampleObserver, SampleRecord};
-use super::path::gather::{Join, gather};
-use super::path::light_path::next_event_density;
-use super::path::mis::{self, SampleCounts, Technique};
-use super::path::techniques::Report;
-use super::path::vertex::{PathVertex, VertexKind, density_at_vertex};
+use super::gather::{Join, gather};
+use super::light_cache::LightCache;
+use super::light_path::next_event_density;
+use super::mis::{self, SampleCounts, Technique};
+use super::photon_map::PhotonMap;
+use super::techniques::Report;
+use super::vertex::{PathVertex, VertexKind, density_at_vertex};
 use crate::bsdf::TransportMode;
+use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::math::{PI, Rgb};
 use crate::scene::Scene;
 use glam::Vec2;

@@ -5,7 +5,7 @@
 //! sample hooks ([`GuideCollector`]), so guides cost no extra rays. Sums with a sample count,
 //! so buffers from workers add up.
 
-use super::observer::{IterationStart, PrimaryHit, SampleObserver, SampleRecord};
+use crate::integrator::observer::{IterationStart, PrimaryHit, SampleObserver, SampleRecord};
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 

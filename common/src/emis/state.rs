@@ -8,15 +8,15 @@
 //! start again for the full set, and [`EmisState::kept_from`] records the first iteration
 //! the image keeps.
 
+use super::candidate::Candidate;
+use super::cost::{PathStatistics, StatisticsSums};
+use super::denoise::{Guides, denoised_intensity};
+use super::filter::Image;
+use super::guides::GuideBuffer;
+use super::moments::MomentBuffer;
+use super::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
-use crate::integrator::guides::GuideBuffer;
-use crate::integrator::vcm::MergeMask;
-use crate::mis::candidate::Candidate;
-use crate::mis::cost::{PathStatistics, StatisticsSums};
-use crate::mis::denoise::{Guides, denoised_intensity};
-use crate::mis::filter::Image;
-use crate::mis::moments::MomentBuffer;
-use crate::mis::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
+use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::time::Instant;

@@ -39,10 +39,11 @@
 
 use super::candidate::Candidate;
 use super::cost::StatisticsSums;
-use super::delta::ProxyWeights;
 use super::moments::MomentBuffer;
+use super::proxy::ProxyWeights;
+use super::proxy::proxy_weights;
 use crate::integrator::observer::{IterationStart, PathCounters, SampleObserver, SampleRecord};
-use crate::integrator::path::mis::{MergeCounts, SampleCounts, Technique, proxy_weights};
+use crate::integrator::path::mis::{MergeCounts, SampleCounts, Technique};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Mutex;

@@ -4,12 +4,12 @@
 //! every value's range, so a corrupt or hostile payload is refused with a reason instead of
 //! reaching the optimiser (or panicking).
 
+use super::cost::StatisticsSums;
+use super::filter::Image;
+use super::guides::GuideBuffer;
+use super::moments::MomentBuffer;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
-use crate::integrator::guides::GuideBuffer;
-use crate::integrator::vcm::MergeMask;
-use crate::mis::cost::StatisticsSums;
-use crate::mis::filter::Image;
-use crate::mis::moments::MomentBuffer;
+use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -260,7 +260,7 @@ impl EmisState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrator::emis::EmisMethod;
+    use crate::emis::EmisMethod;
 
     fn pilot(width: u32, height: u32, candidates: usize) -> PilotData {
         let pixels = (width * height) as usize;

@@ -1,0 +1,36 @@
+//! Efficiency-aware MIS (Grittmann et al. 2022; `docs/emis.md`), in two layers.
+//!
+//! The optimisation, pure and free of rendering and IO so that a coordinator can run it
+//! between passes: the candidate strategies ([`candidate`]), the proxy weights and correction
+//! factor that re-weight a pilot sample for every candidate ([`proxy`], [`delta`]), the moment
+//! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic and its
+//! calibration ([`cost`], [`calibrate`]), the image filters and denoiser ([`filter`],
+//! [`denoise`]) and the optimiser ([`optimize`]).
+//!
+//! The driver, which renders with the bidirectional integrators: strategies and iteration
+//! ranges ([`render`]), the denoiser's guides ([`guides`]), the merged state and its updates
+//! ([`EmisState`]) and its encoding for checkpoints and the wire.
+//!
+//! The direction of use is one way: this module uses the integrators and the MIS weights; they
+//! know nothing of it (they report samples through [`crate::integrator::observer`]).
+
+pub mod calibrate;
+pub mod candidate;
+pub mod cost;
+pub mod delta;
+pub mod denoise;
+pub mod estimator;
+pub mod filter;
+pub mod guides;
+pub mod moments;
+pub mod optimize;
+pub mod proxy;
+pub mod render;
+mod state;
+mod wire;
+
+pub use render::{
+    CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, GUIDE_ITERATIONS, PilotData,
+    PilotStart, Strategy, collecting_call, collects_moments, render_emis, render_iterations,
+};
+pub use state::{EmisState, UpdateReport};
