@@ -1,6 +1,6 @@
-//! Scene bundles: which files a scene XML references, so that a client can ship the scene
-//! with everything it needs to a render farm, and the path rules for unpacking such a bundle
-//! safely on the other side.
+//! Scene bundles: which files a scene XML references, the bundle a client ships to a render
+//! farm (the scene and everything it needs, with paths relative to the scene's folder), and
+//! the path rules for unpacking such a bundle safely on the other side.
 //!
 //! ```no_run
 //! use std::path::Path;
@@ -12,6 +12,61 @@ use crate::scene::SceneError;
 use crate::scene::xml::{Element, Value, parse};
 use std::collections::HashMap;
 use std::path::{Component, Path, PathBuf};
+
+/// A scene and the files it needs, with `/`-separated paths relative to the bundle's root.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Bundle {
+    /// The scene XML's path in `files`.
+    pub scene_path: String,
+    /// Path and bytes of every file, the scene first.
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
+/// Packing a bundle failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum BundleError {
+    /// The scene does not parse.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// A file cannot be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A referenced file lies outside the scene's folder, so it has no path in the bundle.
+    #[error("{file} is outside the scene's folder {folder}")]
+    Outside {
+        /// The file.
+        file: PathBuf,
+        /// The scene's folder.
+        folder: PathBuf,
+    },
+}
+
+/// Packs `scene` and every file it references ([`referenced_files`]) into a bundle rooted at
+/// the scene's folder.
+pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, BundleError> {
+    let read = |path: &Path| std::fs::read(path).map_err(|source| BundleError::Read { path: path.into(), source });
+    let folder = scene.parent().unwrap_or(Path::new(""));
+    let outside = |file: &Path| BundleError::Outside { file: file.into(), folder: folder.into() };
+    let scene_path = scene.file_name().and_then(|n| n.to_str()).ok_or_else(|| outside(scene))?.to_string();
+    let mut files = vec![(scene_path.clone(), read(scene)?)];
+    for file in referenced_files(scene, defines)? {
+        let relative = file
+            .strip_prefix(folder)
+            .ok()
+            .and_then(|r| r.to_str())
+            .and_then(safe_relative_path)
+            .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
+            .ok_or_else(|| outside(&file))?;
+        files.push((relative, read(&file)?));
+    }
+    Ok(Bundle { scene_path, files })
+}
 
 /// The files `scene` references (mesh `filename`s), resolved against the scene's folder the
 /// way the loader resolves them, in document order without repeats. `$name` parameters are
@@ -69,6 +124,17 @@ mod tests {
         assert!(files[0].ends_with("gem.obj") && files[0].exists());
         let box_scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
         assert!(referenced_files(&box_scene, &HashMap::new()).unwrap().is_empty());
+    }
+
+    #[test]
+    fn pack_holds_the_scene_and_its_meshes() {
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/caustic-glass/scene.xml");
+        let bundle = pack(&scene, &HashMap::new()).unwrap();
+        assert_eq!(bundle.scene_path, "scene.xml");
+        let paths: Vec<&str> = bundle.files.iter().map(|(p, _)| p.as_str()).collect();
+        assert_eq!(paths[0], "scene.xml");
+        assert!(paths[1..].iter().all(|p| p.ends_with(".obj")), "{paths:?}");
+        assert_eq!(bundle.files[0].1, std::fs::read(&scene).unwrap());
     }
 
     #[test]

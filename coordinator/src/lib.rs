@@ -1,21 +1,17 @@
-//! Tessera's coordinator crate: the `tessera` command line (local rendering, benchmarks, the
-//! farm client commands) and the farm's coordinator service (`tessera serve`): the pure job
-//! state machine in [`job`], storage in [`storage`], gRPC in [`grpc`], REST in [`rest`].
+//! Tessera's coordinator crate, binary `tessera`, in three rooms with the direction of use
+//! visible from the tree:
+//!
+//! * [`cli`]: argument parsing and dispatch, `tessera render`, and the farm client commands
+//!   (`submit`, `status`, `cancel`), which reach a coordinator only through `tessera-proto`;
+//! * [`serve`]: the coordinator service (`tessera serve`): job state machine, storage, gRPC,
+//!   REST; it imports neither `cli` nor `bench`;
+//! * [`bench`]: every `tessera bench …` measurement.
+//!
+//! Below them, [`options`] holds the command-line option types `cli` and `bench` share, and
+//! [`output`] the image files `cli` and `serve` both write.
 
-pub mod app;
-pub mod auth;
 pub mod bench;
-pub mod bench_emis;
-pub mod bench_farm;
-pub mod calibrate;
-pub mod chart;
 pub mod cli;
-pub mod client;
-pub mod error;
-pub mod ground_truth;
-pub mod grpc;
-pub mod job;
-pub mod local;
-pub mod rest;
-pub mod storage;
-pub mod telemetry;
+pub mod options;
+pub mod output;
+pub mod serve;

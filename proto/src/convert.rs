@@ -3,11 +3,11 @@
 //! the field at fault.
 
 use crate::v1 as pb;
-use tessera_common::film::Rect;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{MomentFilter, OutlierStage};
+use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
 
 fn parse_json_name<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> Result<T, String> {

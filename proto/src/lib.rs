@@ -19,6 +19,7 @@
 
 #![deny(missing_docs)]
 
+pub mod bundle;
 pub mod convert;
 
 /// Generated `tessera.v1` messages, clients and servers.
@@ -40,6 +41,35 @@ pub const CHUNK_BYTES: usize = 1 << 20;
 
 /// Largest gRPC message either side accepts: a chunk plus headers, or an inline scene bundle.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
+
+/// The digest that names a blob (scene bundles, merge masks, outputs): the SHA-256 of its
+/// bytes in lowercase hex. The coordinator stores blobs under it and workers check what they
+/// fetch against it.
+pub fn blob_digest(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    hex::encode(sha2::Sha256::digest(bytes))
+}
+
+/// Whether `s` has the form of a [`blob_digest`] (so it is safe as a file name).
+pub fn is_blob_digest(s: &str) -> bool {
+    s.len() == 64 && s.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+/// A job state's lowercase name, as the REST API spells it (`unknown` for values this version
+/// does not know).
+pub fn state_name(state: i32) -> &'static str {
+    use v1::JobState as S;
+    match S::try_from(state).unwrap_or(S::Unspecified) {
+        S::Queued => "queued",
+        S::Pilot => "pilot",
+        S::Optimizing => "optimizing",
+        S::Final => "final",
+        S::Done => "done",
+        S::Failed => "failed",
+        S::Cancelled => "cancelled",
+        S::Unspecified => "unknown",
+    }
+}
 
 /// A request carrying `token` as a bearer token (the coordinator's authentication), or none.
 pub fn authorized<T>(message: T, token: Option<&str>) -> tonic::Request<T> {
@@ -105,6 +135,14 @@ pub fn decode_tile_payload(bytes: &[u8], pixels: usize) -> Option<(Vec<[f64; 3]>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn blob_digests_are_sha256_in_lowercase_hex() {
+        let d = blob_digest(b"hello");
+        assert_eq!(d, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");
+        assert!(is_blob_digest(&d));
+        assert!(!is_blob_digest(&d.to_uppercase()) && !is_blob_digest("../x") && !is_blob_digest(&d[1..]));
+    }
 
     #[test]
     fn tile_payload_round_trips_bit_exactly_and_checks_length() {

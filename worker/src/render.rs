@@ -5,9 +5,9 @@
 //! guides) encoded for the upload.
 
 use std::time::Instant;
+use tessera_common::emis::{CandidateSet, Strategy, render_iterations};
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::TileRequest;
-use tessera_common::emis::{CandidateSet, Strategy, render_iterations};
 use tessera_common::scene::Scene;
 use tessera_common::settings::Renderer;
 

@@ -3,11 +3,10 @@
 //! few most recent (bundle, defines) pairs; also the current EMIS merge mask (a blob too).
 
 use crate::client::Client;
-use prost::Message;
-use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use tessera_common::bundle::{Bundle, safe_relative_path};
 use tessera_common::scene::Scene;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
@@ -24,10 +23,6 @@ pub struct SceneCache {
     loaded: Vec<(SceneKey, Arc<Scene>)>,
     /// The current EMIS merge mask.
     pub masks: MaskCache,
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 impl SceneCache {
@@ -62,7 +57,7 @@ impl SceneCache {
 
     /// Makes sure the bundle is unpacked; returns the scene file's path.
     async fn unpack(&self, client: &mut Client, digest: &str) -> anyhow::Result<PathBuf> {
-        if digest.len() != 64 || !digest.bytes().all(|b| b.is_ascii_hexdigit()) {
+        if !tessera_proto::is_blob_digest(digest) {
             anyhow::bail!("invalid bundle digest {digest:?}");
         }
         let dir = self.dir.join(digest);
@@ -71,7 +66,7 @@ impl SceneCache {
             return Ok(dir.join(p));
         }
         let bytes = fetch_verified(client, digest).await?;
-        let bundle = pb::SceneBundle::decode(bytes.as_slice())?;
+        let bundle = tessera_proto::bundle::decode(&bytes)?;
         let cache_dir = self.dir.clone();
         let digest = digest.to_string();
         tokio::task::spawn_blocking(move || write_bundle(&cache_dir, &digest, &bundle)).await?
@@ -89,7 +84,7 @@ async fn fetch_verified(client: &mut Client, digest: &str) -> anyhow::Result<Vec
     while let Some(chunk) = stream.next().await {
         bytes.extend_from_slice(&chunk?.data);
     }
-    if hex(&Sha256::digest(&bytes)) != digest {
+    if tessera_proto::blob_digest(&bytes) != digest {
         anyhow::bail!("blob {digest} arrived corrupted (digest mismatch)");
     }
     Ok(bytes)
@@ -124,15 +119,14 @@ impl MaskCache {
     }
 }
 
-fn write_bundle(cache: &Path, digest: &str, bundle: &pb::SceneBundle) -> anyhow::Result<PathBuf> {
-    use tessera_common::bundle::safe_relative_path;
+fn write_bundle(cache: &Path, digest: &str, bundle: &Bundle) -> anyhow::Result<PathBuf> {
     let tmp = cache.join(format!(".{digest}.{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
-    for f in &bundle.files {
-        let rel = safe_relative_path(&f.path).ok_or_else(|| anyhow::anyhow!("unsafe bundle path {:?}", f.path))?;
+    for (path, data) in &bundle.files {
+        let rel = safe_relative_path(path).ok_or_else(|| anyhow::anyhow!("unsafe bundle path {path:?}"))?;
         let p = tmp.join(rel);
         std::fs::create_dir_all(p.parent().unwrap_or(&tmp))?;
-        std::fs::write(&p, &f.data)?;
+        std::fs::write(&p, data)?;
     }
     safe_relative_path(&bundle.scene_path).ok_or_else(|| anyhow::anyhow!("unsafe scene path"))?;
     std::fs::write(tmp.join(".scene_path"), &bundle.scene_path)?;

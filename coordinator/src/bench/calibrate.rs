@@ -1,0 +1,190 @@
+//! `tessera bench --calibrate-costs`: the timing runs of emis-spec §2 on our renderer. On each
+//! scene it times the configurations of [`calibration_configurations`] through the
+//! bidirectional engine, and path tracing through the `pt` integrator, interleaved and the
+//! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units
+//! (time ÷ the bidirectional engine's time at ν = 0 × L̄c); fits the heuristic's constants to
+//! all scenes at once (`tessera_common::emis::calibrate`; path tracing's constant is the
+//! geometric mean of its time ratios); and reports each configuration's error with the
+//! reference and the fitted constants against the ±30 % the authors report for theirs.
+
+use super::SceneArgs;
+use crate::options::scene_name;
+use std::time::Instant;
+use tessera_common::emis::calibrate::{CostSample, calibration_configurations, fit_constants};
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::cost::{CostConstants, pixel_cost};
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::path::merge::MergeMask;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::scene::Scene;
+
+/// Arguments of `tessera bench calibrate-costs`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CalibrateArgs {
+    /// Scenes and threads.
+    #[command(flatten)]
+    pub scenes: SceneArgs,
+    /// Iterations per timed run of each configuration.
+    #[arg(long, default_value_t = 16)]
+    pub spp: u32,
+    /// Timed rounds after one warm-up; the fastest of each configuration is kept.
+    #[arg(long, default_value_t = 2)]
+    pub repeats: u32,
+}
+
+fn label(c: &Candidate) -> String {
+    match (c.nu, c.merge) {
+        (nu, _) if nu == 0.0 => "pt".into(),
+        (nu, false) => format!("nu={nu} c={}", c.connections),
+        (nu, true) => format!("nu={nu} c={} merge", c.connections),
+    }
+}
+
+fn predicted(k: &CostConstants, s: &CostSample) -> f64 {
+    let chi = if s.candidate.merge { 1.0 } else { 0.0 };
+    pixel_cost(k, &s.statistics, &s.candidate, chi, s.candidate.merge, s.pixels)
+}
+
+/// Times every configuration on one scene; returns the samples with measured costs and the
+/// `pt` integrator's time over the unit configuration's (the bidirectional engine at ν = 0).
+fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::ThreadPool) -> (Vec<CostSample>, f64) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let pixels = w * h;
+    let settings = PathSettings::from_scene(scene, None);
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    // the statistics of the pilot (two iterations), as the optimiser would see them
+    let (_, pilot) = pool.install(|| {
+        render_iterations(
+            scene,
+            settings,
+            &config,
+            &Strategy::pilot(EmisMethod::Vcm),
+            1,
+            0..2,
+            Some(CandidateSet::Full),
+        )
+    });
+    let statistics = pilot.expect("invariant: collected").statistics.statistics(pixels);
+    let configs = calibration_configurations();
+    let integrators: Vec<_> = configs
+        .iter()
+        .map(|c| {
+            let merge = c.merge.then_some(MergeMask::Constant(1.0));
+            Strategy { nu: c.nu, connections: c.connections, merge }.integrator(settings, true)
+        })
+        .collect();
+    let mut best = vec![f64::INFINITY; configs.len()];
+    let mut best_pt = f64::INFINITY;
+    // one warm-up round, then `repeats` timed rounds, configurations interleaved so that a
+    // change in machine load hits them alike
+    for round in 0..=repeats {
+        for (i, integrator) in integrators.iter().enumerate() {
+            let samples = 2 + round * iterations..2 + (round + 1) * iterations;
+            let request = TileRequest { rect: Rect::full(w, h), samples, seed: 7 };
+            let t = Instant::now();
+            pool.install(|| integrator.render_tile(scene, &request, &mut TileAccum::new(request.rect)));
+            if round > 0 {
+                best[i] = best[i].min(t.elapsed().as_secs_f64());
+            }
+        }
+        // path tracing as a final pass renders it: the `pt` integrator, rows in parallel
+        let samples = 2 + round * iterations..2 + (round + 1) * iterations;
+        let t = Instant::now();
+        pool.install(|| render_iterations(scene, settings, &config, &Strategy::path_tracing(), 7, samples, None));
+        if round > 0 {
+            best_pt = best_pt.min(t.elapsed().as_secs_f64());
+        }
+    }
+    // the unit configuration stays the unit; the path-tracing sample is the `pt` integrator
+    let samples = configs
+        .iter()
+        .zip(&best)
+        .map(|(c, &t)| CostSample {
+            statistics,
+            candidate: *c,
+            pixels,
+            measured: if c.is_path_tracing() { best_pt } else { t } / best[0] * statistics.camera_vertices,
+        })
+        .collect();
+    (samples, best_pt / best[0])
+}
+
+/// Runs `tessera bench calibrate-costs`.
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let scenes = args.scenes.scenes()?;
+    let pool = args.scenes.pool()?;
+    let iterations = args.spp.max(1);
+    let mut all = Vec::new();
+    let mut names = Vec::new();
+    let mut pt_ratios = Vec::new();
+    for path in &scenes {
+        let scene = Scene::load(path)?;
+        let (samples, pt_ratio) = measure_scene(&scene, iterations, args.repeats.max(1), &pool);
+        let s = samples[0].statistics;
+        eprintln!(
+            "{}: L̄c {:.2}, L̄l {:.2}, φ {:.3e}; pt / (ν = 0) time {:.3}",
+            scene_name(path),
+            s.camera_vertices,
+            s.light_vertices,
+            s.photons_per_query_per_path,
+            pt_ratio
+        );
+        pt_ratios.push(pt_ratio);
+        names.extend(std::iter::repeat_n(scene_name(path), samples.len()));
+        all.extend(samples);
+    }
+    let default = CostConstants::reference();
+    // path tracing's constant: the geometric mean of its measured time ratios
+    let path_tracing = (pt_ratios.iter().map(|r: &f64| r.ln()).sum::<f64>() / pt_ratios.len().max(1) as f64).exp();
+    let fitted = fit_constants(&all, path_tracing)
+        .ok_or_else(|| anyhow::anyhow!("the measurements do not determine the constants"))?;
+    println!(
+        "{:<18} {:<18} {:>9} {:>9} {:>7} {:>9} {:>7}",
+        "scene", "config", "measured", "reference", "err", "fitted", "err"
+    );
+    let (mut worst_default, mut worst_fitted, mut sq_default, mut sq_fitted) = (0.0f64, 0.0f64, 0.0, 0.0);
+    for (name, s) in names.iter().zip(&all) {
+        let (d, f) = (predicted(&default, s), predicted(&fitted, s));
+        let (ed, ef) = (d / s.measured - 1.0, f / s.measured - 1.0);
+        (worst_default, worst_fitted) = (worst_default.max(ed.abs()), worst_fitted.max(ef.abs()));
+        (sq_default, sq_fitted) = (sq_default + ed * ed, sq_fitted + ef * ef);
+        println!(
+            "{:<18} {:<18} {:>9.2} {:>9.2} {:>+6.0}% {:>9.2} {:>+6.0}%",
+            name,
+            label(&s.candidate),
+            s.measured,
+            d,
+            ed * 100.0,
+            f,
+            ef * 100.0
+        );
+    }
+    let n = all.len().max(1) as f64;
+    println!(
+        "relative error of the predicted cost: reference constants rms {:.0}% max {:.0}%; fitted rms {:.0}% max {:.0}% (the authors report ±30% for theirs)",
+        (sq_default / n).sqrt() * 100.0,
+        worst_default * 100.0,
+        (sq_fitted / n).sqrt() * 100.0,
+        worst_fitted * 100.0
+    );
+    println!("fitted constants (reference in brackets): {}", describe(&fitted, &default));
+    Ok(())
+}
+
+fn describe(k: &CostConstants, r: &CostConstants) -> String {
+    [
+        ("light_vertex", k.light_vertex, r.light_vertex),
+        ("light_vertex_walk", k.light_vertex_walk, r.light_vertex_walk),
+        ("connection", k.connection, r.connection),
+        ("connection_walk", k.connection_walk, r.connection_walk),
+        ("build", k.build, r.build),
+        ("query", k.query, r.query),
+        ("photon_shading", k.photon_shading, r.photon_shading),
+        ("path_tracing", k.path_tracing, r.path_tracing),
+    ]
+    .iter()
+    .map(|(name, v, reference)| format!("{name} {v:.3} ({reference:.3})"))
+    .collect::<Vec<_>>()
+    .join(", ")
+}

@@ -1,0 +1,229 @@
+//! `tessera bench equal-time 20,60`: every scene rendered by every integrator of
+//! `--integrators` for the same wall time; relMSE against the scene's `reference.exr` (top
+//! 0.1 % of pixel errors dropped), speed-ups (relMSE_B / relMSE_A), the EMIS targets
+//! (geometric mean of emis-vcm over vcm and of emis-bdpt over bdpt, emis-vcm against the
+//! better of pt and vcm) and, with `--chart`, an SVG bar chart per duration.
+
+use super::chart::{Group, write_bar_chart};
+use super::{SceneArgs, geometric_mean};
+use crate::options::{
+    CostModelArg, EmisPilotArg, IntegratorKind, MomentFilterArg, MomentOutliersArg, make_renderer, scene_name,
+};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use tessera_common::emis::PilotStart;
+use tessera_common::render::{Budget, RenderOptions};
+use tessera_common::scene::Scene;
+use tessera_common::settings::{IntegratorName, RenderSettings};
+
+/// Arguments of `tessera bench equal-time`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct EqualTimeArgs {
+    /// Seconds per render, comma-separated durations run one after another (e.g. 20,60).
+    #[arg(value_delimiter = ',', num_args = 1, required = true)]
+    pub seconds: Vec<f64>,
+    /// Scenes and threads.
+    #[command(flatten)]
+    pub scenes: SceneArgs,
+    /// Integrators compared.
+    #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
+    pub integrators: Vec<IntegratorKind>,
+    /// Render every cell once per seed; relMSE is the mean over seeds, and the floor is also
+    /// reported per seed, so that a verdict shows the run-to-run spread.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    pub seeds: Vec<u64>,
+    /// The EMIS cost heuristic's constants.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub cost_model: CostModelArg,
+    /// The EMIS moment filter order.
+    #[arg(long, value_enum, default_value = "relative")]
+    pub moment_filter: MomentFilterArg,
+    /// The EMIS outlier rejection.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: MomentOutliersArg,
+    /// The pilots each `emis-*` integrator runs with (each a column).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "bidirectional")]
+    pub emis_pilot: Vec<EmisPilotArg>,
+    /// Also draw the speed-ups as an SVG bar chart, one file per duration (NAME-20s.svg ...).
+    #[arg(long)]
+    pub chart: Option<PathBuf>,
+}
+
+/// One integrator's equal-time results on one scene.
+struct Cell {
+    name: String,
+    /// relMSE per seed of `--seeds`.
+    relmse: Vec<f64>,
+    /// Mean samples per second over the seeds.
+    samples_per_s: f64,
+}
+
+impl Cell {
+    fn mean(&self) -> f64 {
+        self.relmse.iter().sum::<f64>() / self.relmse.len().max(1) as f64
+    }
+}
+
+/// One scene's equal-time results, a cell per column.
+type Row = Vec<Cell>;
+
+/// The columns: each integrator of `--integrators`, the `emis-*` ones once per pilot of
+/// `--emis-pilot` (a path-tracing start is named `emis-vcm/pt-start`).
+fn columns(args: &EqualTimeArgs) -> Vec<(IntegratorKind, PilotStart, String)> {
+    let mut out = Vec::new();
+    for &kind in &args.integrators {
+        if IntegratorName::from(kind).emis_method().is_none() {
+            out.push((kind, PilotStart::default(), kind.name().to_string()));
+            continue;
+        }
+        for pilot in args.emis_pilot.iter().map(|&p| PilotStart::from(p)) {
+            let name = match pilot {
+                PilotStart::Bidirectional => kind.name().to_string(),
+                PilotStart::PathTracing => format!("{}/pt-start", kind.name()),
+            };
+            out.push((kind, pilot, name));
+        }
+    }
+    out
+}
+
+fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::Result<Row> {
+    let scene = Scene::load(path)?;
+    let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+    let mut rows = Vec::new();
+    for (kind, pilot, name) in columns(args) {
+        let renderer = make_renderer(
+            &RenderSettings {
+                integrator: kind.into(),
+                cost_model: args.cost_model.into(),
+                moment_filter: args.moment_filter.into(),
+                moment_outliers: args.moment_outliers.into(),
+                emis_pilot: pilot,
+                ..RenderSettings::default()
+            },
+            &scene,
+        )?;
+        let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
+        for &seed in &args.seeds {
+            let opts = RenderOptions {
+                budget: Budget::Time(Duration::from_secs_f64(seconds)),
+                seed,
+                threads: args.scenes.threads.unwrap_or(0),
+                tile_size: 32,
+            };
+            let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
+            cell.relmse.push(tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001));
+            cell.samples_per_s += out.film.total_samples() as f64 / out.elapsed.as_secs_f64() / args.seeds.len() as f64;
+        }
+        rows.push(cell);
+    }
+    Ok(rows)
+}
+
+/// Runs `tessera bench equal-time`: the comparison for every duration.
+pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
+    let scenes = args.scenes.scenes()?;
+    for &seconds in &args.seconds {
+        println!(
+            "\n## equal time {seconds} s ({} threads)\n",
+            args.scenes.threads.map_or("all".into(), |t| t.to_string())
+        );
+        println!(
+            "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}), speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
+            args.seeds
+        );
+        let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
+        println!("| scene | {} |", names.join(" | "));
+        println!("|---|{}", "---|".repeat(names.len()));
+        let mut table = Vec::new();
+        for path in &scenes {
+            let rows = equal_time_scene(args, path, seconds)?;
+            let pt = rows.iter().find(|c| c.name == "pt").map(Cell::mean);
+            let cells: Vec<String> = rows
+                .iter()
+                .map(|c| {
+                    let (e, sps) = (c.mean(), c.samples_per_s);
+                    match pt {
+                        Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
+                        None => format!("{e:.5} ({:.2e} S/s)", sps),
+                    }
+                })
+                .collect();
+            println!("| {} | {} |", scene_name(path), cells.join(" | "));
+            table.push((scene_name(path), rows));
+        }
+        let err = |rows: &Row, n: &str| rows.iter().find(|c| c.name == n).map(Cell::mean);
+        // the relMSE of seed number `i`
+        let err_at = |rows: &Row, n: &str, i: usize| rows.iter().find(|c| c.name == n).map(|c| c.relmse[i]);
+        let ratio = |a: &str, b: &str| -> Vec<f64> {
+            table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect::<Vec<f64>>()
+        };
+        println!();
+        for (a, b, target) in [
+            ("emis-vcm", "vcm", 1.2),
+            ("emis-bdpt", "bdpt", 1.1),
+            ("emis-vcm", "pt", 0.0),
+            ("emis-vcm/pt-start", "emis-vcm", 0.0),
+            ("emis-bdpt/pt-start", "emis-bdpt", 0.0),
+        ] {
+            let r = ratio(a, b);
+            if !r.is_empty() {
+                let per_scene: Vec<String> = r.iter().map(|x| format!("{x:.2}x")).collect();
+                let verdict = if target > 0.0 {
+                    format!(" (target ≥ {target}x: {})", if geometric_mean(&r) >= target { "met" } else { "NOT met" })
+                } else {
+                    String::new()
+                };
+                println!(
+                    "speed-up of {a} over {b}: geometric mean {:.2}x{verdict}; per scene {}",
+                    geometric_mean(&r),
+                    per_scene.join(", ")
+                );
+            }
+        }
+        let worst: Vec<(String, f64)> = table
+            .iter()
+            .filter_map(|(s, r)| {
+                let best = err(r, "pt")?.min(err(r, "vcm")?);
+                Some((s.clone(), best / err(r, "emis-vcm")?))
+            })
+            .collect();
+        if !worst.is_empty() {
+            let below: Vec<&(String, f64)> = worst.iter().filter(|(_, x)| *x < 0.9).collect();
+            println!(
+                "emis-vcm against the better of pt and vcm: {} (target: never below 0.9x: {})",
+                worst.iter().map(|(s, x)| format!("{s} {x:.2}x")).collect::<Vec<_>>().join(", "),
+                if below.is_empty() { "met" } else { "NOT met" }
+            );
+            if args.seeds.len() > 1 {
+                for (i, seed) in args.seeds.iter().enumerate() {
+                    let per_seed: Vec<String> = table
+                        .iter()
+                        .filter_map(|(s, r)| {
+                            let best = err_at(r, "pt", i)?.min(err_at(r, "vcm", i)?);
+                            Some(format!("{s} {:.2}x", best / err_at(r, "emis-vcm", i)?))
+                        })
+                        .collect();
+                    println!("  seed {seed} alone: {}", per_seed.join(", "));
+                }
+            }
+        }
+        if let Some(chart) = &args.chart {
+            let file = chart.with_file_name(format!(
+                "{}-{}s.svg",
+                chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time"),
+                seconds
+            ));
+            let groups: Vec<Group> = table
+                .iter()
+                .map(|(s, r)| {
+                    let pt = err(r, "pt").unwrap_or(f64::NAN);
+                    Group { label: s.clone(), values: r.iter().map(|c| pt / c.mean()).collect() }
+                })
+                .collect();
+            write_bar_chart(&file, &format!("speed-up over pt at equal time {seconds} s"), &names, &groups)?;
+            println!("chart: {}", file.display());
+        }
+    }
+    Ok(())
+}

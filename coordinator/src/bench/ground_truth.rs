@@ -1,0 +1,325 @@
+//! `tessera bench --ground-truth K` (emis-spec checklist §15, decision 3): do the pilot's
+//! moments choose what the true variances would choose?
+//!
+//! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--ground-truth-pilot`
+//! iterations) runs four moment estimators at once, one per setting of the two switches of
+//! decision 3. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
+//! off / everywhere, plus path tracing: 19) renders K iterations itself, timed the way a final
+//! pass renders it (path tracing by the `pt` integrator).
+//!
+//! The truth is the candidate's relMSE against the reference × K, times its measured CPU time
+//! per iteration: the work-normalised error an equal-time render sees. It is taken with no
+//! pixel dropped; the table also shows it with the top 0.1 % of pixel errors dropped, as the
+//! equal-time benchmark measures, which at small K hides rare large errors (caustics seen by
+//! path tracing) that a long render does not drop. Predictions are image-level relative
+//! moments the way the optimiser forms them (box radius 3, relative to the reference in the
+//! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed; with
+//! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says, the
+//! shared part being the minimum over the reduced set),
+//! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
+//! and from the pilot.
+//!
+//! Reported per variant: the candidate it chooses and its **regret**, the true work-normalised
+//! error of that choice over the best candidate's (1 = perfect), plus how well its predictions
+//! correlate with the truth over all candidates (Spearman ρ). Each scene also ends with one
+//! `json:` line holding every figure, for analyses beyond the table.
+
+use super::{SceneArgs, cpu_seconds, geometric_mean};
+use crate::options::{CostModelArg, MomentOutliersArg, scene_name};
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::cost::{CostModel, pixel_cost};
+use tessera_common::emis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
+use tessera_common::emis::filter::Image;
+use tessera_common::emis::moments::MomentBuffer;
+use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_shared_outliers};
+use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
+use tessera_common::film::compare::relmse;
+use tessera_common::film::{Film, Rect, TileAccum};
+use tessera_common::integrator::path::merge::MergeMask;
+use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
+use tessera_common::scene::Scene;
+
+/// Arguments of `tessera bench ground-truth`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct GroundTruthArgs {
+    /// Iterations each candidate renders.
+    pub iterations: u32,
+    /// Scenes and threads.
+    #[command(flatten)]
+    pub scenes: SceneArgs,
+    /// Iterations of the pilot.
+    #[arg(long, default_value_t = 4)]
+    pub pilot: u32,
+    /// The cost heuristic's constants.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub cost_model: CostModelArg,
+    /// The outlier rejection of the predicted moments.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: MomentOutliersArg,
+}
+
+const VARIANTS: [(MergeRatio, MergeKernel); 4] = [
+    (MergeRatio::Principled, MergeKernel::Squared),
+    (MergeRatio::Principled, MergeKernel::Reference),
+    (MergeRatio::Reference, MergeKernel::Squared),
+    (MergeRatio::Reference, MergeKernel::Reference),
+];
+
+fn reduced_candidates() -> Vec<Candidate> {
+    let mut v = Vec::new();
+    for nu in [0.25f32, 1.0, 2.0] {
+        for connections in [0u32, 1, 4] {
+            for merge in [false, true] {
+                v.push(Candidate { nu, connections, merge });
+            }
+        }
+    }
+    v.push(Candidate::PATH_TRACING);
+    v
+}
+
+/// Image-level relative figure of a per-pixel moment, as the optimiser forms it: box 3 and
+/// / (ref² + 1e-4) in `order`, outliers above the 99.9 % quantile zeroed, mean over pixels
+/// with a non-zero reference.
+fn relative_mean(w: usize, h: usize, per_pixel: Vec<f32>, reference: &[f32], order: MomentFilter) -> f64 {
+    let norm: Vec<f32> = reference.iter().map(|&r| r * r + 1e-4).collect();
+    let filtered = order.filter(&Image::from_data(w, h, per_pixel), &norm, 3);
+    let basis: Vec<f32> = filtered.data.iter().zip(&norm).map(|(&m, &n)| order.outlier_basis(m, n)).collect();
+    let basis = Image::from_data(w, h, basis);
+    let threshold = basis.histogram_quantile(0.999);
+    (0..w * h)
+        .filter(|&p| reference[p] > 0.0)
+        .map(|p| {
+            let m = filtered.data[p];
+            if basis.data[p] > threshold && m.is_finite() { 0.0 } else { (m / norm[p]) as f64 }
+        })
+        .sum::<f64>()
+        / (w * h) as f64
+}
+
+fn moments_of(buffer: &MomentBuffer, candidate: usize) -> Vec<f32> {
+    (0..buffer.width * buffer.height).map(|p| buffer.moment(p, candidate) as f32).collect()
+}
+
+/// Spearman rank correlation (ties broken by order).
+fn spearman(a: &[f64], b: &[f64]) -> f64 {
+    let rank = |v: &[f64]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut r = vec![0.0; v.len()];
+        for (k, &i) in idx.iter().enumerate() {
+            r[i] = k as f64;
+        }
+        r
+    };
+    let (ra, rb) = (rank(a), rank(b));
+    let n = a.len() as f64;
+    let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
+    1.0 - 6.0 * d2 / (n * (n * n - 1.0))
+}
+
+fn strategy_of(c: &Candidate) -> Strategy {
+    Strategy { nu: c.nu, connections: c.connections, merge: Some(MergeMask::Constant(if c.merge { 1.0 } else { 0.0 })) }
+}
+
+/// Runs `tessera bench ground-truth`: the comparison on every scene with `iterations` per
+/// candidate.
+pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
+    let scenes = args.scenes.scenes()?;
+    let k = args.iterations;
+    let pool = args.scenes.pool()?;
+    let candidates = reduced_candidates();
+    let pilot_iterations = args.pilot;
+    let outliers: OutlierStage = args.moment_outliers.into();
+    println!(
+        "ground truth: pilot {pilot_iterations} vcm iterations; {} candidates × {k} iterations each",
+        candidates.len()
+    );
+    let mut regrets = vec![Vec::new(); VARIANTS.len()];
+    let mut direct_regrets = Vec::new();
+    let mut order_regrets = [Vec::new(), Vec::new()];
+    for path in &scenes {
+        let scene = Scene::load(path)?;
+        let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+        let ref_mean: Vec<f32> = reference.pixels.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect();
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        let (wu, hu) = (w as usize, h as usize);
+        let settings = PathSettings::from_scene(&scene, None);
+        let config = EmisConfig::new(EmisMethod::Vcm);
+        let full = Rect::full(w, h);
+        // ---- the pilot, four estimators at once ----
+        let estimators: Vec<MomentEstimator> = VARIANTS
+            .iter()
+            .map(|&(merge_ratio, merge_kernel)| {
+                MomentEstimator::new(w, h, &candidates, MomentSettings { merge_ratio, merge_kernel })
+            })
+            .collect();
+        let pilot = Strategy::pilot(EmisMethod::Vcm).integrator(settings, config.correlation_aware);
+        pool.install(|| {
+            pilot.with_observer(&estimators[..]).render_tile(
+                &scene,
+                &TileRequest { rect: full, samples: 0..pilot_iterations, seed: 7 },
+                &mut TileAccum::new(full),
+            )
+        });
+        let snapshots: Vec<_> = estimators.iter().map(|e| e.snapshot()).collect();
+        let statistics = snapshots[0].1.statistics(w * h);
+        let constants = CostModel::from(args.cost_model).constants();
+        let cost = |c: &Candidate| {
+            pixel_cost(&constants, &statistics, c, if c.merge { 1.0 } else { 0.0 }, !c.is_path_tracing(), w * h)
+        };
+        // ---- every candidate on its own ----
+        // per candidate, unscaled: relMSE × K (all pixels, top 0.1 % dropped), the relative
+        // moment of its own samples, CPU seconds per iteration
+        let (mut error, mut error_dropped, mut own_moment, mut seconds) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for c in &candidates {
+            let own = MomentEstimator::new(w, h, std::slice::from_ref(c), MomentSettings::default());
+            let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
+            pool.install(|| {
+                strategy_of(c).integrator(settings, config.correlation_aware).with_observer(&own).render_tile(
+                    &scene,
+                    &request,
+                    &mut TileAccum::new(full),
+                )
+            });
+            // The image and the time come from a second render without the moment observer:
+            // the same samples, timed the way an equal-time render spends them.
+            let started = cpu_seconds();
+            let (accum, _) = pool.install(|| {
+                render_iterations(
+                    &scene,
+                    settings,
+                    &config,
+                    &strategy_of(c),
+                    request.seed,
+                    request.samples.clone(),
+                    None,
+                )
+            });
+            seconds.push((cpu_seconds() - started) / k as f64);
+            let mut film = Film::new(w, h);
+            film.merge_tile(&accum);
+            let image = film.average();
+            error.push(relmse(&image, &reference.pixels, 0.0) * k as f64);
+            error_dropped.push(relmse(&image, &reference.pixels, 0.001) * k as f64);
+            own_moment.push(relative_mean(
+                wu,
+                hu,
+                moments_of(&own.snapshot().0, 0),
+                &ref_mean,
+                MomentFilter::default(),
+            ));
+        }
+        let costs: Vec<f64> = candidates.iter().map(cost).collect();
+        let times_cost = |v: &[f64]| -> Vec<f64> { v.iter().zip(&costs).map(|(x, c)| x * c).collect() };
+        let (variance, variance_dropped, direct) =
+            (times_cost(&error), times_cost(&error_dropped), times_cost(&own_moment));
+        let name_of = |i: usize| {
+            let c = &candidates[i];
+            if c.is_path_tracing() {
+                "pt".to_string()
+            } else {
+                format!("nu {} c {}{}", c.nu, c.connections, if c.merge { " merge" } else { "" })
+            }
+        };
+        let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
+        let predict = |snapshot: usize, order: MomentFilter| -> Vec<f64> {
+            let mut planes: Vec<Image> = (0..candidates.len())
+                .map(|ci| Image::from_data(wu, hu, moments_of(&snapshots[snapshot].0, ci)))
+                .collect();
+            if outliers == OutlierStage::Shared {
+                let norm: Vec<f32> = ref_mean.iter().map(|&r| r * r + 1e-4).collect();
+                remove_shared_outliers(&mut planes, &norm, 0.999);
+            }
+            planes
+                .into_iter()
+                .enumerate()
+                .map(|(ci, plane)| relative_mean(wu, hu, plane.data, &ref_mean, order) * costs[ci])
+                .collect()
+        };
+        let by_order: Vec<Vec<f64>> = MomentFilter::ALL.iter().map(|&order| predict(0, order)).collect();
+        // Equal-time truth: relMSE × K × measured CPU seconds per iteration, in units of the
+        // cost model's (its cost per unit is fitted over the candidates, so only the ranking and
+        // the model's relative errors show).
+        let unit = seconds.iter().zip(&costs).map(|(s, c)| s / c).sum::<f64>() / candidates.len() as f64;
+        let timed: Vec<f64> = error.iter().zip(&seconds).map(|(e, s)| e * s / unit).collect();
+        let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
+        println!("\n### {}: truth's choice {} ", scene_name(path), name_of(argmin(&timed)));
+        println!(
+            "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|");
+        for i in 0..candidates.len() {
+            println!(
+                "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
+                name_of(i),
+                costs[i],
+                seconds[i] / unit,
+                variance[i],
+                timed[i],
+                variance_dropped[i],
+                direct[i],
+                by_order[0][i],
+                by_order[1][i]
+            );
+        }
+        for ((order, predicted), regrets) in MomentFilter::ALL.iter().zip(&by_order).zip(&mut order_regrets) {
+            let choice = argmin(predicted);
+            regrets.push(timed[choice] / timed_best);
+            println!(
+                "pilot moments (principled, squared), {order:?} filter order: choose {} (regret {:.2}x, spearman {:.2})",
+                name_of(choice),
+                timed[choice] / timed_best,
+                spearman(predicted, &timed)
+            );
+        }
+        let d = argmin(&direct);
+        println!(
+            "measured second moments: choose {} (regret {:.2}x, spearman {:.2})",
+            name_of(d),
+            timed[d] / timed_best,
+            spearman(&direct, &timed)
+        );
+        direct_regrets.push(timed[d] / timed_best);
+        for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
+            let predicted = predict(vi, MomentFilter::default());
+            let choice = argmin(&predicted);
+            regrets[vi].push(timed[choice] / timed_best);
+            println!(
+                "pilot moments, ratio {ratio:?}, kernel {kernel:?}: choose {} (regret {:.2}x, spearman {:.2})",
+                name_of(choice),
+                timed[choice] / timed_best,
+                spearman(&predicted, &timed)
+            );
+        }
+        // everything above as one JSON line, for analyses beyond this table
+        let rows: Vec<serde_json::Value> = candidates
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                serde_json::json!({
+                    "nu": c.nu, "connections": c.connections, "merge": c.merge,
+                    "cost": costs[i], "seconds": seconds[i],
+                    "relmse_k": error[i], "relmse_k_dropped": error_dropped[i],
+                    "measured_moment": own_moment[i], "predicted_moment": by_order[0][i] / costs[i],
+                })
+            })
+            .collect();
+        println!(
+            "json: {}",
+            serde_json::json!({"scene": scene_name(path), "k": k, "pilot": pilot_iterations,
+                "statistics": statistics, "candidates": rows})
+        );
+    }
+    let gm = geometric_mean;
+    println!("\n### geometric-mean regret over {} scenes", scenes.len());
+    println!("measured second moments: {:.3}x", gm(&direct_regrets));
+    for (order, regrets) in MomentFilter::ALL.iter().zip(&order_regrets) {
+        println!("filter order {order:?} (principled, squared): {:.3}x", gm(regrets));
+    }
+    for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
+        println!("ratio {ratio:?}, kernel {kernel:?}: {:.3}x", gm(&regrets[vi]));
+    }
+    Ok(())
+}

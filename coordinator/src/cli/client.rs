@@ -1,0 +1,151 @@
+//! The farm client: the connection to a coordinator shared by `submit`, `status` and
+//! `cancel`, and the `status` and `cancel` commands, all over gRPC.
+
+use anyhow::{Context, bail};
+use tessera_proto::state_name;
+use tessera_proto::v1 as pb;
+use tessera_proto::v1::job_service_client::JobServiceClient;
+use tonic::transport::Channel;
+
+/// Connection options shared by the client commands.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ServerArgs {
+    /// Coordinator URL.
+    #[arg(long, env = "TESSERA_SERVER", default_value = "http://127.0.0.1:7878")]
+    pub server: String,
+    /// Client bearer token.
+    #[arg(long, env = "TESSERA_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+}
+
+/// A connected client plus its token.
+pub struct Client {
+    /// The gRPC client.
+    pub jobs: JobServiceClient<Channel>,
+    token: Option<String>,
+}
+
+impl Client {
+    /// Connects to the coordinator.
+    pub async fn connect(args: &ServerArgs) -> anyhow::Result<Client> {
+        let channel = Channel::from_shared(args.server.clone())
+            .with_context(|| format!("invalid --server URL {}", args.server))?
+            .connect()
+            .await
+            .with_context(|| format!("cannot connect to {}", args.server))?;
+        let jobs = JobServiceClient::new(channel)
+            .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
+            .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
+        Ok(Client { jobs, token: args.token.clone() })
+    }
+
+    /// Wraps a message with the bearer token.
+    pub fn request<T>(&self, message: T) -> tonic::Request<T> {
+        tessera_proto::authorized(message, self.token.as_deref())
+    }
+}
+
+/// A gRPC error as a one-line message.
+pub fn status_error(s: tonic::Status) -> anyhow::Error {
+    anyhow::anyhow!("{} ({:?})", s.message(), s.code())
+}
+
+/// Arguments of `tessera status`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct StatusArgs {
+    /// A job id; all jobs when absent.
+    pub job: Option<String>,
+    /// Coordinator.
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `tessera cancel`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CancelArgs {
+    /// The job id.
+    pub job: String,
+    /// Coordinator.
+    #[command(flatten)]
+    pub server: ServerArgs,
+}
+
+/// A job as JSON (the REST shape's main fields).
+pub fn job_json(j: &pb::Job) -> serde_json::Value {
+    serde_json::json!({
+        "id": j.id, "name": j.name, "state": state_name(j.state), "phase": j.phase,
+        "progress": j.progress, "tiles_done": j.tiles_done, "tiles_total": j.tiles_total,
+        "samples_done": j.samples_done, "eta_s": j.eta_s, "error": j.error,
+        "strategy": j.strategy.as_ref().map(|s| serde_json::json!({
+            "nu": s.light_paths_per_pixel, "connections": s.connections,
+            "mean_merge_probability": s.mean_merge_probability, "updates": s.updates,
+        })),
+        "priority": j.priority, "width": j.width, "height": j.height,
+        "integrator": j.settings.as_ref().map(|s| s.integrator.clone()),
+    })
+}
+
+/// Runs `tessera status`.
+pub fn status_command(args: &StatusArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let mut c = Client::connect(&args.server).await?;
+        let jobs = match &args.job {
+            Some(id) => vec![
+                c.jobs
+                    .get_job(c.request(pb::GetJobRequest { id: id.clone() }))
+                    .await
+                    .map_err(status_error)?
+                    .into_inner(),
+            ],
+            None => c.jobs.list_jobs(c.request(pb::ListJobsRequest {})).await.map_err(status_error)?.into_inner().jobs,
+        };
+        if args.json {
+            let v: Vec<_> = jobs.iter().map(job_json).collect();
+            let out = if args.job.is_some() { v[0].clone() } else { serde_json::Value::Array(v) };
+            println!("{}", serde_json::to_string_pretty(&out)?);
+            return Ok(());
+        }
+        println!("{:<36}  {:<10}  {:>6}  {:>11}  {:<5}  name", "id", "state", "done", "tiles", "integ");
+        for j in &jobs {
+            let integrator = j.settings.as_ref().map_or("", |s| s.integrator.as_str());
+            println!(
+                "{:<36}  {:<10}  {:>5.1}%  {:>5}/{:<5}  {:<5}  {}{}",
+                j.id,
+                state_name(j.state),
+                j.progress * 100.0,
+                j.tiles_done,
+                j.tiles_total,
+                integrator,
+                j.name,
+                j.error.as_ref().map(|e| format!("  error: {e}")).unwrap_or_default()
+            );
+        }
+        Ok(())
+    })
+}
+
+/// Runs `tessera cancel`.
+pub fn cancel_command(args: &CancelArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let mut c = Client::connect(&args.server).await?;
+        let job = c
+            .jobs
+            .cancel_job(c.request(pb::CancelJobRequest { id: args.job.clone() }))
+            .await
+            .map_err(status_error)?
+            .into_inner();
+        println!("{}: {}", job.id, state_name(job.state));
+        if job.state != pb::JobState::Cancelled as i32 {
+            bail!("job {} was already {}", job.id, state_name(job.state));
+        }
+        Ok(())
+    })
+}
+
+/// A small runtime for a client command.
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().context("cannot start the async runtime")
+}

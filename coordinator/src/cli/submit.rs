@@ -1,0 +1,163 @@
+//! `tessera submit`: packs a scene and every file it references into a bundle, submits it,
+//! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG.
+
+use super::client::{Client, ServerArgs, runtime, status_error};
+use crate::options::{IntegratorArgs, parse_defines, scene_name};
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use tessera_common::settings::{IntegratorName, RenderSettings};
+use tessera_proto::state_name;
+use tessera_proto::v1 as pb;
+use tokio_stream::StreamExt;
+
+/// Arguments of `tessera submit`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SubmitArgs {
+    /// The Mitsuba 3 scene file; every file it references is uploaded with it.
+    pub scene: PathBuf,
+    /// Coordinator.
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// Rendering algorithm: pt, lt, bdpt, vcm, emis-bdpt or emis-vcm.
+    #[arg(long, default_value = "pt")]
+    pub integrator: IntegratorName,
+    /// Samples per pixel (iterations for lt, bdpt, vcm) [default: the scene's].
+    #[arg(long, conflicts_with = "time")]
+    pub spp: Option<u32>,
+    /// Render for this many seconds instead.
+    #[arg(long)]
+    pub time: Option<f64>,
+    /// Seed [default: the scene's, or 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Higher priorities run first.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    pub priority: i32,
+    /// Path length, sample counts, merging and EMIS options.
+    #[command(flatten)]
+    pub mis: IntegratorArgs,
+    /// Set a scene parameter: -D name=value.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    pub define: Vec<String>,
+    /// Job name [default: the scene's name].
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Wait for the job, showing progress, and download the result.
+    #[arg(long)]
+    pub wait: bool,
+    /// Where --wait writes the EXR (a PNG goes beside it) [default: the scene's name].
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+/// Runs `tessera submit`.
+pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
+    let defines = parse_defines(&args.define)?;
+    let mut settings = RenderSettings {
+        integrator: args.integrator,
+        spp: args.spp,
+        time_s: args.time,
+        seed: args.seed,
+        defines: defines.clone().into_iter().collect(),
+        ..RenderSettings::default()
+    };
+    args.mis.apply(&mut settings);
+    settings.validate()?;
+    let bundle = tessera_common::bundle::pack(&args.scene, &defines)?;
+    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
+    runtime()?.block_on(async {
+        let mut c = Client::connect(&args.server).await?;
+        let req = pb::SubmitJobRequest {
+            settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
+            bundle: Some(tessera_proto::bundle::to_pb(&bundle)),
+            priority: args.priority,
+            name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),
+        };
+        let job = c.jobs.submit_job(c.request(req)).await.map_err(status_error)?.into_inner();
+        println!("{}", job.id);
+        if !args.wait {
+            return Ok(());
+        }
+        let last = follow(&mut c, &job.id).await?;
+        if last.state != pb::JobState::Done as i32 {
+            bail!(
+                "job {} {}{}",
+                last.id,
+                state_name(last.state),
+                last.error.map(|e| format!(": {e}")).unwrap_or_default()
+            );
+        }
+        download(&mut c, &job.id, pb::ResultFormat::Exr, &output).await?;
+        download(&mut c, &job.id, pb::ResultFormat::Png, &output.with_extension("png")).await?;
+        eprintln!("{}: done -> {}", job.id, output.display());
+        Ok(())
+    })
+}
+
+/// Watches a job with a progress bar until it ends; returns its last state.
+async fn follow(c: &mut Client, id: &str) -> anyhow::Result<pb::Job> {
+    let bar = ProgressBar::new(1000);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    // a coordinator restart resumes the job, so a lost connection is retried for a while
+    let mut lost_since: Option<std::time::Instant> = None;
+    loop {
+        let watched = async {
+            let req = c.request(pb::GetJobRequest { id: id.to_string() });
+            let mut stream = c.jobs.watch_job(req).await?.into_inner();
+            let mut last = None;
+            while let Some(job) = stream.next().await {
+                let job = job?;
+                lost_since = None;
+                bar.set_position((job.progress * 1000.0) as u64);
+                let eta = job.eta_s.map(|e| format!(" eta {e:.0}s")).unwrap_or_default();
+                bar.set_message(format!("{} {}/{} tiles{eta}", job.phase, job.tiles_done, job.tiles_total));
+                last = Some(job);
+            }
+            Ok::<_, tonic::Status>(last)
+        }
+        .await;
+        match watched {
+            Ok(Some(job)) if is_final(&job) => {
+                bar.finish_and_clear();
+                return Ok(job);
+            }
+            Ok(_) => {}
+            Err(s) if !matches!(s.code(), tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal) => {
+                bar.finish_and_clear();
+                return Err(status_error(s));
+            }
+            Err(s) if lost_since.is_some_and(|t| t.elapsed() > RECONNECT_FOR) => {
+                bar.finish_and_clear();
+                return Err(status_error(s).context("lost the coordinator"));
+            }
+            Err(_) => {}
+        }
+        lost_since.get_or_insert_with(std::time::Instant::now);
+        bar.set_message("coordinator unreachable, retrying");
+        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+    }
+}
+
+/// How long `--wait` keeps retrying an unreachable coordinator.
+const RECONNECT_FOR: std::time::Duration = std::time::Duration::from_secs(120);
+
+fn is_final(job: &pb::Job) -> bool {
+    [pb::JobState::Done, pb::JobState::Failed, pb::JobState::Cancelled].iter().any(|s| *s as i32 == job.state)
+}
+
+async fn download(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> anyhow::Result<()> {
+    let req = c.request(pb::GetResultRequest { id: id.to_string(), format: format as i32 });
+    let mut stream = c.jobs.get_result(req).await.map_err(status_error)?.into_inner();
+    let mut bytes = Vec::new();
+    while let Some(chunk) = stream.next().await {
+        bytes.extend_from_slice(&chunk.map_err(status_error)?.data);
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}

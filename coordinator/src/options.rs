@@ -1,0 +1,275 @@
+//! Command-line options shared by `tessera render`, `tessera submit` and the benchmarks: the
+//! integrator names, the path-length, sample-count, merging and EMIS switches (clap value
+//! types mapped onto the renderer's settings), `-D` definitions and scene names.
+
+use anyhow::{anyhow, bail};
+use clap::ValueEnum;
+use std::collections::HashMap;
+use std::path::Path;
+use tessera_common::emis::PilotStart;
+use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
+use tessera_common::emis::optimize::{MomentFilter, OutlierStage};
+use tessera_common::scene::Scene;
+use tessera_common::settings::{IntegratorName, RenderSettings, Renderer, SettingsError};
+
+/// Rendering algorithms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IntegratorKind {
+    /// Path tracing with next-event estimation and MIS (Mitsuba's `path`).
+    Pt,
+    /// Light tracing (Mitsuba's `ptracer`): light paths connected to the camera. Cannot see
+    /// smooth glass or mirrors, or an environment, directly: those pixels stay dark.
+    Lt,
+    /// Bidirectional path tracing with a light-vertex cache: hits, next-event estimation,
+    /// c connections per camera vertex and light tracing, balance heuristic over sample counts.
+    Bdpt,
+    /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but
+    /// the first (fixed radius, so slightly biased).
+    Vcm,
+    /// Efficiency-aware MIS on bdpt: a bdpt pilot (ν = 1, c = 1) estimates every candidate's
+    /// second moment; after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are
+    /// chosen and used from then on.
+    EmisBdpt,
+    /// Efficiency-aware MIS on vcm: a vcm pilot (ν = 1, c = 1, merging everywhere) picks ν, c and
+    /// a per-pixel merge mask; writes the mask, the relative moment, a strategy PNG and a JSON
+    /// report of every update beside the image.
+    EmisVcm,
+}
+
+impl IntegratorKind {
+    /// The name on the command line.
+    pub fn name(&self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "pt",
+            IntegratorKind::Lt => "lt",
+            IntegratorKind::Bdpt => "bdpt",
+            IntegratorKind::Vcm => "vcm",
+            IntegratorKind::EmisBdpt => "emis-bdpt",
+            IntegratorKind::EmisVcm => "emis-vcm",
+        }
+    }
+}
+
+impl From<IntegratorKind> for IntegratorName {
+    fn from(kind: IntegratorKind) -> IntegratorName {
+        match kind {
+            IntegratorKind::Pt => IntegratorName::Pt,
+            IntegratorKind::Lt => IntegratorName::Lt,
+            IntegratorKind::Bdpt => IntegratorName::Bdpt,
+            IntegratorKind::Vcm => IntegratorName::Vcm,
+            IntegratorKind::EmisBdpt => IntegratorName::EmisBdpt,
+            IntegratorKind::EmisVcm => IntegratorName::EmisVcm,
+        }
+    }
+}
+
+/// Path length, sample counts, merging and EMIS options, shared by `render` and `submit`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct IntegratorArgs {
+    /// Longest path in segments counting the camera ray, -1 for unlimited [default: the scene's].
+    #[arg(long, allow_negative_numbers = true)]
+    pub max_depth: Option<i64>,
+    /// Light paths per pixel per iteration (ν) for lt, bdpt and vcm: N = floor(ν · pixels);
+    /// 0 makes bdpt a path tracer on the shared bidirectional code (hits and NEE only).
+    #[arg(long, default_value_t = 1.0)]
+    pub light_paths_per_pixel: f32,
+    /// Connections to cached light vertices per camera vertex (c) for bdpt and vcm.
+    #[arg(long, default_value_t = 1)]
+    pub connections: u32,
+    /// Merging for vcm (on: merge probability 1 in every pixel).
+    #[arg(long, value_enum, default_value = "on")]
+    pub merge: Switch,
+    /// Correlation-aware MIS weights for merges (vcm, emis-vcm).
+    #[arg(long, value_enum, default_value = "on")]
+    pub correlation_aware: Switch,
+    /// emis-*: optimise after these many iterations (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
+    pub emis_updates: Vec<u32>,
+    /// emis-*: count ratio of merge candidates in the correction factor.
+    #[arg(long, value_enum, default_value = "principled")]
+    pub merge_ratio: MergeRatioArg,
+    /// emis-*: merge moments with the kernel squared or (as the reference) once.
+    #[arg(long, value_enum, default_value = "squared")]
+    pub merge_kernel: MergeKernelArg,
+    /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub cost_model: CostModelArg,
+    /// emis-*: make moments relative to the image before the box filter, or after it (the
+    /// reference, which lets bright features spread into dark neighbours).
+    #[arg(long, value_enum, default_value = "relative")]
+    pub moment_filter: MomentFilterArg,
+    /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
+    /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
+    /// candidate shares (rare samples no strategy can change), before the box filter spreads
+    /// it over the neighbours; or apply the reference's rule alone.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: MomentOutliersArg,
+    /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
+    /// switches to the full candidate set, discarding the iterations so far, once a
+    /// bidirectional strategy wins.
+    #[arg(long, value_enum, default_value = "bidirectional")]
+    pub emis_pilot: EmisPilotArg,
+}
+
+impl From<EmisPilotArg> for PilotStart {
+    fn from(arg: EmisPilotArg) -> PilotStart {
+        match arg {
+            EmisPilotArg::Bidirectional => PilotStart::Bidirectional,
+            EmisPilotArg::PathTracing => PilotStart::PathTracing,
+        }
+    }
+}
+
+/// How an EMIS render starts (decision 5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EmisPilotArg {
+    /// The method's own pilot: VCM (BDPT) with N = P, c = 1 (χ = 1), kept in the image.
+    Bidirectional,
+    /// Path tracing, choosing from a reduced candidate set until a bidirectional one wins.
+    PathTracing,
+}
+
+/// Where the EMIS image-level sums reject outlier pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MomentOutliersArg {
+    /// First the outliers of the part every candidate shares, per pixel before the box
+    /// filter; then as `filtered`.
+    Shared,
+    /// The reference: each candidate's box-filtered moments above their 99.9 % quantile.
+    Filtered,
+}
+
+impl From<MomentOutliersArg> for OutlierStage {
+    fn from(arg: MomentOutliersArg) -> OutlierStage {
+        match arg {
+            MomentOutliersArg::Filtered => OutlierStage::Filtered,
+            MomentOutliersArg::Shared => OutlierStage::Shared,
+        }
+    }
+}
+
+/// The order of the EMIS moment filter and the division by the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MomentFilterArg {
+    /// Per-pixel relative moments M/(Ī² + 1e-4), then the box filter.
+    Relative,
+    /// The reference: box filter on M, then divide by the filtered Ī² + 1e-4.
+    Absolute,
+}
+
+impl From<MomentFilterArg> for MomentFilter {
+    fn from(arg: MomentFilterArg) -> MomentFilter {
+        match arg {
+            MomentFilterArg::Relative => MomentFilter::Relative,
+            MomentFilterArg::Absolute => MomentFilter::Absolute,
+        }
+    }
+}
+
+impl From<CostModelArg> for CostModel {
+    fn from(arg: CostModelArg) -> CostModel {
+        match arg {
+            CostModelArg::Calibrated => CostModel::Calibrated,
+            CostModelArg::Reference => CostModel::Reference,
+        }
+    }
+}
+
+/// The cost heuristic's constants (decision 8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CostModelArg {
+    /// Fitted to this renderer's measured times (`tessera bench --calibrate-costs`).
+    Calibrated,
+    /// The reference implementation's constants (emis-spec §2).
+    Reference,
+}
+
+impl IntegratorArgs {
+    /// Sets these options in `settings`.
+    pub fn apply(&self, settings: &mut RenderSettings) {
+        settings.max_depth = self.max_depth;
+        settings.light_paths_per_pixel = self.light_paths_per_pixel;
+        settings.connections = self.connections;
+        settings.merge = self.merge == Switch::On;
+        settings.correlation_aware = self.correlation_aware == Switch::On;
+        settings.emis_updates = self.emis_updates.clone();
+        settings.merge_ratio = match self.merge_ratio {
+            MergeRatioArg::Principled => MergeRatio::Principled,
+            MergeRatioArg::Reference => MergeRatio::Reference,
+        };
+        settings.merge_kernel = match self.merge_kernel {
+            MergeKernelArg::Squared => MergeKernel::Squared,
+            MergeKernelArg::Reference => MergeKernel::Reference,
+        };
+        settings.cost_model = self.cost_model.into();
+        settings.moment_filter = self.moment_filter.into();
+        settings.moment_outliers = self.moment_outliers.into();
+        settings.emis_pilot = self.emis_pilot.into();
+    }
+}
+
+/// Count ratio of merge candidates in the EMIS correction factor (decision 3a).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MergeRatioArg {
+    /// χ·ν: merges scale with the light paths, as in the MIS weights.
+    Principled,
+    /// χ: the reference implementation.
+    Reference,
+}
+
+/// How merge samples enter the EMIS moments (decision 3b).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MergeKernelArg {
+    /// (contribution × kernel)².
+    Squared,
+    /// contribution² × kernel: the reference implementation.
+    Reference,
+}
+
+/// An on/off switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Switch {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
+/// A scene's display name: the file stem, or the folder name for files called `scene.xml`.
+pub fn scene_name(path: &Path) -> String {
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
+    if stem == "scene" {
+        if let Some(dir) = path
+            .canonicalize()
+            .ok()
+            .as_deref()
+            .and_then(Path::parent)
+            .and_then(Path::file_name)
+            .and_then(|s| s.to_str())
+        {
+            return dir.to_string();
+        }
+    }
+    stem.to_string()
+}
+
+/// Parses `-D name=value` definitions.
+pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, String>> {
+    defines
+        .iter()
+        .map(|d| match d.split_once('=') {
+            Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
+            _ => bail!("invalid -D \"{d}\": expected NAME=VALUE"),
+        })
+        .collect()
+}
+
+/// Builds the renderer of `settings` (the rules shared with the farm), naming the command-line
+/// flag of a bad value.
+pub fn make_renderer(settings: &RenderSettings, scene: &Scene) -> anyhow::Result<Renderer> {
+    settings.make_renderer(scene).map_err(|e| match e {
+        SettingsError::Invalid { field, message } => anyhow!("--{} {message}", field.replace('_', "-")),
+        other => anyhow!(other),
+    })
+}

@@ -1,0 +1,180 @@
+//! The files a finished render produces, written alike by `tessera render` and by the
+//! coordinator: the EXR (beauty, per-pixel sample counts and, for EMIS, the merge-mask and
+//! relative-moment layers with the decisions as attributes), an sRGB PNG preview, and for EMIS
+//! a strategy PNG and a JSON report of every update.
+
+use image::ImageEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use std::path::{Path, PathBuf};
+use tessera_common::emis::EmisState;
+use tessera_common::film::Film;
+use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
+use tessera_common::film::png::linear_to_srgb;
+
+/// Writing an output file failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutputError {
+    /// The file could not be written.
+    #[error("cannot write {path}: {message}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+}
+
+fn write_error(path: &Path, e: impl std::fmt::Display) -> OutputError {
+    OutputError::Write { path: path.to_path_buf(), message: e.to_string() }
+}
+
+/// How a render was made, for the EXR's `tessera/*` attributes.
+#[derive(Clone, Debug, Default)]
+pub struct Provenance {
+    /// Integrator name.
+    pub integrator: String,
+    /// Samples per pixel (iterations) in the image.
+    pub spp: u32,
+    /// Seed of all random numbers.
+    pub seed: u64,
+    /// The scene: its path (local) or its job's name (farm).
+    pub scene: String,
+    /// Further text attributes, e.g. `render_seconds` or `job`.
+    pub extra: Vec<(String, String)>,
+}
+
+/// PNG encoder effort.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PngEffort {
+    /// The encoder's default compression.
+    Default,
+    /// Fast deflate: the coordinator encodes while uploads wait, and the default level costs
+    /// about 0.2 s per megapixel.
+    Fast,
+}
+
+/// A finished render ready to be written: the averaged image and what goes beside it.
+pub struct Outputs<'a> {
+    film: &'a Film,
+    rgb: Vec<[f32; 3]>,
+    /// EMIS: the state and its per-pixel merge mask.
+    emis: Option<(&'a EmisState, Vec<f32>)>,
+    attributes: Vec<(String, Attribute)>,
+}
+
+impl<'a> Outputs<'a> {
+    /// The outputs of `film`, made as `provenance` says, with EMIS's decisions if given.
+    pub fn new(film: &'a Film, provenance: &Provenance, emis: Option<&'a EmisState>) -> Self {
+        let text = |k: &str, v: String| (format!("tessera/{k}"), Attribute::Text(v));
+        let mut attributes = vec![
+            text("integrator", provenance.integrator.clone()),
+            text("spp", provenance.spp.to_string()),
+            text("seed", provenance.seed.to_string()),
+            text("scene", provenance.scene.clone()),
+        ];
+        attributes.extend(provenance.extra.iter().map(|(k, v)| text(k, v.clone())));
+        if let Some(e) = emis {
+            attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
+            attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
+            attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
+            // a path-tracing start's discarded iterations: the image holds kept_from.. only
+            attributes.push(("tessera/emis_kept_from".into(), Attribute::Int(e.kept_from as i32)));
+        }
+        Outputs { film, rgb: film.average(), emis: emis.map(|e| (e, e.merge_mask())), attributes }
+    }
+
+    /// The averaged linear RGB image.
+    pub fn rgb(&self) -> &[[f32; 3]] {
+        &self.rgb
+    }
+
+    /// Writes the EXR: beauty, sample counts, EMIS layers and every attribute.
+    pub fn write_exr(&self, path: &Path) -> Result<(), OutputError> {
+        let mut extras =
+            ExrExtras { counts: Some(&self.film.count), layers: Vec::new(), attributes: self.attributes.clone() };
+        if let Some((e, mask)) = &self.emis {
+            extras.layers.push(("merge_mask", mask));
+            if let Some(relative) = &e.relative_moment {
+                extras.layers.push(("relative_moment", &relative.data));
+            }
+        }
+        write_exr(path, self.film.width, self.film.height, &self.rgb, &extras).map_err(|e| write_error(path, e))
+    }
+
+    /// Writes the sRGB preview (clamped, no tone mapping).
+    pub fn write_png(&self, path: &Path, effort: PngEffort) -> Result<(), OutputError> {
+        write_srgb_png(path, self.film.width, self.film.height, &self.rgb, effort)
+    }
+
+    /// EMIS: writes the strategy picture (the image in grey, tinted orange by the merge
+    /// probability χ); false, writing nothing, for other integrators.
+    pub fn write_strategy_png(&self, path: &Path, effort: PngEffort) -> Result<bool, OutputError> {
+        let Some((_, mask)) = &self.emis else { return Ok(false) };
+        write_srgb_png(path, self.film.width, self.film.height, &strategy_map(&self.rgb, mask), effort)?;
+        Ok(true)
+    }
+
+    /// EMIS: the JSON report of every update (`None` for other integrators).
+    pub fn emis_report(&self, integrator: &str, iterations: u32) -> Option<serde_json::Value> {
+        let (e, _) = self.emis.as_ref()?;
+        Some(serde_json::json!({
+            "integrator": integrator,
+            "iterations": iterations,
+            "kept_from": e.kept_from,
+            "final": { "nu": e.strategy.nu, "connections": e.strategy.connections },
+            "candidates": e.candidates,
+            "updates": e.reports,
+        }))
+    }
+
+    /// Writes everything beside `exr`: the EXR, `NAME.png` and, for EMIS,
+    /// `NAME.strategy.png` and `NAME.emis.json`.
+    pub fn write_all(&self, exr: &Path, integrator: &str, iterations: u32) -> Result<(), OutputError> {
+        if let Some(dir) = exr.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| write_error(dir, e))?;
+        }
+        self.write_exr(exr)?;
+        self.write_png(&exr.with_extension("png"), PngEffort::Default)?;
+        self.write_strategy_png(&exr.with_extension("strategy.png"), PngEffort::Default)?;
+        if let Some(report) = self.emis_report(integrator, iterations) {
+            let path = exr.with_extension("emis.json");
+            let text = serde_json::to_string_pretty(&report).map_err(|e| write_error(&path, e))?;
+            std::fs::write(&path, text).map_err(|e| write_error(&path, e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Encodes linear RGB as an 8-bit sRGB PNG.
+fn write_srgb_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    effort: PngEffort,
+) -> Result<(), OutputError> {
+    let bytes: Vec<u8> = rgb.iter().flat_map(|p| p.map(|c| (linear_to_srgb(c) * 255.0 + 0.5) as u8)).collect();
+    let file = std::fs::File::create(path).map_err(|e| write_error(path, e))?;
+    let compression = match effort {
+        PngEffort::Default => CompressionType::Default,
+        PngEffort::Fast => CompressionType::Fast,
+    };
+    PngEncoder::new_with_quality(std::io::BufWriter::new(file), compression, FilterType::Adaptive)
+        .write_image(&bytes, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| write_error(path, e))
+}
+
+/// The strategy as a picture: the image's luminance in grey, tinted orange by the merge
+/// probability χ (ν and c are image-wide and in the EXR attributes and the report).
+fn strategy_map(rgb: &[[f32; 3]], mask: &[f32]) -> Vec<[f32; 3]> {
+    const ORANGE: [f32; 3] = [1.0, 0.35, 0.0];
+    rgb.iter()
+        .zip(mask)
+        .map(|(c, &chi)| {
+            let grey = (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]).clamp(0.0, 1.0) * 0.6 + 0.05;
+            let t = 0.7 * chi.clamp(0.0, 1.0);
+            [0, 1, 2].map(|k| grey * (1.0 - t) + ORANGE[k] * t)
+        })
+        .collect()
+}

@@ -1,0 +1,104 @@
+//! `tessera serve`: wiring of the coordinator. Opens the data directory (resuming unfinished
+//! jobs), serves gRPC (`JobService`, `WorkerService`) and REST on one port behind bearer-token
+//! authentication, expires leases on a timer, and shuts down gracefully on SIGINT/SIGTERM.
+
+use super::auth::Tokens;
+use super::config::ServeArgs;
+use super::error::{ApiError, ErrorCode};
+use super::job::service::JobService;
+use super::state::{AppState, now_ms};
+use anyhow::Context;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// How long a graceful shutdown waits for open requests (long polls, watch streams).
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// The whole HTTP surface: gRPC and REST on one router, behind authentication.
+pub fn router(state: Arc<AppState>, tokens: Tokens) -> axum::Router {
+    crate::serve::grpc::router(state.clone())
+        .merge(crate::serve::rest::router(state))
+        // tonic's routes answer unknown paths with 200 + grpc-status 12 unless a fallback is set
+        .fallback(|| async { ApiError::new(ErrorCode::NotFound, "no such route") })
+        .layer(axum::middleware::from_fn_with_state(Arc::new(tokens), crate::serve::auth::require_token))
+        .layer(tower_http::trace::TraceLayer::new_for_http())
+}
+
+/// Runs `tessera serve`.
+pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
+    let (tokens, cfg) = args.resolve()?;
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
+    runtime.block_on(async {
+        let data_dir = args.data_dir.clone();
+        let svc = tokio::task::spawn_blocking(move || JobService::open(&data_dir, cfg, now_ms()))
+            .await?
+            .with_context(|| format!("cannot open data dir {}", args.data_dir.display()))?;
+        let svc = Arc::new(svc);
+        let state = Arc::new(AppState { svc: svc.clone(), max_upload_bytes: args.max_upload_mb << 20 });
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .with_context(|| format!("cannot listen on {}", args.listen))?;
+        let addr = listener.local_addr()?;
+        // small gRPC answers (upload outcomes, leases) must not wait for Nagle's algorithm to
+        // see the ACK of the previous segment: that costs tens of milliseconds per request
+        let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::warn!(error = %e, "cannot set TCP_NODELAY");
+            }
+        });
+        // the one line of stdout: scripts and tests read the address from it
+        println!("tessera serve: listening on http://{addr}");
+        tracing::info!(%addr, data_dir = %args.data_dir.display(), "coordinator started");
+        let ticker = {
+            let svc = svc.clone();
+            let period = Duration::from_millis((svc.lease_timeout_ms() / 4).clamp(50, 1000));
+            tokio::spawn(async move {
+                let mut tick = tokio::time::interval(period);
+                loop {
+                    tick.tick().await;
+                    let svc = svc.clone();
+                    if let Ok(Err(e)) = tokio::task::spawn_blocking(move || svc.expire(now_ms())).await {
+                        tracing::error!(error = %e, "lease expiry failed");
+                    }
+                }
+            })
+        };
+        // graceful shutdown waits for requests in flight, but long polls and watch streams may
+        // not end by themselves: give them DRAIN_TIMEOUT, then stop (every transition is
+        // already persisted, so stopping is safe)
+        let (stopping_tx, mut stopping) = tokio::sync::watch::channel(false);
+        let server = axum::serve(listener, router(state, tokens)).with_graceful_shutdown(async move {
+            shutdown_signal().await;
+            tracing::info!("shutting down");
+            let _ = stopping_tx.send(true);
+        });
+        tokio::select! {
+            r = server => r?,
+            _ = async {
+                let _ = stopping.wait_for(|s| *s).await;
+                tokio::time::sleep(DRAIN_TIMEOUT).await;
+            } => tracing::warn!("requests still open after the drain timeout; stopping anyway"),
+        }
+        ticker.abort();
+        tracing::info!("coordinator stopped");
+        Ok(())
+    })
+}
+
+/// Resolves on SIGINT or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(s) => s,
+            Err(_) => return ctrl_c.await.unwrap_or(()),
+        };
+        tokio::select! {
+            _ = ctrl_c => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    ctrl_c.await.unwrap_or(());
+}

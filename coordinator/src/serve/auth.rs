@@ -1,0 +1,52 @@
+//! Bearer-token authentication for every endpoint but `/healthz` and the dashboard page: the worker token guards
+//! `WorkerService`, the client token guards `JobService` and the REST API. A missing or wrong
+//! token gets HTTP 401, or gRPC `UNAUTHENTICATED` on gRPC paths. Without tokens configured,
+//! everything is open (the server refuses to listen beyond loopback then, see `app.rs`).
+
+use axum::extract::{Request, State};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use std::sync::Arc;
+
+/// The configured tokens.
+#[derive(Clone, Debug, Default)]
+pub struct Tokens {
+    /// Required of workers.
+    pub worker: Option<String>,
+    /// Required of clients.
+    pub client: Option<String>,
+}
+
+const WORKER_PREFIX: &str = "/tessera.v1.WorkerService/";
+const GRPC_PREFIX: &str = "/tessera.v1.";
+
+/// Compares in time independent of where the strings differ.
+fn same(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The axum middleware.
+pub async fn require_token(State(tokens): State<Arc<Tokens>>, req: Request, next: Next) -> Response {
+    let path = req.uri().path();
+    // liveness and the dashboard page (which carries no data) are public
+    if matches!(path, "/healthz" | "/api/v1/healthz" | "/" | "/dashboard") {
+        return next.run(req).await;
+    }
+    let expected = if path.starts_with(WORKER_PREFIX) { &tokens.worker } else { &tokens.client };
+    let Some(expected) = expected else { return next.run(req).await };
+    let given = req
+        .headers()
+        .get(http::header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    if given.is_some_and(|g| same(g.as_bytes(), expected.as_bytes())) {
+        return next.run(req).await;
+    }
+    let message = if given.is_some() { "wrong bearer token" } else { "missing bearer token (authorization header)" };
+    if path.starts_with(GRPC_PREFIX) {
+        tonic::Status::unauthenticated(message).into_http::<axum::body::Body>().into_response()
+    } else {
+        let code = crate::serve::error::ErrorCode::Unauthenticated;
+        (code.http(), axum::Json(serde_json::json!({"error": message, "code": code.as_str()}))).into_response()
+    }
+}

@@ -1,0 +1,247 @@
+//! The coordinator's side of an EMIS job: the merged pilot data and decisions (an
+//! [`EmisState`] from `common`, the same one `tessera render` drives locally), the strategy
+//! each lease carries to its worker, the checks on the pilot data that comes back, and the
+//! update run at each optimisation barrier. The job model decides *when* (passes and
+//! barriers); this decides *what* the next pass renders with.
+
+use super::model::{JobSpec, TileSpec};
+use super::view::StrategyView;
+use crate::serve::storage::BlobStore;
+use tessera_common::emis::{CandidateSet, EmisState, PilotData, collects_moments};
+use tessera_common::film::Film;
+use tessera_common::integrator::path::merge::MergeMask;
+
+/// Where a tile's merge probability comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MergeSpec {
+    /// No merging (emis-bdpt).
+    None,
+    /// The same χ everywhere (the pilot's).
+    Constant(f32),
+    /// A per-pixel mask stored as a blob (width·height little-endian f32).
+    Mask(String),
+}
+
+/// The counts an EMIS tile renders with, as a lease carries them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileStrategy {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Merge probability.
+    pub merge: MergeSpec,
+    /// Record and return pilot data.
+    pub collect: bool,
+    /// The candidates the pilot data is for.
+    pub candidates: CandidateSet,
+}
+
+/// The size of an EMIS job's pilot data, copied out so that decoding a result (megabytes)
+/// needs no lock on the job.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PilotShape {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Candidates per pixel.
+    pub candidates: usize,
+    /// ν of the current strategy ([`collects_moments`] depends on it).
+    pub nu: f32,
+}
+
+impl PilotShape {
+    /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
+    /// tile collects (in a collecting pass and [`collects_moments`]), the job's size and
+    /// candidate count, one iteration per tile iteration.
+    pub fn decode(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        let collect = collect && collects_moments(self.nu, &tile.samples);
+        match (collect, bytes.is_empty()) {
+            (false, true) => return Ok(None),
+            (false, false) => return Err("result has pilot data but the tile does not collect moments".into()),
+            (true, true) => return Err("result has no pilot data but the tile collects moments".into()),
+            (true, false) => {}
+        }
+        let pilot = PilotData::decode(bytes, self.width, self.height, self.candidates)?;
+        let iterations = tile.samples.len() as u32;
+        if pilot.moments.iterations != iterations || pilot.statistics.iterations != iterations as u64 {
+            return Err(format!(
+                "pilot data covers {} iterations ({} in the statistics), the tile {iterations}",
+                pilot.moments.iterations, pilot.statistics.iterations
+            ));
+        }
+        Ok(Some(pilot))
+    }
+}
+
+/// An EMIS job's state on the coordinator.
+pub struct EmisJob {
+    /// Merged pilot data, current strategy, reports.
+    pub state: EmisState,
+    /// Digest of the current per-pixel mask blob, once stored.
+    mask_digest: Option<String>,
+}
+
+impl EmisJob {
+    /// The state before the pilot of an `emis-*` job; `None` for other integrators.
+    pub fn new(spec: &JobSpec) -> Option<EmisJob> {
+        spec.settings.integrator.emis_method()?;
+        Some(EmisJob { state: EmisState::new(spec.settings.emis_config(), spec.width, spec.height), mask_digest: None })
+    }
+
+    /// Restores a checkpointed state ([`EmisJob::checkpoint`]).
+    pub fn restore(spec: &JobSpec, bytes: &[u8]) -> Result<EmisJob, String> {
+        let state = EmisState::decode(spec.settings.emis_config(), spec.width, spec.height, bytes)?;
+        Ok(EmisJob { state, mask_digest: None })
+    }
+
+    /// The bytes to checkpoint beside the film.
+    pub fn checkpoint(&self) -> Vec<u8> {
+        self.state.encode()
+    }
+
+    /// The strategy of the current pass; stores the per-pixel mask as a blob the first time.
+    pub fn strategy(&mut self, blobs: &BlobStore, collect: bool) -> std::io::Result<TileStrategy> {
+        let s = &self.state.strategy;
+        let merge = match &s.merge {
+            None => MergeSpec::None,
+            Some(MergeMask::Constant(c)) => MergeSpec::Constant(*c),
+            Some(MergeMask::PerPixel(mask)) => {
+                let digest = match &self.mask_digest {
+                    Some(d) => d.clone(),
+                    None => {
+                        let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
+                        let d = blobs.put(&bytes)?;
+                        self.mask_digest = Some(d.clone());
+                        d
+                    }
+                };
+                MergeSpec::Mask(digest)
+            }
+        };
+        Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect, candidates: self.state.candidate_set })
+    }
+
+    /// What this job's pilot data must look like.
+    pub fn shape(&self) -> PilotShape {
+        let m = &self.state.moments;
+        PilotShape {
+            width: m.width,
+            height: m.height,
+            candidates: self.state.candidates.len(),
+            nu: self.state.strategy.nu,
+        }
+    }
+
+    /// [`PilotShape::decode`] with this job's shape.
+    pub fn decode_pilot(&self, tile: &TileSpec, collect: bool, bytes: &[u8]) -> Result<Option<PilotData>, String> {
+        self.shape().decode(tile, collect, bytes)
+    }
+
+    /// Adds a tile's pilot data (tiles are merged in order, so the sums are those of a local
+    /// render).
+    pub fn absorb(&mut self, pilot: &PilotData) -> Result<(), String> {
+        self.state.absorb(pilot)
+    }
+
+    /// The update at a barrier after `iterations` iterations: denoise the film's image,
+    /// optimise, switch the strategy. True if it ended a path-tracing start: the caller must
+    /// clear the film.
+    ///
+    /// Idempotent: the update's checkpoint can land before the transition it belongs to is
+    /// committed (both name the same merged count), and a restart in between comes back to
+    /// the barrier with the state the update already produced. That state's last report is
+    /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
+    pub fn update(&mut self, film: &Film, iterations: u32) -> bool {
+        self.mask_digest = None;
+        if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
+            return done.restarted;
+        }
+        self.state.update(&film.average(), iterations).restarted
+    }
+
+    /// The decisions so far, for status views (`None` before the first update).
+    pub fn view(&self) -> Option<StrategyView> {
+        let last = self.state.reports.last()?;
+        Some(StrategyView {
+            nu: self.state.strategy.nu,
+            connections: self.state.strategy.connections,
+            mean_merge_probability: last.mean_merge_probability,
+            updates: self.state.reports.clone(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessera_common::emis::cost::StatisticsSums;
+    use tessera_common::emis::guides::GuideBuffer;
+    use tessera_common::emis::moments::MomentBuffer;
+    use tessera_common::film::Rect;
+    use tessera_common::settings::{IntegratorName, RenderSettings};
+
+    fn spec() -> JobSpec {
+        JobSpec {
+            name: "j".into(),
+            priority: 0,
+            settings: RenderSettings { integrator: IntegratorName::EmisVcm, spp: Some(8), ..Default::default() },
+            width: 4,
+            height: 2,
+            full_frame: true,
+            bundle_digest: "d".into(),
+            scene_path: "scene.xml".into(),
+        }
+    }
+
+    fn pilot(job: &EmisJob, iterations: u32) -> PilotData {
+        let mut moments = MomentBuffer::new(4, 2, job.state.candidates.len());
+        moments.iterations = iterations;
+        let statistics = StatisticsSums { iterations: iterations as u64, ..Default::default() };
+        PilotData { moments, statistics, guides: GuideBuffer::new(4, 2) }
+    }
+
+    /// Running the update of a barrier again (a restart between its checkpoint and the commit
+    /// of its transition) leaves the state as the first run made it.
+    #[test]
+    fn an_update_runs_once_per_barrier() {
+        let mut job = EmisJob::new(&spec()).unwrap();
+        job.absorb(&pilot(&job, 1)).unwrap();
+        let film = Film::new(4, 2);
+        let restarted = job.update(&film, 1);
+        let (strategy, reports) = (job.state.strategy.clone(), job.state.reports.len());
+        assert_eq!(job.update(&film, 1), restarted);
+        assert_eq!(
+            (job.state.strategy.clone(), job.state.reports.len(), job.state.updates_done),
+            (strategy, reports, 1)
+        );
+        job.update(&film, 4);
+        assert_eq!(job.state.reports.len(), 2, "the next barrier's update runs");
+    }
+
+    #[test]
+    fn pilot_data_must_match_the_tile_and_whether_it_collects() {
+        let job = EmisJob::new(&spec()).unwrap();
+        assert!(EmisJob::new(&JobSpec { settings: RenderSettings::default(), ..spec() }).is_none());
+        let tile = TileSpec { rect: Rect::full(4, 2), samples: 1..2 };
+        let good = pilot(&job, 1).encode();
+        assert!(job.decode_pilot(&tile, true, &good).unwrap().is_some());
+        assert!(job.decode_pilot(&tile, false, &[]).unwrap().is_none());
+        assert!(job.decode_pilot(&tile, true, &[]).unwrap_err().contains("no pilot data"));
+        assert!(job.decode_pilot(&tile, false, &good).unwrap_err().contains("does not collect"));
+        let two = pilot(&job, 2).encode();
+        assert!(job.decode_pilot(&tile, true, &two).unwrap_err().contains("covers 2 iterations"));
+        assert!(job.decode_pilot(&tile, true, &good[..good.len() - 4]).is_err());
+        // with path tracing as the strategy only iteration 0 and those ≡ 2 mod 4 record moments
+        let mut pt = EmisJob::new(&spec()).unwrap();
+        pt.state.strategy.nu = 0.0;
+        assert!(pt.decode_pilot(&tile, true, &[]).unwrap().is_none());
+        assert!(pt.decode_pilot(&tile, true, &good).unwrap_err().contains("does not collect"));
+        let skipped = TileSpec { samples: 4..5, ..tile.clone() };
+        assert!(pt.decode_pilot(&skipped, true, &[]).unwrap().is_none());
+        let recorded = TileSpec { samples: 2..3, ..tile };
+        assert!(pt.decode_pilot(&recorded, true, &good).unwrap().is_some());
+        assert!(pt.decode_pilot(&recorded, true, &[]).unwrap_err().contains("no pilot data"));
+    }
+}

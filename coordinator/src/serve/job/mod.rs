@@ -1,0 +1,16 @@
+//! Jobs: what a job renders ([`spec`]), the pure state machine ([`model`]), how jobs are cut into tiles and passes
+//! ([`plan`]), result validation ([`validate`]), the EMIS state and updates ([`emis`]) and the
+//! service that wraps them with storage and notifications ([`service`]).
+
+pub mod emis;
+pub mod model;
+pub mod plan;
+pub mod service;
+pub mod spec;
+pub mod validate;
+pub mod view;
+
+#[cfg(test)]
+mod service_tests;
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,557 @@
+//! The pure, synchronous job state machine: jobs, their passes and tiles, leases with epochs,
+//! exactly-once acceptance of results and the canonical merge order. No IO and no clock: every
+//! method that depends on time takes `now_ms`. The service layer (`service.rs`) persists the
+//! [`Changes`] each call reports before it answers anyone.
+//!
+//! Tile life: `Queued → Leased{worker, deadline} → Accepted → Merged`. A lease that expires,
+//! a refused (invalid) result or a reported failure send the tile back to `Queued` with its
+//! epoch + 1, so a late answer to the old lease is recognised as stale. Accepted results are
+//! merged in tile-index order only (see `plan.rs` for why), so `tiles[..merged]` is exactly the
+//! set of tiles in the film.
+//!
+//! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`.
+
+use super::plan::{self, BarrierAction, PassPlan};
+pub use super::spec::{JobSpec, TileSpec};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+use std::ops::Range;
+
+/// A worker that failed this many leases of one job gets no more of its tiles.
+pub const BLOCKLIST_AFTER_FAILURES: u32 = 3;
+/// A tile that failed this many times fails its job.
+pub const MAX_TILE_FAILURES: u32 = 6;
+
+/// Lifecycle state of a job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted, nothing leased yet.
+    Queued,
+    /// Rendering the pilot pass (EMIS).
+    Pilot,
+    /// Waiting for the optimiser at a barrier (EMIS).
+    Optimizing,
+    /// Rendering final passes.
+    Final,
+    /// Finished; the result is stored.
+    Done,
+    /// Stopped by an error.
+    Failed,
+    /// Stopped by a client.
+    Cancelled,
+}
+
+impl JobState {
+    /// Done, failed or cancelled.
+    pub fn is_terminal(self) -> bool {
+        matches!(self, JobState::Done | JobState::Failed | JobState::Cancelled)
+    }
+
+    /// Lowercase name, as in JSON.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Pilot => "pilot",
+            JobState::Optimizing => "optimizing",
+            JobState::Final => "final",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+}
+
+/// The kind of a pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PassKind {
+    /// EMIS pilot: fixed strategy, moments on.
+    Pilot,
+    /// The chosen strategy.
+    Final,
+}
+
+/// A pass: a contiguous range of tile indices that ends at a barrier.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pass {
+    /// Pilot or final.
+    pub kind: PassKind,
+    /// Its tiles.
+    pub tiles: Range<usize>,
+    /// EMIS: its tiles collect moments for an update at its end.
+    #[serde(default)]
+    pub collect: bool,
+    /// EMIS: the film was cleared before this pass (a path-tracing start ended), so the
+    /// image keeps only the iterations from here on.
+    #[serde(default)]
+    pub restart: bool,
+}
+
+/// Where a tile is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TileState {
+    /// Waiting for a worker.
+    Queued,
+    /// Held by `worker` until `deadline_ms` unless heartbeats extend it.
+    Leased {
+        /// The holder.
+        worker: String,
+        /// Expiry time.
+        deadline_ms: u64,
+    },
+    /// A valid result is stored and waits for its turn in the merge order.
+    Accepted,
+    /// In the film.
+    Merged,
+}
+
+/// One work unit of a job.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tile {
+    /// What to render.
+    pub spec: TileSpec,
+    /// Current lease epoch; results for other epochs are stale.
+    pub epoch: u64,
+    /// Where it is.
+    pub state: TileState,
+    /// Failed attempts (expired, refused, reported).
+    pub failures: u32,
+}
+
+/// A job and everything the scheduler knows about it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job {
+    /// Unique id.
+    pub id: String,
+    /// Submission order, the tie-breaker between equal priorities.
+    pub seq: u64,
+    /// What to render.
+    pub spec: JobSpec,
+    /// Lifecycle state.
+    pub state: JobState,
+    /// Planned passes, in order; their tile ranges tile `tiles` without gaps.
+    pub passes: Vec<Pass>,
+    /// All planned tiles, in merge order.
+    pub tiles: Vec<Tile>,
+    /// `tiles[..merged]` are in the film.
+    pub merged: usize,
+    /// Failed leases per worker; reaching [`BLOCKLIST_AFTER_FAILURES`] blocklists the worker.
+    pub worker_failures: BTreeMap<String, u32>,
+    /// Why the job failed.
+    pub error: Option<String>,
+    /// Submission time.
+    pub created_ms: u64,
+    /// First lease.
+    pub started_ms: Option<u64>,
+    /// Reaching a terminal state.
+    pub finished_ms: Option<u64>,
+}
+
+impl Job {
+    /// Whether `worker` may lease this job's tiles.
+    pub fn is_blocklisted(&self, worker: &str) -> bool {
+        self.worker_failures.get(worker).is_some_and(|&n| n >= BLOCKLIST_AFTER_FAILURES)
+    }
+
+    /// Pixel samples merged into the film.
+    pub fn samples_merged(&self) -> u64 {
+        self.tiles[..self.merged].iter().map(|t| t.spec.pixel_samples()).sum()
+    }
+
+    /// Pixel samples planned so far.
+    pub fn samples_planned(&self) -> u64 {
+        self.tiles.iter().map(|t| t.spec.pixel_samples()).sum()
+    }
+
+    /// Samples per pixel merged (the end of the last merged pass's sample range), counting
+    /// iterations a restart discarded.
+    pub fn spp_merged(&self) -> u32 {
+        self.tiles[..self.merged].iter().map(|t| t.spec.samples.end).max().unwrap_or(0)
+    }
+
+    /// The first iteration the film keeps: where the last restarting pass begins (0 if none).
+    pub fn kept_from(&self) -> u32 {
+        self.passes
+            .iter()
+            .rev()
+            .find(|p| p.restart)
+            .and_then(|p| self.tiles.get(p.tiles.start))
+            .map_or(0, |t| t.spec.samples.start)
+    }
+
+    /// Tiles accepted or merged.
+    pub fn tiles_done(&self) -> usize {
+        self.tiles.iter().filter(|t| matches!(t.state, TileState::Accepted | TileState::Merged)).count()
+    }
+
+    /// The pass `tile` belongs to.
+    pub fn pass_of(&self, tile: usize) -> Option<usize> {
+        self.passes.iter().position(|p| p.tiles.contains(&tile))
+    }
+
+    /// Whether tile `tile` collects EMIS moments.
+    pub fn collects(&self, tile: usize) -> bool {
+        self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
+    }
+
+    fn append_pass(&mut self, kind: PassKind, plan: PassPlan, restart: bool) -> Range<usize> {
+        let start = self.tiles.len();
+        self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
+            spec,
+            epoch: 0,
+            state: TileState::Queued,
+            failures: 0,
+        }));
+        let range = start..self.tiles.len();
+        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart });
+        range
+    }
+
+    fn finish(&mut self, state: JobState, now_ms: u64) {
+        self.state = state;
+        self.finished_ms = Some(now_ms);
+    }
+}
+
+/// What a call changed, for the service to persist: per job, the tile indices whose rows
+/// changed (the job's own row is always saved for a job listed here).
+pub type Changes = BTreeMap<String, BTreeSet<usize>>;
+
+fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
+    let set = changes.entry(job.to_string()).or_default();
+    if let Some(t) = tile {
+        set.insert(t);
+    }
+}
+
+/// Identifies a lease: a tile of a job at an epoch.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct LeaseRef {
+    /// The job.
+    pub job: String,
+    /// Tile index.
+    pub tile: usize,
+    /// Epoch it was leased at.
+    pub epoch: u64,
+}
+
+/// What happened to an uploaded result.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ResultOutcome {
+    /// Current lease, valid result: stored for merging.
+    Accepted,
+    /// Already accepted at this epoch.
+    Duplicate,
+    /// Not the current lease (expired, re-leased, cancelled, unknown).
+    Stale,
+    /// Current lease, invalid result: refused, tile re-queued.
+    Refused(String),
+}
+
+/// Why a call was refused outright.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TransitionError {
+    /// No such job.
+    #[error("job {0} not found")]
+    UnknownJob(String),
+    /// A job with this id exists.
+    #[error("job {0} already exists")]
+    DuplicateJob(String),
+    /// The job is not waiting for the optimiser.
+    #[error("job {0} is not at an optimisation barrier")]
+    NotOptimizing(String),
+}
+
+/// All jobs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct JobsModel {
+    /// Jobs by id.
+    pub jobs: BTreeMap<String, Job>,
+}
+
+impl JobsModel {
+    /// Adds a job and plans its first pass.
+    pub fn submit(&mut self, id: &str, spec: JobSpec, now_ms: u64) -> Result<Changes, TransitionError> {
+        if self.jobs.contains_key(id) {
+            return Err(TransitionError::DuplicateJob(id.to_string()));
+        }
+        let seq = self.jobs.values().map(|j| j.seq + 1).max().unwrap_or(0);
+        let first = plan::first_pass(&spec);
+        let mut job = Job {
+            id: id.to_string(),
+            seq,
+            spec,
+            state: JobState::Queued,
+            passes: Vec::new(),
+            tiles: Vec::new(),
+            merged: 0,
+            worker_failures: BTreeMap::new(),
+            error: None,
+            created_ms: now_ms,
+            started_ms: None,
+            finished_ms: None,
+        };
+        let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
+        let range = job.append_pass(kind, first, false);
+        self.jobs.insert(id.to_string(), job);
+        let mut changes = Changes::new();
+        changes.insert(id.to_string(), range.collect());
+        Ok(changes)
+    }
+
+    /// Adds a job rebuilt from storage as it was.
+    pub fn restore(&mut self, job: Job) {
+        self.jobs.insert(job.id.clone(), job);
+    }
+
+    /// Leases up to `max_tiles` queued tiles of the most urgent job `worker` may render
+    /// (highest priority, then oldest). Full-frame jobs hand out one tile at a time.
+    pub fn lease(&mut self, worker: &str, max_tiles: usize, now_ms: u64, ttl_ms: u64) -> (Vec<LeaseRef>, Changes) {
+        let mut changes = Changes::new();
+        let candidate = self
+            .jobs
+            .values()
+            .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
+            .filter(|j| !j.is_blocklisted(worker))
+            .filter(|j| j.tiles.iter().any(|t| t.state == TileState::Queued))
+            .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
+            .map(|j| j.id.clone());
+        let Some(id) = candidate else { return (Vec::new(), changes) };
+        let job = self.jobs.get_mut(&id).expect("invariant: candidate job exists");
+        let max = if job.spec.full_frame { 1 } else { max_tiles.max(1) };
+        let mut leases = Vec::new();
+        for (i, tile) in job.tiles.iter_mut().enumerate() {
+            if leases.len() == max {
+                break;
+            }
+            if tile.state == TileState::Queued {
+                tile.state = TileState::Leased { worker: worker.to_string(), deadline_ms: now_ms + ttl_ms };
+                leases.push(LeaseRef { job: id.clone(), tile: i, epoch: tile.epoch });
+                touch(&mut changes, &id, Some(i));
+            }
+        }
+        if job.state == JobState::Queued {
+            job.state = match job.passes.last().map(|p| p.kind) {
+                Some(PassKind::Pilot) => JobState::Pilot,
+                _ => JobState::Final,
+            };
+            job.started_ms = Some(now_ms);
+            touch(&mut changes, &id, None);
+        }
+        (leases, changes)
+    }
+
+    /// The tile a lease refers to, if that lease is still the current one.
+    fn current_tile(&mut self, worker: &str, lease: &LeaseRef) -> Option<(&mut Job, usize)> {
+        let job = self.jobs.get_mut(&lease.job)?;
+        if job.state.is_terminal() {
+            return None;
+        }
+        let tile = job.tiles.get(lease.tile)?;
+        let held = matches!(&tile.state, TileState::Leased { worker: w, .. } if w == worker);
+        (held && tile.epoch == lease.epoch).then_some((job, lease.tile))
+    }
+
+    /// Extends `worker`'s current leases among `leases` to `now_ms + ttl_ms`; returns those
+    /// that are not current any more. Deadlines are not persisted (see `service.rs`), so this
+    /// reports no changes.
+    pub fn heartbeat(&mut self, worker: &str, leases: &[LeaseRef], now_ms: u64, ttl_ms: u64) -> Vec<LeaseRef> {
+        let mut lost = Vec::new();
+        for lease in leases {
+            match self.current_tile(worker, lease) {
+                Some((job, i)) => {
+                    if let TileState::Leased { deadline_ms, .. } = &mut job.tiles[i].state {
+                        *deadline_ms = (*deadline_ms).max(now_ms + ttl_ms);
+                    }
+                }
+                None => lost.push(lease.clone()),
+            }
+        }
+        lost
+    }
+
+    /// Returns every lease whose deadline has passed to the queue with epoch + 1, counting a
+    /// failure against its worker.
+    pub fn expire(&mut self, now_ms: u64) -> Changes {
+        let mut changes = Changes::new();
+        for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
+            for i in 0..job.tiles.len() {
+                let expired = match &job.tiles[i].state {
+                    TileState::Leased { worker, deadline_ms } if *deadline_ms <= now_ms => Some(worker.clone()),
+                    _ => None,
+                };
+                if let Some(worker) = expired {
+                    fail_tile(job, i, &worker, "lease expired", now_ms);
+                    touch(&mut changes, &job.id, Some(i));
+                }
+            }
+        }
+        changes
+    }
+
+    /// Applies an uploaded result. `verdict` is the validation of its buffers (done outside
+    /// this model): `Err(reason)` refuses it. Only the current lease's first result counts.
+    pub fn result(
+        &mut self,
+        worker: &str,
+        lease: &LeaseRef,
+        verdict: Result<(), String>,
+        now_ms: u64,
+    ) -> (ResultOutcome, Changes) {
+        let mut changes = Changes::new();
+        let Some((job, i)) = self.current_tile(worker, lease) else {
+            let duplicate =
+                self.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).is_some_and(|t| {
+                    t.epoch == lease.epoch && matches!(t.state, TileState::Accepted | TileState::Merged)
+                });
+            return (if duplicate { ResultOutcome::Duplicate } else { ResultOutcome::Stale }, changes);
+        };
+        touch(&mut changes, &lease.job, Some(i));
+        match verdict {
+            Ok(()) => {
+                job.tiles[i].state = TileState::Accepted;
+                (ResultOutcome::Accepted, changes)
+            }
+            Err(reason) => {
+                fail_tile(job, i, worker, &reason, now_ms);
+                (ResultOutcome::Refused(reason), changes)
+            }
+        }
+    }
+
+    /// A worker could not render its lease: re-queue the tile and count the failure.
+    pub fn report_failure(&mut self, worker: &str, lease: &LeaseRef, message: &str, now_ms: u64) -> Changes {
+        let mut changes = Changes::new();
+        if let Some((job, i)) = self.current_tile(worker, lease) {
+            fail_tile(job, i, worker, message, now_ms);
+            touch(&mut changes, &lease.job, Some(i));
+        }
+        changes
+    }
+
+    /// Tiles of `job` that can be merged now: accepted ones right after the merged prefix.
+    pub fn mergeable(&self, job: &str) -> Range<usize> {
+        let Some(j) = self.jobs.get(job) else { return 0..0 };
+        if j.state.is_terminal() {
+            return j.merged..j.merged;
+        }
+        let end = j.tiles[j.merged..]
+            .iter()
+            .position(|t| t.state != TileState::Accepted)
+            .map_or(j.tiles.len(), |n| j.merged + n);
+        j.merged..end
+    }
+
+    /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
+    pub fn merge_finishes(&self, job: &str, upto: usize, now_ms: u64) -> bool {
+        let Some(j) = self.jobs.get(job) else { return false };
+        if j.state.is_terminal() || upto < j.tiles.len() {
+            return false;
+        }
+        let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let collected = j.passes.last().is_some_and(|p| p.collect);
+        plan::after_pass(&j.spec, spp, j.kept_from(), elapsed_s, collected) == BarrierAction::Finish
+    }
+
+    /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
+    /// every pass that is now complete. Returns the barrier's action when one ran.
+    pub fn merged(&mut self, job: &str, upto: usize, now_ms: u64) -> (Option<BarrierAction>, Changes) {
+        let mut changes = Changes::new();
+        let Some(j) = self.jobs.get_mut(job) else { return (None, changes) };
+        for i in j.merged..upto.min(j.tiles.len()) {
+            debug_assert_eq!(j.tiles[i].state, TileState::Accepted, "invariant: merging an unaccepted tile");
+            j.tiles[i].state = TileState::Merged;
+            touch(&mut changes, job, Some(i));
+        }
+        j.merged = j.merged.max(upto.min(j.tiles.len()));
+        touch(&mut changes, job, None);
+        if j.state.is_terminal() || j.merged < j.tiles.len() {
+            return (None, changes);
+        }
+        // every planned tile is merged: the last pass's barrier
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let collected = j.passes.last().is_some_and(|p| p.collect);
+        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s, collected);
+        match &action {
+            BarrierAction::NextPass(plan) => {
+                let range = j.append_pass(PassKind::Final, plan.clone(), false);
+                changes.entry(job.to_string()).or_default().extend(range);
+            }
+            BarrierAction::Optimize => j.state = JobState::Optimizing,
+            BarrierAction::Finish => j.finish(JobState::Done, now_ms),
+        }
+        (Some(action), changes)
+    }
+
+    /// The optimiser has chosen a strategy at an EMIS barrier: plan the next pass with it.
+    /// `restart`: the update ended a path-tracing start, and the service cleared the film, so
+    /// a sample budget counts from the next pass on.
+    pub fn optimized(&mut self, job: &str, restart: bool, now_ms: u64) -> Result<Changes, TransitionError> {
+        let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
+        if j.state != JobState::Optimizing {
+            return Err(TransitionError::NotOptimizing(job.to_string()));
+        }
+        j.state = JobState::Final;
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let spp = j.spp_merged();
+        let kept_from = if restart { spp } else { j.kept_from() };
+        let plan = plan::pass_after_update(&j.spec, spp, kept_from, elapsed_s);
+        let range = j.append_pass(PassKind::Final, plan, restart);
+        let mut changes = Changes::new();
+        changes.insert(job.to_string(), range.collect());
+        Ok(changes)
+    }
+
+    /// Cancels a job: no more tiles are handed out and results in flight become stale.
+    pub fn cancel(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
+        let mut changes = Changes::new();
+        if !j.state.is_terminal() {
+            j.finish(JobState::Cancelled, now_ms);
+            touch(&mut changes, job, None);
+        }
+        Ok(changes)
+    }
+
+    /// Marks a job failed (for errors found outside the model, e.g. storage).
+    pub fn fail(&mut self, job: &str, error: String, now_ms: u64) -> Changes {
+        let mut changes = Changes::new();
+        if let Some(j) = self.jobs.get_mut(job).filter(|j| !j.state.is_terminal()) {
+            j.error = Some(error);
+            j.finish(JobState::Failed, now_ms);
+            touch(&mut changes, job, None);
+        }
+        changes
+    }
+
+    /// Current leases of `worker`.
+    pub fn leases_of(&self, worker: &str) -> Vec<LeaseRef> {
+        let mut out = Vec::new();
+        for job in self.jobs.values() {
+            for (i, t) in job.tiles.iter().enumerate() {
+                if matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker) {
+                    out.push(LeaseRef { job: job.id.clone(), tile: i, epoch: t.epoch });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Sends tile `i` back to the queue with a new epoch and counts the failure against `worker`
+/// (blocklisting it for the job after [`BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile
+/// has failed [`MAX_TILE_FAILURES`] times.
+fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now_ms: u64) {
+    let tile = &mut job.tiles[i];
+    tile.state = TileState::Queued;
+    tile.epoch += 1;
+    tile.failures += 1;
+    *job.worker_failures.entry(worker.to_string()).or_default() += 1;
+    if tile.failures >= MAX_TILE_FAILURES {
+        job.error = Some(format!("tile {i} failed {} times, last: {reason}", tile.failures));
+        job.finish(JobState::Failed, now_ms);
+    }
+}

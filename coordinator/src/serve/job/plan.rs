@@ -1,0 +1,260 @@
+//! How a job is cut into tiles and passes: the canonical decomposition that makes a farm
+//! render bit-identical to `tessera render`.
+//!
+//! Local rendering (`tessera_common::render`) adds tile sums into a zeroed film. With a sample
+//! budget, image-tile integrators (pt) render every tile's whole sample range in one pass: each
+//! pixel's sum is accumulated sample by sample inside one tile and added once to a zero, so the
+//! tile size does not change a single bit. Full-frame integrators (lt, bdpt, vcm) render one
+//! iteration per pass and add the passes in iteration order. The farm therefore uses
+//! * pt: [`TILE_SIZE`]² rectangles × the whole range `[0, spp)`, any merge order;
+//! * lt, bdpt, vcm: the full frame × `[i, i + 1)` per tile, merged in iteration order.
+//!
+//! Tiles are numbered in merge order across passes, and the coordinator merges strictly in
+//! that order (holding results that arrive early), so the film gets the same additions in the
+//! same order as locally: bit-for-bit equality, not just equality within rounding.
+//!
+//! Time budgets have no local bit-exact twin (local passes depend on wall time too); they plan
+//! one pass at a time at the barrier that ends the previous one.
+
+use super::spec::{JobSpec, TileSpec};
+use tessera_common::emis::{FINAL_ITERATIONS_PER_CALL, collecting_call};
+use tessera_common::film::Rect;
+
+/// Edge of the rectangles of image-tile integrators.
+pub const TILE_SIZE: u32 = 64;
+
+/// A pass to append: its tiles, and whether they collect EMIS moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PassPlan {
+    /// The tiles, in merge order.
+    pub tiles: Vec<TileSpec>,
+    /// EMIS: the tiles record moments, statistics and guides for an update at the pass's end.
+    pub collect: bool,
+}
+
+/// What a job does when a pass has been merged completely (a barrier).
+#[derive(Clone, Debug, PartialEq)]
+pub enum BarrierAction {
+    /// Render this as the next pass, with the current strategy.
+    NextPass(PassPlan),
+    /// EMIS: an update is due. The coordinator runs the optimiser on the merged image and
+    /// moments, then calls `JobsModel::optimized` with [`pass_after_update`].
+    Optimize,
+    /// Nothing left: the job is done.
+    Finish,
+}
+
+fn is_emis(spec: &JobSpec) -> bool {
+    spec.settings.integrator.emis_method().is_some()
+}
+
+/// Iterations the budget allows in total, as far as is known after `spp_done` took
+/// `elapsed_s` seconds (a time budget's is unknown before the first iteration). A sample
+/// budget counts the iterations the film keeps, from `kept_from` on (EMIS: a path-tracing
+/// start's iterations are discarded when a bidirectional strategy wins).
+fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
+    match (spec.settings.spp, spec.settings.time_s) {
+        (Some(n), _) => kept_from + n,
+        (None, Some(budget)) if spp_done > 0 && elapsed_s > 0.0 => {
+            ((budget / (elapsed_s / spp_done as f64)) as u32).max(spp_done)
+        }
+        _ => u32::MAX,
+    }
+}
+
+/// Iterations the next pass may render: the rest of a sample budget, or for a time budget
+/// about a tenth of it, never planned past the deadline (as locally). 0: finished.
+fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
+    match (spec.settings.spp, spec.settings.time_s) {
+        (Some(n), _) => (kept_from + n).saturating_sub(spp_done),
+        (None, Some(budget)) => {
+            let remaining = budget - elapsed_s;
+            if remaining <= 0.0 || spp_done == 0 {
+                return 0;
+            }
+            let per_spp = (elapsed_s / spp_done as f64).max(1e-9);
+            ((remaining / per_spp).floor() as u32).min(((budget * 0.1 / per_spp) as u32).max(1))
+        }
+        (None, None) => 0,
+    }
+}
+
+/// A pass from `spp_done` of at most `count` iterations. EMIS collects moments while another
+/// update can come within the budget (`may_collect`: no earlier pass stopped collecting), and
+/// then ends the pass at that update, where the barrier runs it.
+fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total: u32) -> PassPlan {
+    let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done).filter(|&u| u < total);
+    let update = update.filter(|_| may_collect && is_emis(spec));
+    let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
+    let collect = update.is_some();
+    if collect {
+        // as `render_emis` does: the calls of `collecting_call`
+        let mut tiles = Vec::new();
+        let mut begin = spp_done;
+        while begin < end {
+            let samples = collecting_call(begin..end);
+            begin = samples.end;
+            tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
+        }
+        return PassPlan { tiles, collect };
+    }
+    let per_tile = if is_emis(spec) { FINAL_ITERATIONS_PER_CALL } else { 1 };
+    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done, per_tile), collect }
+}
+
+/// The first pass (the pilot for EMIS). A time budget starts with one iteration to measure
+/// the speed.
+pub fn first_pass(spec: &JobSpec) -> PassPlan {
+    let count = spec.settings.spp.unwrap_or(1);
+    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0))
+}
+
+/// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take
+/// `per_tile` iterations each (the last one the rest).
+pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32, per_tile: u32) -> Vec<TileSpec> {
+    if spec.full_frame {
+        (begin..begin + count)
+            .step_by(per_tile as usize)
+            .map(|i| TileSpec {
+                rect: Rect::full(spec.width, spec.height),
+                samples: i..(i + per_tile).min(begin + count),
+            })
+            .collect()
+    } else {
+        Rect::tiles(spec.width, spec.height, TILE_SIZE)
+            .into_iter()
+            .map(|rect| TileSpec { rect, samples: begin..begin + count })
+            .collect()
+    }
+}
+
+/// What to do at the barrier after a pass. `spp_done` samples per pixel are merged (the film
+/// keeps those from `kept_from` on), rendering has run for `elapsed_s` seconds, and
+/// `collected` says whether the pass collected moments.
+/// An EMIS update is due when the pass collected up to an update point and iterations remain
+/// to use it (as `render_emis` decides locally).
+pub fn after_pass(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64, collected: bool) -> BarrierAction {
+    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
+    if collected && spec.settings.emis_updates.contains(&spp_done) && spp_done < total {
+        return BarrierAction::Optimize;
+    }
+    match next_count(spec, spp_done, kept_from, elapsed_s) {
+        0 => BarrierAction::Finish,
+        count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total)),
+    }
+}
+
+/// The pass after an EMIS update at `spp_done` (at least one iteration: the update was run
+/// because iterations remain; `kept_from` is `spp_done` if the update restarted the film).
+pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> PassPlan {
+    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
+    plan_from(spec, spp_done, next_count(spec, spp_done, kept_from, elapsed_s).max(1), true, total)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessera_common::settings::{IntegratorName, RenderSettings};
+
+    fn spec(integrator: IntegratorName, spp: Option<u32>, time_s: Option<f64>) -> JobSpec {
+        JobSpec {
+            name: "t".into(),
+            priority: 0,
+            settings: RenderSettings { integrator, spp, time_s, seed: Some(1), ..Default::default() },
+            width: 130,
+            height: 70,
+            full_frame: integrator.full_frame(),
+            bundle_digest: "d".into(),
+            scene_path: "scene.xml".into(),
+        }
+    }
+
+    #[test]
+    fn plan_pt_covers_every_pixel_once_with_all_samples() {
+        let tiles = first_pass(&spec(IntegratorName::Pt, Some(8), None)).tiles;
+        assert_eq!(tiles.len(), 3 * 2);
+        assert_eq!(tiles.iter().map(|t| t.rect.area()).sum::<usize>(), 130 * 70);
+        assert!(tiles.iter().all(|t| t.samples == (0..8)));
+    }
+
+    #[test]
+    fn plan_bidir_is_one_full_frame_iteration_per_tile() {
+        let tiles = first_pass(&spec(IntegratorName::Vcm, Some(3), None)).tiles;
+        assert_eq!(tiles.len(), 3);
+        for (i, t) in tiles.iter().enumerate() {
+            assert_eq!(t.rect, Rect::full(130, 70));
+            assert_eq!(t.samples, i as u32..i as u32 + 1);
+        }
+        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 0, 1.0, false), BarrierAction::Finish);
+    }
+
+    #[test]
+    fn plan_time_budget_adds_passes_until_the_time_is_used() {
+        let s = spec(IntegratorName::Pt, None, Some(10.0));
+        assert!(first_pass(&s).tiles.iter().all(|t| t.samples == (0..1)));
+        match after_pass(&s, 1, 0, 0.1, false) {
+            BarrierAction::NextPass(p) => assert_eq!(p.tiles[0].samples, 1..11),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(after_pass(&s, 50, 0, 10.5, false), BarrierAction::Finish);
+    }
+
+    /// The passes and barriers of an EMIS job with a sample budget, as `render_emis` does
+    /// locally: updates after 1 and 4 (16 is not reached within 12), moments collected up to
+    /// the last reachable update only.
+    #[test]
+    fn plan_emis_passes_end_at_the_updates_the_budget_reaches() {
+        let s = spec(IntegratorName::EmisVcm, Some(12), None);
+        let first = first_pass(&s);
+        assert_eq!(first.tiles.len(), 1);
+        assert!(first.collect);
+        assert_eq!(after_pass(&s, 1, 0, 1.0, true), BarrierAction::Optimize);
+        let second = pass_after_update(&s, 1, 0, 1.0);
+        assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
+        assert_eq!(after_pass(&s, 4, 0, 1.0, true), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 0, 1.0);
+        // after the last update the pass is cut into calls of FINAL_ITERATIONS_PER_CALL
+        assert_eq!(third.collect, false);
+        let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [4..12]);
+        // a collecting pass: a call per iteration that records under path tracing (0 and
+        // ≡ 2 mod 4), one per run between them
+        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0);
+        let ranges: Vec<_> = collecting.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [4..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..16]);
+        assert!(collecting.collect);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0);
+        let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
+        assert_eq!(after_pass(&s, 12, 0, 1.0, false), BarrierAction::Finish);
+        // a budget that ends at an update point runs no update there, and collects nothing
+        // for it
+        let s = spec(IntegratorName::EmisBdpt, Some(4), None);
+        let after = pass_after_update(&s, 1, 0, 1.0);
+        assert!(!after.collect);
+        assert_eq!(after.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [1..4]);
+        let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
+        assert!(!one.collect);
+        // other integrators never collect
+        assert!(!first_pass(&spec(IntegratorName::Vcm, Some(12), None)).collect);
+    }
+
+    /// A path-tracing start discarded at the update after iteration 1: the sample budget
+    /// counts the 12 iterations the film keeps, 1..13, and the update schedule stays on the
+    /// iteration count (the next update after 4).
+    #[test]
+    fn plan_after_a_restart_renders_the_whole_budget_into_the_new_film() {
+        let s = spec(IntegratorName::EmisVcm, Some(12), None);
+        let second = pass_after_update(&s, 1, 1, 1.0);
+        let ranges: Vec<_> = second.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!((ranges, second.collect), (vec![1..2, 2..3, 3..4], true));
+        assert_eq!(after_pass(&s, 4, 1, 1.0, true), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 1, 1.0);
+        assert_eq!(third.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..12, 12..13]);
+        assert!(matches!(after_pass(&s, 12, 1, 1.0, false), BarrierAction::NextPass(_)));
+        assert_eq!(after_pass(&s, 13, 1, 1.0, false), BarrierAction::Finish);
+        // a time budget is wall time, whatever was discarded
+        let t = spec(IntegratorName::EmisVcm, None, Some(10.0));
+        assert_eq!(after_pass(&t, 40, 1, 10.5, false), BarrierAction::Finish);
+    }
+}

@@ -1,0 +1,45 @@
+//! What a job is asked to render, fixed at submission: its description ([`JobSpec`]) and the
+//! work unit it is cut into ([`TileSpec`], an image rectangle × a range of iterations). The
+//! state machine ([`super::model`]) and the planner ([`super::plan`]) both build on these.
+
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use tessera_common::film::Rect;
+use tessera_common::settings::RenderSettings;
+
+/// The immutable description of a job, fixed at submission.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobSpec {
+    /// Display name.
+    pub name: String,
+    /// Higher runs first.
+    pub priority: i32,
+    /// Settings with the scene's spp and seed filled in.
+    pub settings: RenderSettings,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Whether tiles are full frames × iterations.
+    pub full_frame: bool,
+    /// Digest of the scene bundle blob.
+    pub bundle_digest: String,
+    /// The scene XML's path inside the bundle.
+    pub scene_path: String,
+}
+
+/// What a tile renders.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileSpec {
+    /// Pixels.
+    pub rect: Rect,
+    /// Sample (iteration) indices.
+    pub samples: Range<u32>,
+}
+
+impl TileSpec {
+    /// Pixel samples the tile contributes.
+    pub fn pixel_samples(&self) -> u64 {
+        self.rect.area() as u64 * self.samples.len() as u64
+    }
+}

@@ -1,0 +1,99 @@
+//! JSON shapes of the REST API. DTOs never leave `rest/`.
+
+use crate::serve::error::ApiError;
+use crate::serve::job::service::{JobView, WorkerView};
+use crate::serve::job::view::StrategyView;
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use tessera_common::settings::RenderSettings;
+
+/// `GET /api/v1/jobs/{id}`.
+#[derive(Serialize)]
+pub struct JobDto {
+    /// Id.
+    pub id: String,
+    /// Name.
+    pub name: String,
+    /// queued, pilot, optimizing, final, done, failed, cancelled.
+    pub state: &'static str,
+    /// E.g. `final pass 1/1`.
+    pub phase: String,
+    /// 0..1.
+    pub progress: f64,
+    /// Tiles accepted or merged.
+    pub tiles_done: u64,
+    /// Tiles planned.
+    pub tiles_total: u64,
+    /// Pixel samples merged.
+    pub samples_done: u64,
+    /// Estimated seconds left.
+    pub eta_s: Option<f64>,
+    /// The chosen MIS strategy (EMIS; null before the first update and for other integrators).
+    pub strategy: Option<StrategyView>,
+    /// Why the job failed.
+    pub error: Option<String>,
+    /// Priority.
+    pub priority: i32,
+    /// Resolved settings.
+    pub settings: RenderSettings,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Submission time, Unix ms.
+    pub created_unix_ms: u64,
+    /// Bundle digest.
+    pub scene_digest: String,
+}
+
+impl From<JobView> for JobDto {
+    fn from(j: JobView) -> Self {
+        JobDto {
+            id: j.id,
+            name: j.name,
+            state: j.state.as_str(),
+            phase: j.phase,
+            progress: j.progress,
+            tiles_done: j.tiles_done,
+            tiles_total: j.tiles_total,
+            samples_done: j.samples_done,
+            eta_s: j.eta_s,
+            strategy: j.strategy,
+            error: j.error,
+            priority: j.priority,
+            settings: j.settings,
+            width: j.width,
+            height: j.height,
+            created_unix_ms: j.created_ms,
+            scene_digest: j.scene_digest,
+        }
+    }
+}
+
+/// `GET /api/v1/workers`.
+#[derive(Serialize)]
+pub struct WorkerDto {
+    /// Id.
+    pub id: String,
+    /// Name.
+    pub name: String,
+    /// Threads.
+    pub threads: u32,
+    /// Seconds since last contact.
+    pub last_seen_s_ago: f64,
+    /// Leases held.
+    pub leases: usize,
+}
+
+impl From<WorkerView> for WorkerDto {
+    fn from(w: WorkerView) -> Self {
+        WorkerDto { id: w.id, name: w.name, threads: w.threads, last_seen_s_ago: w.last_seen_s_ago, leases: w.leases }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        (self.code.http(), axum::Json(serde_json::json!({ "error": self.message, "code": self.code.as_str() })))
+            .into_response()
+    }
+}

@@ -1,0 +1,169 @@
+//! REST handlers: decode → call the job service → encode.
+
+use super::dto::{JobDto, WorkerDto};
+use crate::serve::error::{ApiError, ErrorCode};
+use crate::serve::job::service::{Bundle, OutputKind};
+use crate::serve::state::{AppState, blocking, now_ms};
+use axum::Json;
+use axum::extract::{Multipart, Path, State};
+use axum::http::header;
+use axum::response::IntoResponse;
+use std::fmt::Write;
+use std::sync::Arc;
+use tessera_common::settings::RenderSettings;
+
+type St = State<Arc<AppState>>;
+
+fn invalid(message: impl Into<String>) -> ApiError {
+    ApiError::new(ErrorCode::InvalidArgument, message)
+}
+
+fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::new(ErrorCode::PayloadTooLarge, format!("upload too large: {}", e.body_text()))
+    } else {
+        invalid(format!("malformed multipart body: {}", e.body_text()))
+    }
+}
+
+/// Splits the `settings` JSON into render settings, priority and name.
+fn parse_settings(text: &str) -> Result<(RenderSettings, i32, Option<String>), ApiError> {
+    let mut value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| invalid(format!("field \"settings\" is not JSON: {e}")))?;
+    let obj = value.as_object_mut().ok_or_else(|| invalid("field \"settings\" must be a JSON object"))?;
+    let priority = match obj.remove("priority") {
+        None => 0,
+        Some(p) => p
+            .as_i64()
+            .and_then(|p| i32::try_from(p).ok())
+            .ok_or_else(|| invalid("settings field \"priority\" must be an integer"))?,
+    };
+    let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
+    let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
+    Ok((settings, priority, name))
+}
+
+/// `POST /api/v1/jobs`.
+pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoResponse, ApiError> {
+    let mut bundle = Bundle::default();
+    let mut settings = (RenderSettings::default(), 0, None);
+    while let Some(field) = form.next_field().await.map_err(multipart_error)? {
+        let name = field.name().unwrap_or("").to_string();
+        let file_name = field.file_name().map(str::to_string);
+        let data = field.bytes().await.map_err(multipart_error)?;
+        match name.as_str() {
+            "settings" => {
+                settings =
+                    parse_settings(std::str::from_utf8(&data).map_err(|_| invalid("field \"settings\" is not UTF-8"))?)?
+            }
+            "scene" => {
+                bundle.scene_path = file_name.unwrap_or_else(|| "scene.xml".into());
+                bundle.files.push((bundle.scene_path.clone(), data.to_vec()));
+            }
+            _ => {
+                let path = file_name.ok_or_else(|| invalid(format!("part \"{name}\" needs a file name (its path)")))?;
+                bundle.files.push((path, data.to_vec()));
+            }
+        }
+    }
+    if bundle.scene_path.is_empty() {
+        return Err(invalid("field \"scene\" is missing (the scene XML file)"));
+    }
+    let svc = st.svc.clone();
+    let (settings, priority, name) = settings;
+    let view = blocking(move || svc.submit(bundle, settings, priority, name, now_ms())).await?;
+    Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
+}
+
+/// `GET /api/v1/jobs`.
+pub async fn list(State(st): St) -> Result<Json<Vec<JobDto>>, ApiError> {
+    let svc = st.svc.clone();
+    let jobs = blocking(move || svc.list(now_ms())).await?;
+    Ok(Json(jobs.into_iter().map(JobDto::from).collect()))
+}
+
+/// `GET /api/v1/jobs/{id}`.
+pub async fn get_one(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.get(&id, now_ms())).await?.into()))
+}
+
+/// `DELETE /api/v1/jobs/{id}`.
+pub async fn cancel(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
+    Ok(Json(st.svc.cancel(&id, now_ms())?.into()))
+}
+
+async fn output(st: Arc<AppState>, id: String, kind: OutputKind) -> Result<impl IntoResponse, ApiError> {
+    let svc = st.svc.clone();
+    let bytes = blocking(move || svc.output(&id, kind)).await?;
+    let mime = if kind == OutputKind::Exr { "image/x-exr" } else { "image/png" };
+    Ok(([(header::CONTENT_TYPE, mime)], bytes))
+}
+
+/// `GET /api/v1/jobs/{id}/result.exr`.
+pub async fn result_exr(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
+    output(st, id, OutputKind::Exr).await
+}
+
+/// `GET /api/v1/jobs/{id}/preview.png`.
+pub async fn preview_png(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
+    output(st, id, OutputKind::Png).await
+}
+
+/// `GET /api/v1/workers`.
+pub async fn workers(State(st): St) -> Json<Vec<WorkerDto>> {
+    Json(st.svc.workers(now_ms()).into_iter().map(WorkerDto::from).collect())
+}
+
+/// `GET /metrics`: Prometheus text format.
+pub async fn metrics(State(st): St) -> impl IntoResponse {
+    let (c, states, queued, leased) = st.svc.metrics();
+    let workers = st.svc.workers(now_ms());
+    let mut out = String::new();
+    let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
+        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+        for (labels, v) in samples {
+            let _ = writeln!(out, "{name}{labels} {v}");
+        }
+    };
+    let states: Vec<_> = ["queued", "pilot", "optimizing", "final", "done", "failed", "cancelled"]
+        .iter()
+        .map(|s| (format!("{{state=\"{s}\"}}"), *states.get(s).unwrap_or(&0) as f64))
+        .collect();
+    metric("tessera_jobs", "gauge", "Jobs by state.", &states);
+    metric(
+        "tessera_tiles_queued",
+        "gauge",
+        "Tiles waiting for a worker (the backlog).",
+        &[(String::new(), queued as f64)],
+    );
+    metric("tessera_tiles_leased", "gauge", "Tiles leased to workers.", &[(String::new(), leased as f64)]);
+    let live = workers.iter().filter(|w| w.last_seen_s_ago < 60.0).count();
+    metric("tessera_workers", "gauge", "Workers seen in the last minute.", &[(String::new(), live as f64)]);
+    let counters = [
+        ("tessera_results_accepted_total", "Tile results accepted.", c.results_accepted),
+        ("tessera_results_refused_total", "Tile results refused by validation.", c.results_refused),
+        ("tessera_results_ignored_total", "Stale or duplicate tile results.", c.results_ignored),
+        ("tessera_leases_expired_total", "Leases that expired.", c.leases_expired),
+        ("tessera_tiles_merged_total", "Tiles merged into films.", c.tiles_merged),
+    ];
+    for (name, help, v) in counters {
+        metric(name, "counter", help, &[(String::new(), v as f64)]);
+    }
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_json_names_the_bad_field() {
+        let (s, p, n) = parse_settings(r#"{"integrator":"vcm","spp":2,"priority":3,"name":"x"}"#).unwrap();
+        assert_eq!((s.spp, p, n.as_deref()), (Some(2), 3, Some("x")));
+        let e = parse_settings(r#"{"integrator":"vcm","spq":2}"#).unwrap_err();
+        assert!(e.message.contains("spq"), "{}", e.message);
+        let e = parse_settings(r#"{"priority":"high"}"#).unwrap_err();
+        assert!(e.message.contains("priority"));
+    }
+}

@@ -1,0 +1,74 @@
+//! The REST API under `/api/v1` (plus `/healthz` and `/metrics` at the root):
+//!
+//! | route | what |
+//! |---|---|
+//! | `POST /api/v1/jobs` | multipart: `scene` file, asset files (`asset`, file name = path relative to the scene), `settings` JSON |
+//! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON |
+//! | `DELETE /api/v1/jobs/{id}` | cancel |
+//! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job |
+//! | `GET /api/v1/workers` | registered workers |
+//! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
+//! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
+
+pub mod dto;
+pub mod jobs;
+
+use crate::serve::state::AppState;
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::routing::get;
+use std::sync::Arc;
+
+/// The REST router.
+pub fn router(state: Arc<AppState>) -> Router {
+    let limit = state.max_upload_bytes;
+    Router::new()
+        .route("/api/v1/jobs", get(jobs::list).post(jobs::submit))
+        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::cancel))
+        .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
+        .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
+        .route("/api/v1/workers", get(jobs::workers))
+        .route("/", get(dashboard))
+        .route("/dashboard", get(dashboard))
+        .route("/healthz", get(|| async { "ok" }))
+        .route("/api/v1/healthz", get(|| async { "ok" }))
+        .route("/metrics", get(jobs::metrics))
+        .route("/api/v1/metrics", get(jobs::metrics))
+        .layer(DefaultBodyLimit::max(limit))
+        .layer(axum::middleware::from_fn_with_state(limit, refuse_oversized))
+        .with_state(state)
+}
+
+/// The dashboard page. It holds no data (it fetches the API with the token the user types in),
+/// so it is served without authentication.
+async fn dashboard() -> axum::response::Html<&'static str> {
+    axum::response::Html(include_str!("dashboard.html"))
+}
+
+/// Bodies up to this much over the limit are read and discarded before the 413 goes out.
+const DRAIN_CAP: u64 = 64 << 20;
+
+/// Answers 413 to a request whose `Content-Length` exceeds the upload limit. A modestly
+/// oversized body is read and discarded first: closing the socket while the client is still
+/// sending makes it see a connection reset instead of the 413. (Chunked bodies without a
+/// length are cut off by `DefaultBodyLimit` as they are read.)
+async fn refuse_oversized(
+    axum::extract::State(limit): axum::extract::State<usize>,
+    req: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    use axum::response::IntoResponse;
+    use tokio_stream::StreamExt;
+    let length = req.headers().get(http::header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+    match length {
+        Some(n) if n > limit as u64 => {
+            if n <= limit as u64 + DRAIN_CAP {
+                let mut body = req.into_body().into_data_stream();
+                while let Some(Ok(_)) = body.next().await {}
+            }
+            let message = format!("upload of {n} bytes exceeds the limit of {limit} bytes (--max-upload-mb)");
+            crate::serve::error::ApiError::new(crate::serve::error::ErrorCode::PayloadTooLarge, message).into_response()
+        }
+        _ => next.run(req).await,
+    }
+}

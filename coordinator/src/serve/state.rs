@@ -1,0 +1,32 @@
+//! What the gRPC and REST layers share: the domain service and limits, the clock the pure job
+//! model is fed with, and how a synchronous service call runs off the async threads.
+
+use super::error::{ApiError, ErrorCode};
+use super::job::service::{JobService, ServiceError};
+use std::sync::Arc;
+
+/// What the API layers share.
+pub struct AppState {
+    /// The domain service.
+    pub svc: Arc<JobService>,
+    /// Upload limit in bytes.
+    pub max_upload_bytes: usize,
+}
+
+/// Milliseconds since the Unix epoch: the clock the pure model is fed with.
+pub fn now_ms() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
+}
+
+/// Runs a synchronous service call on a blocking thread.
+pub async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T, ServiceError> + Send + 'static,
+) -> Result<T, ApiError> {
+    match tokio::task::spawn_blocking(f).await {
+        Ok(r) => r.map_err(ApiError::from),
+        Err(e) => {
+            tracing::error!(error = %e, "blocking task failed");
+            Err(ApiError::new(ErrorCode::Internal, "internal error (see the coordinator's log)"))
+        }
+    }
+}
