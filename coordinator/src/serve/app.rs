@@ -34,7 +34,7 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
             .await?
             .with_context(|| format!("cannot open data dir {}", args.data_dir.display()))?;
         let svc = Arc::new(svc);
-        let state = Arc::new(AppState { svc: svc.clone(), max_upload_bytes: args.max_upload_mb << 20 });
+        let state = Arc::new(AppState::new(svc.clone(), args.max_upload_mb << 20));
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
             .with_context(|| format!("cannot listen on {}", args.listen))?;

@@ -1,7 +1,7 @@
 //! The coordinator service, `tessera serve`: the pure job state machine and the service that
 //! persists and merges around it ([`job`]), durable storage ([`storage`]), the gRPC and REST
 //! APIs ([`grpc`], [`rest`]) over the state they share ([`state`]), authentication, the error
-//! table, metrics and logging, and the wiring ([`app`]) configured by [`config`].
+//! table, metrics ([`metrics`]) and logging, and the wiring ([`app`]) configured by [`config`].
 //!
 //! Nothing here imports the command line or the benchmarks.
 
@@ -11,6 +11,7 @@ pub mod config;
 pub mod error;
 pub mod grpc;
 pub mod job;
+pub mod metrics;
 pub mod rest;
 pub mod state;
 pub mod storage;

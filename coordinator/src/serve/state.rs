@@ -3,6 +3,7 @@
 
 use super::error::{ApiError, ErrorCode};
 use super::job::service::{JobService, ServiceError};
+use super::metrics::Telemetry;
 use std::sync::Arc;
 
 /// What the API layers share.
@@ -11,6 +12,15 @@ pub struct AppState {
     pub svc: Arc<JobService>,
     /// Upload limit in bytes.
     pub max_upload_bytes: usize,
+    /// `/metrics` and the latencies the API layers observe.
+    pub telemetry: Telemetry,
+}
+
+impl AppState {
+    /// The state of a coordinator serving `svc`.
+    pub fn new(svc: Arc<JobService>, max_upload_bytes: usize) -> Self {
+        AppState { telemetry: Telemetry::new(svc.clone()), svc, max_upload_bytes }
+    }
 }
 
 /// Milliseconds since the Unix epoch: the clock the pure model is fed with.

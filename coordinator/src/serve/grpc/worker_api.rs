@@ -47,7 +47,9 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
             let notified = self.0.svc.work.notified();
             tokio::pin!(notified);
             notified.as_mut().enable();
+            let started = std::time::Instant::now();
             let grants = self.0.svc.lease(&req.worker_id, max, now_ms())?;
+            self.0.telemetry.lease_seconds.observe(started.elapsed().as_secs_f64());
             if !grants.is_empty() || tokio::time::Instant::now() >= deadline {
                 return Ok(Response::new(pb::LeaseTileResponse { leases: grants.iter().map(grant_to_pb).collect() }));
             }
@@ -99,7 +101,9 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         };
         let svc = self.0.svc.clone();
         let worker = header.worker_id;
+        let started = std::time::Instant::now();
         let outcome = blocking(move || svc.upload(&worker, &lease, &claim, &payload, now_ms())).await?;
+        self.0.telemetry.upload_seconds.observe(started.elapsed().as_secs_f64());
         let (outcome, message) = match outcome {
             ResultOutcome::Accepted => (pb::UploadOutcome::Accepted, "accepted"),
             ResultOutcome::Duplicate => (pb::UploadOutcome::Duplicate, "already accepted"),

@@ -8,7 +8,6 @@ use axum::Json;
 use axum::extract::{Multipart, Path, State};
 use axum::http::header;
 use axum::response::IntoResponse;
-use std::fmt::Write;
 use std::sync::Arc;
 use tessera_common::settings::RenderSettings;
 
@@ -115,42 +114,10 @@ pub async fn workers(State(st): St) -> Json<Vec<WorkerDto>> {
     Json(st.svc.workers(now_ms()).into_iter().map(WorkerDto::from).collect())
 }
 
-/// `GET /metrics`: Prometheus text format.
+/// `GET /metrics`: the OpenMetrics text format, which Prometheus reads.
 pub async fn metrics(State(st): St) -> impl IntoResponse {
-    let (c, states, queued, leased) = st.svc.metrics();
-    let workers = st.svc.workers(now_ms());
-    let mut out = String::new();
-    let mut metric = |name: &str, kind: &str, help: &str, samples: &[(String, f64)]| {
-        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
-        for (labels, v) in samples {
-            let _ = writeln!(out, "{name}{labels} {v}");
-        }
-    };
-    let states: Vec<_> = ["queued", "pilot", "optimizing", "final", "done", "failed", "cancelled"]
-        .iter()
-        .map(|s| (format!("{{state=\"{s}\"}}"), *states.get(s).unwrap_or(&0) as f64))
-        .collect();
-    metric("tessera_jobs", "gauge", "Jobs by state.", &states);
-    metric(
-        "tessera_tiles_queued",
-        "gauge",
-        "Tiles waiting for a worker (the backlog).",
-        &[(String::new(), queued as f64)],
-    );
-    metric("tessera_tiles_leased", "gauge", "Tiles leased to workers.", &[(String::new(), leased as f64)]);
-    let live = workers.iter().filter(|w| w.last_seen_s_ago < 60.0).count();
-    metric("tessera_workers", "gauge", "Workers seen in the last minute.", &[(String::new(), live as f64)]);
-    let counters = [
-        ("tessera_results_accepted_total", "Tile results accepted.", c.results_accepted),
-        ("tessera_results_refused_total", "Tile results refused by validation.", c.results_refused),
-        ("tessera_results_ignored_total", "Stale or duplicate tile results.", c.results_ignored),
-        ("tessera_leases_expired_total", "Leases that expired.", c.leases_expired),
-        ("tessera_tiles_merged_total", "Tiles merged into films.", c.tiles_merged),
-    ];
-    for (name, help, v) in counters {
-        metric(name, "counter", help, &[(String::new(), v as f64)]);
-    }
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
+    let body = tokio::task::spawn_blocking(move || st.telemetry.encode()).await.unwrap_or_default();
+    ([(header::CONTENT_TYPE, "application/openmetrics-text; version=1.0.0; charset=utf-8")], body)
 }
 
 #[cfg(test)]

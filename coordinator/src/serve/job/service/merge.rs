@@ -3,6 +3,7 @@
 //! checkpoints of the film and EMIS state (spaced by their cost) and, when the last tile is in,
 //! the job's outputs, which are encoded without the service's lock.
 
+use super::runtime::{CheckpointState, HeldResult};
 use super::{Inner, JobService, ServiceError};
 use crate::output::{Outputs, PngEffort, Provenance};
 use crate::serve::job::emis::EmisJob;
@@ -10,7 +11,6 @@ use crate::serve::job::model::{Changes, JobSpec, TileSpec};
 use crate::serve::job::plan::BarrierAction;
 use crate::serve::job::validate::{ResultClaim, validate_result};
 use crate::serve::storage::Extra;
-use tessera_common::emis::PilotData;
 use tessera_common::film::{Film, TileAccum};
 
 /// A checkpoint writes the whole film while uploads wait, so consecutive checkpoints of a job
@@ -32,15 +32,6 @@ pub(super) struct Finishing {
     pub(super) emis: Option<EmisJob>,
 }
 
-/// The last checkpoint of a job.
-#[derive(Clone, Copy, Debug, Default)]
-pub(super) struct CheckpointState {
-    /// When it was written.
-    pub(super) at_ms: u64,
-    /// How long writing it took.
-    pub(super) cost_ms: u64,
-}
-
 impl JobService {
     /// Checks a result's image sums and, for EMIS tiles, its pilot data (which the worker
     /// appends to the payload); the error says what is wrong.
@@ -51,14 +42,14 @@ impl JobService {
         collect: bool,
         claim: &ResultClaim,
         payload: &[u8],
-    ) -> Result<(TileAccum, Option<PilotData>), String> {
+    ) -> Result<HeldResult, String> {
         let pilot_bytes = usize::try_from(claim.pilot_bytes).ok().filter(|&n| n <= payload.len()).ok_or_else(|| {
             format!("result claims {} pilot bytes in a payload of {}", claim.pilot_bytes, payload.len())
         })?;
         let (image, pilot) = payload.split_at(payload.len() - pilot_bytes);
         let accum = validate_result(tile, claim, image)?;
         // megabytes of pilot data are decoded without holding the service's lock
-        let shape = self.lock().emis.get(job).map(EmisJob::shape);
+        let shape = self.lock().jobs.get(job).and_then(|r| r.emis.as_ref()).map(EmisJob::shape);
         let pilot = match shape {
             Some(shape) => shape.decode(tile, collect, pilot)?,
             None if pilot.is_empty() => None,
@@ -72,7 +63,8 @@ impl JobService {
     /// resumes after the update (or, if it stopped before, runs it again identically).
     pub(super) fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let iterations = inner.model.jobs[job].spp_merged();
-        let (Some(film), Some(emis)) = (inner.films.get(job), inner.emis.get_mut(job)) else {
+        let runtime = inner.job(job);
+        let (Some(film), Some(emis)) = (runtime.film.as_mut(), runtime.emis.as_mut()) else {
             let changes = inner.model.fail(job, "the EMIS state of this job is missing".into(), now_ms);
             return self.persist(inner, &changes, &[]);
         };
@@ -81,11 +73,9 @@ impl JobService {
         if restarted {
             // a path-tracing start ended: its iterations leave the image (the checkpoint
             // below stores the empty film with the new strategy)
-            let (w, h) = (film.width, film.height);
-            inner.films.insert(job.to_string(), Film::new(w, h));
+            *film = Film::new(film.width, film.height);
         }
-        let changes =
-            inner.model.optimized(job, restarted, now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
+        let changes = inner.model.optimized(job, restarted, now_ms)?;
         let upto = inner.model.jobs[job].merged;
         self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
         self.work.notify_waiters();
@@ -103,17 +93,19 @@ impl JobService {
         mut extras: Vec<Extra>,
         now_ms: u64,
     ) -> Result<(), ServiceError> {
-        let Some(film) = inner.films.get(job) else { return self.persist(inner, changes, &extras) };
-        let emis = inner.emis.get(job).map(EmisJob::checkpoint).unwrap_or_default();
-        let old = inner.files.get(job).and_then(|f| f.checkpoint.clone());
+        let runtime = inner.job(job);
+        let Some(film) = &runtime.film else { return self.persist(inner, changes, &extras) };
+        let emis = runtime.emis.as_ref().map(EmisJob::checkpoint).unwrap_or_default();
+        let old = runtime.files.checkpoint.clone();
         let started = std::time::Instant::now();
         let file = self.blobs.put_checkpoint(job, upto, film, &emis)?;
         let cost_ms = started.elapsed().as_millis() as u64;
         // after the pending result, so a result the checkpoint covers is deleted with it
         extras.push(Extra::Checkpoint { job: job.to_string(), merged: upto, file: file.clone() });
         self.persist(inner, changes, &extras)?;
-        inner.checkpoints.insert(job.to_string(), CheckpointState { at_ms: now_ms, cost_ms });
-        inner.files.entry(job.to_string()).or_default().checkpoint = Some(file.clone());
+        let runtime = inner.job(job);
+        runtime.checkpoint = Some(CheckpointState { at_ms: now_ms, cost_ms });
+        runtime.files.checkpoint = Some(file.clone());
         if let Some(old) = old.filter(|o| *o != file) {
             // the database names the old file until the new name is committed
             self.sync(inner)?;
@@ -134,54 +126,80 @@ impl JobService {
         extras: Vec<Extra>,
     ) -> Result<Option<Finishing>, ServiceError> {
         let range = inner.model.mergeable(job);
-        let film = if range.is_empty() { None } else { inner.films.remove(job) };
+        let film = if range.is_empty() { None } else { inner.job(job).film.take() };
         let Some(mut film) = film else { return self.persist(inner, &pending, &extras).map(|()| None) };
-        let merged = self.merge_range(inner, job, range.clone(), &mut film);
-        let merged = match merged {
-            Ok(()) => film,
-            Err(e) => {
-                inner.films.insert(job.to_string(), film);
-                self.persist(inner, &pending, &extras)?;
-                return Err(e);
-            }
-        };
+        if let Err(e) = self.merge_range(inner, job, range.clone(), &mut film) {
+            inner.job(job).film = Some(film);
+            self.persist(inner, &pending, &extras)?;
+            return Err(e);
+        }
         inner.counters.tiles_merged += range.len() as u64;
         if inner.model.merge_finishes(job, range.end, now_ms) {
             // encoding a frame's outputs takes seconds for big films: `finish` does it without
             // the lock; the accepted result is committed now
             self.persist(inner, &pending, &extras)?;
             let spec = inner.model.jobs[job].spec.clone();
-            let emis = inner.emis.remove(job);
-            return Ok(Some(Finishing { job: job.to_string(), spec, film: merged, upto: range.end, now_ms, emis }));
+            let emis = inner.job(job).emis.take();
+            return Ok(Some(Finishing { job: job.to_string(), spec, film, upto: range.end, now_ms, emis }));
         }
+        inner.job(job).film = Some(film);
         let (action, mut changes) = inner.model.merged(job, range.end, now_ms);
         for (j, tiles) in pending {
             changes.entry(j).or_default().extend(tiles);
         }
+        self.after_merge(inner, job, action, &changes, extras, now_ms)?;
+        Ok(None)
+    }
+
+    /// Commits a merge that did not finish the job (with a checkpoint when one is due or a
+    /// pass ended) and runs its barrier: the next pass, or an EMIS update.
+    fn after_merge(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        action: Option<BarrierAction>,
+        changes: &Changes,
+        extras: Vec<Extra>,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
         let upto = inner.model.jobs[job].merged;
         // a job's first merge (after submission or a restart) starts its checkpoint clock
-        let last = *inner.checkpoints.entry(job.to_string()).or_insert(CheckpointState { at_ms: now_ms, cost_ms: 0 });
+        let last = *inner.job(job).checkpoint.get_or_insert(CheckpointState { at_ms: now_ms, cost_ms: 0 });
         let interval = self.cfg.checkpoint_interval_ms.max(last.cost_ms.saturating_mul(CHECKPOINT_SPACING));
         let due = now_ms.saturating_sub(last.at_ms) >= interval;
-        inner.films.insert(job.to_string(), merged);
-        if action == Some(BarrierAction::Finish) {
-            // not reached: `merge_finishes` answered the same question above
-            let emis = inner.emis.remove(job);
-            let film = inner.films.remove(job).expect("invariant: inserted above");
-            let outputs = self.write_outputs(&inner.model.jobs[job].spec, job, &film, emis.as_ref())?;
-            self.record_outputs(inner, job, outputs, upto, &changes, extras, emis)?;
-        } else if due || matches!(action, Some(BarrierAction::NextPass(_))) {
-            self.checkpoint(inner, job, upto, &changes, extras, now_ms)?;
-        } else {
-            self.persist(inner, &changes, &extras)?;
-        }
         match action {
-            Some(BarrierAction::NextPass(_)) => self.work.notify_waiters(),
+            // `merge_finishes` answered this before the merge was committed
+            Some(BarrierAction::Finish) => unreachable!("invariant: a finishing merge returns before its barrier"),
+            Some(BarrierAction::NextPass(_)) => {
+                self.checkpoint(inner, job, upto, changes, extras, now_ms)?;
+                self.work.notify_waiters();
+            }
             // the update is committed with its own checkpoint of the new strategy
-            Some(BarrierAction::Optimize) => self.optimize(inner, job, now_ms)?,
-            Some(BarrierAction::Finish) | None => {}
+            Some(BarrierAction::Optimize) => {
+                self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?;
+                self.optimize(inner, job, now_ms)?;
+            }
+            None => self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?,
         }
-        Ok(None)
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn checkpoint_or_persist(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        upto: usize,
+        changes: &Changes,
+        extras: Vec<Extra>,
+        now_ms: u64,
+        due: bool,
+    ) -> Result<(), ServiceError> {
+        if due {
+            self.checkpoint(inner, job, upto, changes, extras, now_ms)
+        } else {
+            self.persist(inner, changes, &extras)
+        }
     }
 
     /// Writes a finished job's outputs without holding the lock, then records them with the
@@ -214,20 +232,19 @@ impl JobService {
         mut extras: Vec<Extra>,
         emis: Option<EmisJob>,
     ) -> Result<(), ServiceError> {
-        if let Some(view) = emis.and_then(|e| e.view()) {
-            inner.strategies.insert(job.to_string(), view);
-        }
-        let old = inner.files.get(job).and_then(|f| f.checkpoint.clone());
+        let old = inner.job(job).files.checkpoint.clone();
         extras.push(Extra::Outputs { job: job.to_string(), exr: exr.clone(), png: png.clone(), merged: upto });
         self.persist(inner, changes, &extras)?;
-        let f = inner.files.entry(job.to_string()).or_default();
+        let runtime = inner.job(job);
+        runtime.emis = emis;
+        runtime.end();
+        let f = &mut runtime.files;
         (f.result_exr, f.preview_png, f.checkpoint) = (Some(exr), Some(png), None);
         if let Some(old) = old {
             // the database names the old file until the outputs are committed
             self.sync(inner)?;
             self.blobs.remove_checkpoint(&old);
         }
-        inner.films.remove(job);
         tracing::info!(job_id = %job, "job done");
         Ok(())
     }
@@ -240,13 +257,13 @@ impl JobService {
         film: &mut Film,
     ) -> Result<(), ServiceError> {
         for i in range {
-            let (accum, pilot) = match inner.held.remove(&(job.to_string(), i)) {
+            let (accum, pilot) = match inner.job(job).held.remove(&i) {
                 Some(r) => r,
                 None => self.stored_result(inner, job, i)?,
             };
             film.merge_tile(&accum);
-            if let (Some(p), Some(e)) = (pilot, inner.emis.get_mut(job)) {
-                e.absorb(&p).map_err(|m| ServiceError::Io(std::io::Error::other(m)))?;
+            if let (Some(p), Some(e)) = (pilot, inner.job(job).emis.as_mut()) {
+                e.absorb(&p).map_err(|message| ServiceError::Emis { job: job.to_string(), message })?;
             }
         }
         Ok(())
@@ -254,18 +271,16 @@ impl JobService {
 
     /// An accepted result read back from the database (after a restart). The payload is the
     /// image sums of the tile's rectangle followed by the EMIS pilot data, if any.
-    fn stored_result(
-        &self,
-        inner: &Inner,
-        job: &str,
-        i: usize,
-    ) -> Result<(TileAccum, Option<PilotData>), ServiceError> {
+    fn stored_result(&self, inner: &Inner, job: &str, i: usize) -> Result<HeldResult, ServiceError> {
         let j = &inner.model.jobs[job];
         let t = &j.tiles[i];
-        let corrupt = |why: &str| ServiceError::Io(std::io::Error::other(format!("stored result of tile {i}: {why}")));
+        let corrupt = |why: &str| ServiceError::Corrupt {
+            what: format!("stored result of job {job} tile {i}"),
+            message: why.into(),
+        };
         let (non_finite, bytes) = match self.commits.store().load_result(job, i, t.epoch)? {
             Some(r) => r,
-            // data directories of earlier versions kept results in files
+            // a data directory written before results moved into the database keeps them as files
             None => {
                 let bytes = self.blobs.get_result(job, i, t.epoch)?;
                 let nf = bytes.get(..8).ok_or_else(|| corrupt("too short"))?.try_into().expect("invariant: 8 bytes");
@@ -276,7 +291,7 @@ impl JobService {
         let (image, pilot) = bytes.split_at_checked(image_bytes).ok_or_else(|| corrupt("too short"))?;
         let (sum, count) =
             tessera_proto::decode_tile_payload(image, t.spec.rect.area()).ok_or_else(|| corrupt("wrong size"))?;
-        let pilot = match inner.emis.get(job) {
+        let pilot = match inner.jobs.get(job).and_then(|r| r.emis.as_ref()) {
             Some(e) => e.decode_pilot(&t.spec, j.collects(i), pilot).map_err(|m| corrupt(&m))?,
             None => None,
         };

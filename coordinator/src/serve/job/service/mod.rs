@@ -8,27 +8,30 @@
 //! outstanding gets a fresh deadline, which gives its worker time to upload or heartbeat.
 //!
 //! Methods are synchronous and may do file IO; async callers run the heavy ones (submit,
-//! upload, results) on blocking threads.
+//! upload, results) on blocking threads. The calls are grouped by who makes them: clients
+//! ([`submit`], [`query`]), workers ([`leases`]), and the merge path ([`merge`]); what the
+//! service holds per job is one [`runtime::JobRuntime`].
+
+mod leases;
+mod merge;
+mod query;
+mod runtime;
+mod submit;
 
 use super::emis::{EmisJob, TileStrategy};
-use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, ResultOutcome, TileSpec, TileState};
-use super::validate::ResultClaim;
+use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, TileSpec, TransitionError};
 use crate::serve::storage::commit::{Committer, Ticket};
-use crate::serve::storage::{BlobStore, Extra, JobFiles, Store, StoreError, WorkerRow, sqlite::Batch};
+use crate::serve::storage::{BlobStore, Extra, Store, StoreError, WorkerRow, sqlite::Batch};
+use runtime::JobRuntime;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-pub use tessera_common::bundle::Bundle;
-use tessera_common::emis::PilotData;
-use tessera_common::film::{Film, TileAccum};
-use tessera_common::scene::Scene;
-use tessera_common::settings::RenderSettings;
+use tessera_common::film::Film;
 
 pub use super::view::{JobView, StrategyView, WorkerView};
 pub use merge::CHECKPOINT_SPACING;
-use merge::CheckpointState;
-
-mod merge;
+pub use query::{Metrics, OutputKind};
+pub use tessera_common::bundle::Bundle;
 
 /// Tunables of the service.
 #[derive(Clone, Debug)]
@@ -41,7 +44,7 @@ pub struct ServiceConfig {
     pub checkpoint_interval_ms: u64,
 }
 
-/// Why a call failed; `code()` maps it onto the API error table.
+/// Why a call failed; the API layer maps each variant onto its error table.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ServiceError {
@@ -57,6 +60,25 @@ pub enum ServiceError {
     /// The request does not fit the current state (e.g. a result before the job is done).
     #[error("{0}")]
     FailedPrecondition(String),
+    /// The state machine refused a transition the service asked for.
+    #[error("job state: {0}")]
+    Transition(#[from] TransitionError),
+    /// Stored data (a result, a checkpoint, an EMIS state) does not decode.
+    #[error("corrupt {what}: {message}")]
+    Corrupt {
+        /// What was read.
+        what: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A job's EMIS state refused pilot data that had passed validation.
+    #[error("EMIS state of job {job}: {message}")]
+    Emis {
+        /// The job.
+        job: String,
+        /// What is wrong.
+        message: String,
+    },
     /// Storage failed.
     #[error("storage: {0}")]
     Storage(#[from] StoreError),
@@ -81,15 +103,6 @@ pub struct LeaseGrant {
     pub strategy: Option<TileStrategy>,
 }
 
-/// Which finished output.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OutputKind {
-    /// The EXR.
-    Exr,
-    /// The PNG preview.
-    Png,
-}
-
 /// Counters for `/metrics`.
 #[derive(Clone, Debug, Default)]
 pub struct Counters {
@@ -109,15 +122,17 @@ struct Inner {
     model: JobsModel,
     /// The last commit ticket handed out (see [`JobService::persist`]).
     ticket: Ticket,
-    films: HashMap<String, Film>,
-    emis: HashMap<String, EmisJob>,
-    /// EMIS decisions of finished jobs (whose state is dropped).
-    strategies: HashMap<String, StrategyView>,
-    held: HashMap<(String, usize), (TileAccum, Option<PilotData>)>,
-    files: HashMap<String, JobFiles>,
-    checkpoints: HashMap<String, CheckpointState>,
+    /// Every job's in-memory state beside the model's, by job id.
+    jobs: HashMap<String, JobRuntime>,
     workers: BTreeMap<String, WorkerRow>,
     counters: Counters,
+}
+
+impl Inner {
+    /// The runtime of `job` (created empty on first use).
+    fn job(&mut self, job: &str) -> &mut JobRuntime {
+        self.jobs.entry(job.to_string()).or_default()
+    }
 }
 
 /// The job service.
@@ -142,12 +157,7 @@ impl JobService {
         let mut inner = Inner {
             model: JobsModel::default(),
             ticket: 0,
-            films: HashMap::new(),
-            emis: HashMap::new(),
-            strategies: HashMap::new(),
-            held: HashMap::new(),
-            files: HashMap::new(),
-            checkpoints: HashMap::new(),
+            jobs: HashMap::new(),
             workers: BTreeMap::new(),
             counters: Counters::default(),
         };
@@ -155,25 +165,14 @@ impl JobService {
             inner.workers.insert(w.id.clone(), w);
         }
         let jobs = store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
-        let svc_ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
+        let ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
         for (job, files) in jobs {
+            let mut runtime = JobRuntime { files, ..JobRuntime::default() };
             if !job.state.is_terminal() {
-                let (film, emis_bytes) = match &files.checkpoint {
-                    Some(name) => blobs.get_checkpoint(name)?,
-                    None => (Film::new(job.spec.width, job.spec.height), Vec::new()),
-                };
-                inner.films.insert(job.id.clone(), film);
-                let emis = match emis_bytes.is_empty() {
-                    true => EmisJob::new(&job.spec),
-                    false => Some(EmisJob::restore(&job.spec, &emis_bytes).map_err(|e| {
-                        ServiceError::Io(std::io::Error::other(format!("EMIS checkpoint of job {}: {e}", job.id)))
-                    })?),
-                };
-                if let Some(e) = emis {
-                    inner.emis.insert(job.id.clone(), e);
-                }
+                let (film, emis) = restore_running(&blobs, &job.id, &job.spec, &runtime.files)?;
+                (runtime.film, runtime.emis) = (Some(film), emis);
             }
-            inner.files.insert(job.id.clone(), files);
+            inner.jobs.insert(job.id.clone(), runtime);
             inner.model.restore(job);
         }
         let svc = JobService {
@@ -185,24 +184,29 @@ impl JobService {
             work: tokio::sync::Notify::new(),
             changed: tokio::sync::watch::channel(0).0,
         };
-        {
-            for id in svc_ids {
-                // accepted tiles after the checkpoint first: an update must see the whole
-                // pass (merging the pass's last tile runs its barrier, and the update, again)
-                let finishing = svc.merge_ready(&mut svc.lock(), &id, now_ms, Changes::new(), Vec::new())?;
-                if let Some(f) = finishing {
-                    svc.finish(f)?;
-                }
-                if svc.lock().model.jobs[&id].state == JobState::Optimizing {
-                    // stopped between a barrier and its update, with the pass in the
-                    // checkpoint: run the update now
-                    svc.optimize(&mut svc.lock(), &id, now_ms)?;
-                }
-            }
-            let ticket = svc.lock().ticket;
-            svc.commits.wait(ticket)?;
+        for id in ids {
+            svc.resume(&id, now_ms)?;
         }
+        let ticket = svc.lock().ticket;
+        svc.commits.wait(ticket)?;
         Ok(svc)
+    }
+
+    /// Brings a job loaded from storage to where it stopped: merges the tiles accepted after
+    /// its checkpoint and runs an update it stopped before.
+    fn resume(&self, id: &str, now_ms: u64) -> Result<(), ServiceError> {
+        // accepted tiles after the checkpoint first: an update must see the whole pass
+        // (merging the pass's last tile runs its barrier, and the update, again)
+        let finishing = self.merge_ready(&mut self.lock(), id, now_ms, Changes::new(), Vec::new())?;
+        if let Some(f) = finishing {
+            self.finish(f)?;
+        }
+        if self.lock().model.jobs[id].state == JobState::Optimizing {
+            // stopped between a barrier and its update, with the pass in the checkpoint: run
+            // the update now
+            self.optimize(&mut self.lock(), id, now_ms)?;
+        }
+        Ok(())
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -229,360 +233,29 @@ impl JobService {
         Ok(self.commits.wait(inner.ticket)?)
     }
 
-    /// Validates and stores a scene bundle and settings, and queues the job.
-    #[tracing::instrument(skip_all, fields(scene = %bundle.scene_path))]
-    pub fn submit(
-        &self,
-        bundle: Bundle,
-        settings: RenderSettings,
-        priority: i32,
-        name: Option<String>,
-        now_ms: u64,
-    ) -> Result<JobView, ServiceError> {
-        settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let (digest, scene) = self.store_bundle(&bundle, &settings)?;
-        let integrator_settings = settings.resolved(&scene);
-        integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let spec = JobSpec {
-            name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
-            priority,
-            full_frame: integrator_settings.integrator.full_frame(),
-            settings: integrator_settings,
-            width: scene.camera.width,
-            height: scene.camera.height,
-            bundle_digest: digest,
-            scene_path: bundle.scene_path.clone(),
-        };
-        let id = uuid::Uuid::new_v4().to_string();
-        let mut inner = self.lock();
-        let changes =
-            inner.model.submit(&id, spec.clone(), now_ms).map_err(|e| ServiceError::Io(std::io::Error::other(e)))?;
-        inner.films.insert(id.clone(), Film::new(spec.width, spec.height));
-        if let Some(e) = EmisJob::new(&spec) {
-            inner.emis.insert(id.clone(), e);
-        }
-        self.persist(&mut inner, &changes, &[])?;
-        self.sync(&inner)?;
-        tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
-        self.work.notify_waiters();
-        Ok(self.view(&inner, &id, now_ms))
-    }
-
-    /// Stores the bundle blob, unpacks it and loads the scene from it to validate it. Scene
-    /// errors name the file inside the bundle, its line and column.
-    fn store_bundle(&self, bundle: &Bundle, settings: &RenderSettings) -> Result<(String, Scene), ServiceError> {
-        let invalid = ServiceError::InvalidArgument;
-        if tessera_common::bundle::safe_relative_path(&bundle.scene_path).is_none() {
-            return Err(invalid(format!("bundle scene path \"{}\" is not a relative path", bundle.scene_path)));
-        }
-        if !bundle.files.iter().any(|(p, _)| *p == bundle.scene_path) {
-            return Err(invalid(format!("bundle has no file \"{}\" (the scene)", bundle.scene_path)));
-        }
-        for (path, _) in &bundle.files {
-            if tessera_common::bundle::safe_relative_path(path).is_none() {
-                return Err(invalid(format!("bundle file path \"{path}\" must be relative without \"..\"")));
-            }
-        }
-        let digest = self.blobs.put(&tessera_proto::bundle::encode(bundle))?;
-        let dir = self.scenes_dir.join(&digest);
-        if !dir.exists() {
-            let tmp = self.scenes_dir.join(format!("{digest}.{}", uuid::Uuid::new_v4()));
-            for (path, data) in &bundle.files {
-                let p = tmp.join(tessera_common::bundle::safe_relative_path(path).expect("invariant: checked above"));
-                std::fs::create_dir_all(p.parent().expect("invariant: joined path has a parent"))?;
-                std::fs::write(&p, data)?;
-            }
-            if std::fs::rename(&tmp, &dir).is_err() {
-                // another submission unpacked the same bundle first
-                let _ = std::fs::remove_dir_all(&tmp);
-            }
-        }
-        let scene = Scene::load_with(&dir.join(&bundle.scene_path), &settings.define_map()).map_err(|e| {
-            let prefix = format!("{}/", dir.display());
-            invalid(e.to_string().replace(&prefix, ""))
-        })?;
-        Ok((digest, scene))
-    }
-
-    /// Registers a worker; returns its id.
-    pub fn register(&self, name: &str, threads: u32, now_ms: u64) -> Result<String, ServiceError> {
-        let row = WorkerRow {
-            id: uuid::Uuid::new_v4().to_string(),
-            name: name.to_string(),
-            threads,
-            registered_ms: now_ms,
-            last_seen_ms: now_ms,
-        };
-        let mut inner = self.lock();
-        self.commits.store().save_worker(&row)?;
-        tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
-        inner.workers.insert(row.id.clone(), row.clone());
-        Ok(row.id)
-    }
-
-    fn seen(&self, inner: &mut Inner, worker: &str, now_ms: u64) -> Result<(), ServiceError> {
-        let w = inner
-            .workers
-            .get_mut(worker)
-            .ok_or_else(|| ServiceError::NotFound(format!("worker {worker} is not registered")))?;
-        w.last_seen_ms = now_ms;
-        Ok(())
-    }
-
-    /// Leases up to `max_tiles` tiles to `worker` (nothing when no work is queued).
-    pub fn lease(&self, worker: &str, max_tiles: usize, now_ms: u64) -> Result<Vec<LeaseGrant>, ServiceError> {
-        let mut inner = self.lock();
-        self.seen(&mut inner, worker, now_ms)?;
-        let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
-        self.persist(&mut inner, &changes, &[])?;
-        let state = &mut *inner;
-        let grants = leases
-            .into_iter()
-            .map(|l| {
-                let job = &state.model.jobs[&l.job];
-                let strategy = match state.emis.get_mut(&l.job) {
-                    Some(e) => Some(e.strategy(&self.blobs, job.collects(l.tile))?),
-                    None => None,
-                };
-                Ok(LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l, strategy })
-            })
-            .collect::<Result<Vec<_>, ServiceError>>()?;
-        let ticket = inner.ticket;
-        drop(inner);
-        self.commits.wait(ticket)?;
-        Ok(grants)
-    }
-
-    /// The tile a lease refers to.
-    pub fn lease_spec(&self, lease: &LeaseRef) -> Option<TileSpec> {
-        let inner = self.lock();
-        inner.model.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).map(|t| t.spec.clone())
-    }
-
-    /// Extends `worker`'s leases; returns those that are no longer current.
-    pub fn heartbeat(&self, worker: &str, leases: &[LeaseRef], now_ms: u64) -> Result<Vec<LeaseRef>, ServiceError> {
-        let mut inner = self.lock();
-        self.seen(&mut inner, worker, now_ms)?;
-        Ok(inner.model.heartbeat(worker, leases, now_ms, self.cfg.lease_timeout_ms))
-    }
-
-    /// Re-queues expired leases.
-    pub fn expire(&self, now_ms: u64) -> Result<(), ServiceError> {
-        let mut inner = self.lock();
-        let changes = inner.model.expire(now_ms);
-        if !changes.is_empty() {
-            inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
-            tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
-            self.persist(&mut inner, &changes, &[])?;
-            self.sync(&inner)?;
-            self.work.notify_waiters();
-        }
-        Ok(())
-    }
-
-    /// A worker's failure to render a lease.
-    pub fn report_failure(
-        &self,
-        worker: &str,
-        lease: &LeaseRef,
-        message: &str,
-        now_ms: u64,
-    ) -> Result<(), ServiceError> {
-        let mut inner = self.lock();
-        let changes = inner.model.report_failure(worker, lease, message, now_ms);
-        tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, message, "worker reported a failure");
-        self.persist(&mut inner, &changes, &[])?;
-        self.sync(&inner)?;
-        self.work.notify_waiters();
-        Ok(())
-    }
-
-    /// An uploaded result: validated, stored, accepted once for the current epoch, merged in
-    /// tile order. A refused result re-queues its tile and returns [`ServiceError::InvalidResult`].
-    #[tracing::instrument(skip_all, fields(job_id = %lease.job, tile = lease.tile, epoch = lease.epoch, worker))]
-    pub fn upload(
-        &self,
-        worker: &str,
-        lease: &LeaseRef,
-        claim: &ResultClaim,
-        payload: &[u8],
-        now_ms: u64,
-    ) -> Result<ResultOutcome, ServiceError> {
-        let tile = {
-            let inner = self.lock();
-            let job = inner.model.jobs.get(&lease.job);
-            let current = job.and_then(|j| j.tiles.get(lease.tile)).filter(|t| {
-                t.epoch == lease.epoch && matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker)
-            });
-            current.map(|t| (t.spec.clone(), job.is_some_and(|j| j.collects(lease.tile))))
-        };
-        let Some((tile, collect)) = tile else {
-            // not current: let the model say whether it is a duplicate or stale
-            let mut inner = self.lock();
-            let (outcome, _) = inner.model.result(worker, lease, Ok(()), now_ms);
-            inner.counters.results_ignored += 1;
-            return Ok(outcome);
-        };
-        let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
-        let stored = verdict.as_ref().ok().map(|(accum, _)| Extra::Result {
-            job: lease.job.clone(),
-            tile: lease.tile,
-            epoch: lease.epoch,
-            non_finite: accum.non_finite,
-            payload: payload.to_vec(),
-        });
-        let mut inner = self.lock();
-        let (outcome, changes) =
-            inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
-        match (&outcome, verdict) {
-            (ResultOutcome::Accepted, Ok(result)) => {
-                inner.counters.results_accepted += 1;
-                inner.held.insert((lease.job.clone(), lease.tile), result);
-                // the result and its acceptance are committed in the merge's transaction: one
-                // commit (one fsync) per result, still before anyone is answered
-                let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());
-                let ticket = inner.ticket;
-                drop(inner);
-                // outside the lock, so that concurrent uploads share a commit
-                self.commits.wait(ticket)?;
-                if let Some(f) = finishing? {
-                    self.finish(f)?;
-                }
-                Ok(outcome)
-            }
-            (ResultOutcome::Refused(reason), _) => {
-                self.persist(&mut inner, &changes, &[])?;
-                self.sync(&inner)?;
-                inner.counters.results_refused += 1;
-                tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, reason = %reason, "tile result refused");
-                self.work.notify_waiters();
-                Err(ServiceError::InvalidResult(reason.clone()))
-            }
-            _ => {
-                self.persist(&mut inner, &changes, &[])?;
-                self.sync(&inner)?;
-                inner.counters.results_ignored += 1;
-                Ok(outcome)
-            }
-        }
-    }
-
-    /// A job's view with its EMIS decisions (kept after the job ends).
-    fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
-        let mut view = JobView::of(&inner.model.jobs[job], now_ms);
-        view.strategy = match inner.emis.get(job) {
-            Some(e) => e.view(),
-            None => inner.strategies.get(job).cloned(),
-        };
-        view
-    }
-
-    /// Cancels a job.
-    pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
-        let mut inner = self.lock();
-        let changes = inner.model.cancel(job, now_ms).map_err(|e| ServiceError::NotFound(e.to_string()))?;
-        self.persist(&mut inner, &changes, &[])?;
-        self.sync(&inner)?;
-        inner.films.remove(job);
-        if let Some(view) = inner.emis.remove(job).and_then(|e| e.view()) {
-            inner.strategies.insert(job.to_string(), view);
-        }
-        tracing::info!(job_id = %job, "job cancelled");
-        Ok(self.view(&inner, job, now_ms))
-    }
-
-    /// One job.
-    ///
-    /// Answered only once everything the view shows is committed (uploads are answered after
-    /// their commit but become visible before it), so a client never sees progress that a
-    /// crash could take back.
-    pub fn get(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
-        let inner = self.lock();
-        let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-        let view = self.view(&inner, &j.id, now_ms);
-        let ticket = inner.ticket;
-        drop(inner);
-        self.commits.wait(ticket)?;
-        Ok(view)
-    }
-
-    /// Every job, newest first (committed state, as [`JobService::get`]).
-    pub fn list(&self, now_ms: u64) -> Result<Vec<JobView>, ServiceError> {
-        let inner = self.lock();
-        let mut jobs: Vec<_> = inner.model.jobs.values().collect();
-        jobs.sort_by_key(|j| std::cmp::Reverse(j.seq));
-        let views = jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect();
-        let ticket = inner.ticket;
-        drop(inner);
-        self.commits.wait(ticket)?;
-        Ok(views)
-    }
-
-    /// A finished job's EXR or PNG.
-    pub fn output(&self, job: &str, kind: OutputKind) -> Result<Vec<u8>, ServiceError> {
-        let digest = {
-            let inner = self.lock();
-            let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-            if j.state != JobState::Done {
-                return Err(ServiceError::FailedPrecondition(format!("job {job} is {}, not done", j.state.as_str())));
-            }
-            let files = inner.files.get(job).cloned().unwrap_or_default();
-            match kind {
-                OutputKind::Exr => files.result_exr,
-                OutputKind::Png => files.preview_png,
-            }
-        };
-        let digest = digest.ok_or_else(|| ServiceError::NotFound(format!("job {job} has no stored result")))?;
-        self.blob(&digest)
-    }
-
-    /// A content-addressed blob.
-    pub fn blob(&self, digest: &str) -> Result<Vec<u8>, ServiceError> {
-        self.blobs.get(digest)?.ok_or_else(|| ServiceError::NotFound(format!("blob {digest} not found")))
-    }
-
-    /// Registered workers with their current leases.
-    pub fn workers(&self, now_ms: u64) -> Vec<WorkerView> {
-        let inner = self.lock();
-        inner
-            .workers
-            .values()
-            .map(|w| WorkerView {
-                id: w.id.clone(),
-                name: w.name.clone(),
-                threads: w.threads,
-                last_seen_s_ago: now_ms.saturating_sub(w.last_seen_ms) as f64 / 1000.0,
-                leases: inner.model.leases_of(&w.id).len(),
-            })
-            .collect()
-    }
-
-    /// Counters and gauges for `/metrics`: (counters, jobs per state, queued tiles, leased tiles).
-    pub fn metrics(&self) -> (Counters, BTreeMap<&'static str, usize>, usize, usize) {
-        let inner = self.lock();
-        let mut states = BTreeMap::new();
-        let (mut queued, mut leased) = (0, 0);
-        for j in inner.model.jobs.values() {
-            *states.entry(j.state.as_str()).or_default() += 1;
-            if !j.state.is_terminal() {
-                queued += j.tiles.iter().filter(|t| t.state == TileState::Queued).count();
-                leased += j.tiles.iter().filter(|t| matches!(t.state, TileState::Leased { .. })).count();
-            }
-        }
-        (inner.counters.clone(), states, queued, leased)
-    }
-
     /// The lease timeout.
     pub fn lease_timeout_ms(&self) -> u64 {
         self.cfg.lease_timeout_ms
     }
 }
 
-fn default_name(scene_path: &str) -> String {
-    let p = Path::new(scene_path);
-    let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("job");
-    match (stem, p.parent().and_then(|d| d.file_name()).and_then(|s| s.to_str())) {
-        ("scene", Some(dir)) => dir.to_string(),
-        _ => stem.to_string(),
-    }
+/// The film and EMIS state of an unfinished job: from its checkpoint, or empty.
+fn restore_running(
+    blobs: &BlobStore,
+    id: &str,
+    spec: &JobSpec,
+    files: &crate::serve::storage::JobFiles,
+) -> Result<(Film, Option<EmisJob>), ServiceError> {
+    let (film, emis_bytes) = match &files.checkpoint {
+        Some(name) => blobs.get_checkpoint(name)?,
+        None => (Film::new(spec.width, spec.height), Vec::new()),
+    };
+    let emis = match emis_bytes.is_empty() {
+        true => EmisJob::new(spec),
+        false => Some(
+            EmisJob::restore(spec, &emis_bytes)
+                .map_err(|message| ServiceError::Corrupt { what: format!("EMIS checkpoint of job {id}"), message })?,
+        ),
+    };
+    Ok((film, emis))
 }

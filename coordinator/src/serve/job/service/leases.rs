@@ -1,0 +1,173 @@
+//! The calls workers make: registration, leasing, heartbeats, failure reports and result
+//! uploads (validated, stored, accepted once for the current epoch, merged in tile order), and
+//! the timer's lease expiry.
+
+use super::{Inner, JobService, LeaseGrant, ServiceError};
+use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
+use crate::serve::job::validate::ResultClaim;
+use crate::serve::storage::{Extra, WorkerRow};
+
+impl JobService {
+    /// Registers a worker; returns its id.
+    pub fn register(&self, name: &str, threads: u32, now_ms: u64) -> Result<String, ServiceError> {
+        let row = WorkerRow {
+            id: uuid::Uuid::new_v4().to_string(),
+            name: name.to_string(),
+            threads,
+            registered_ms: now_ms,
+            last_seen_ms: now_ms,
+        };
+        let mut inner = self.lock();
+        self.commits.store().save_worker(&row)?;
+        tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
+        inner.workers.insert(row.id.clone(), row.clone());
+        Ok(row.id)
+    }
+
+    fn seen(&self, inner: &mut Inner, worker: &str, now_ms: u64) -> Result<(), ServiceError> {
+        let w = inner
+            .workers
+            .get_mut(worker)
+            .ok_or_else(|| ServiceError::NotFound(format!("worker {worker} is not registered")))?;
+        w.last_seen_ms = now_ms;
+        Ok(())
+    }
+
+    /// Leases up to `max_tiles` tiles to `worker` (nothing when no work is queued).
+    pub fn lease(&self, worker: &str, max_tiles: usize, now_ms: u64) -> Result<Vec<LeaseGrant>, ServiceError> {
+        let mut inner = self.lock();
+        self.seen(&mut inner, worker, now_ms)?;
+        let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
+        self.persist(&mut inner, &changes, &[])?;
+        let state = &mut *inner;
+        let grants = leases
+            .into_iter()
+            .map(|l| {
+                let job = &state.model.jobs[&l.job];
+                let strategy = match state.jobs.get_mut(&l.job).and_then(|r| r.emis.as_mut()) {
+                    Some(e) => Some(e.strategy(&self.blobs, job.collects(l.tile))?),
+                    None => None,
+                };
+                Ok(LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l, strategy })
+            })
+            .collect::<Result<Vec<_>, ServiceError>>()?;
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(grants)
+    }
+
+    /// The tile a lease refers to.
+    pub fn lease_spec(&self, lease: &LeaseRef) -> Option<TileSpec> {
+        let inner = self.lock();
+        inner.model.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).map(|t| t.spec.clone())
+    }
+
+    /// Extends `worker`'s leases; returns those that are no longer current.
+    pub fn heartbeat(&self, worker: &str, leases: &[LeaseRef], now_ms: u64) -> Result<Vec<LeaseRef>, ServiceError> {
+        let mut inner = self.lock();
+        self.seen(&mut inner, worker, now_ms)?;
+        Ok(inner.model.heartbeat(worker, leases, now_ms, self.cfg.lease_timeout_ms))
+    }
+
+    /// Re-queues expired leases.
+    pub fn expire(&self, now_ms: u64) -> Result<(), ServiceError> {
+        let mut inner = self.lock();
+        let changes = inner.model.expire(now_ms);
+        if !changes.is_empty() {
+            inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
+            tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
+            self.persist(&mut inner, &changes, &[])?;
+            self.sync(&inner)?;
+            self.work.notify_waiters();
+        }
+        Ok(())
+    }
+
+    /// A worker's failure to render a lease.
+    pub fn report_failure(
+        &self,
+        worker: &str,
+        lease: &LeaseRef,
+        message: &str,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
+        let mut inner = self.lock();
+        let changes = inner.model.report_failure(worker, lease, message, now_ms);
+        tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, message, "worker reported a failure");
+        self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
+        self.work.notify_waiters();
+        Ok(())
+    }
+
+    /// An uploaded result: validated, stored, accepted once for the current epoch, merged in
+    /// tile order. A refused result re-queues its tile and returns [`ServiceError::InvalidResult`].
+    #[tracing::instrument(skip_all, fields(job_id = %lease.job, tile = lease.tile, epoch = lease.epoch, worker))]
+    pub fn upload(
+        &self,
+        worker: &str,
+        lease: &LeaseRef,
+        claim: &ResultClaim,
+        payload: &[u8],
+        now_ms: u64,
+    ) -> Result<ResultOutcome, ServiceError> {
+        let tile = {
+            let inner = self.lock();
+            let job = inner.model.jobs.get(&lease.job);
+            let current = job.and_then(|j| j.tiles.get(lease.tile)).filter(|t| {
+                t.epoch == lease.epoch && matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker)
+            });
+            current.map(|t| (t.spec.clone(), job.is_some_and(|j| j.collects(lease.tile))))
+        };
+        let Some((tile, collect)) = tile else {
+            // not current: let the model say whether it is a duplicate or stale
+            let mut inner = self.lock();
+            let (outcome, _) = inner.model.result(worker, lease, Ok(()), now_ms);
+            inner.counters.results_ignored += 1;
+            return Ok(outcome);
+        };
+        let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
+        let stored = verdict.as_ref().ok().map(|(accum, _)| Extra::Result {
+            job: lease.job.clone(),
+            tile: lease.tile,
+            epoch: lease.epoch,
+            non_finite: accum.non_finite,
+            payload: payload.to_vec(),
+        });
+        let mut inner = self.lock();
+        let (outcome, changes) =
+            inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
+        match (&outcome, verdict) {
+            (ResultOutcome::Accepted, Ok(result)) => {
+                inner.counters.results_accepted += 1;
+                inner.job(&lease.job).held.insert(lease.tile, result);
+                // the result and its acceptance are committed in the merge's transaction: one
+                // commit (one fsync) per result, still before anyone is answered
+                let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());
+                let ticket = inner.ticket;
+                drop(inner);
+                // outside the lock, so that concurrent uploads share a commit
+                self.commits.wait(ticket)?;
+                if let Some(f) = finishing? {
+                    self.finish(f)?;
+                }
+                Ok(outcome)
+            }
+            (ResultOutcome::Refused(reason), _) => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
+                inner.counters.results_refused += 1;
+                tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, reason = %reason, "tile result refused");
+                self.work.notify_waiters();
+                Err(ServiceError::InvalidResult(reason.clone()))
+            }
+            _ => {
+                self.persist(&mut inner, &changes, &[])?;
+                self.sync(&inner)?;
+                inner.counters.results_ignored += 1;
+                Ok(outcome)
+            }
+        }
+    }
+}

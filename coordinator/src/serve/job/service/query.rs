@@ -1,0 +1,129 @@
+//! The calls clients make besides submission: job views, cancellation, finished outputs,
+//! blobs, the workers' list and the figures behind `/metrics`.
+
+use super::{Counters, Inner, JobService, ServiceError};
+use crate::serve::job::model::{JobState, TileState};
+use crate::serve::job::view::{JobView, WorkerView};
+use std::collections::BTreeMap;
+
+/// Which finished output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    /// The EXR.
+    Exr,
+    /// The PNG preview.
+    Png,
+}
+
+/// What `/metrics` reports of the service.
+#[derive(Clone, Debug, Default)]
+pub struct Metrics {
+    /// Results and leases so far.
+    pub counters: Counters,
+    /// Jobs per state name.
+    pub jobs_by_state: BTreeMap<&'static str, usize>,
+    /// Tiles waiting for a worker (the backlog) in unfinished jobs.
+    pub tiles_queued: usize,
+    /// Tiles leased to workers.
+    pub tiles_leased: usize,
+}
+
+impl JobService {
+    /// A job's view with its EMIS decisions (kept after the job ends).
+    pub(super) fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
+        let mut view = JobView::of(&inner.model.jobs[job], now_ms);
+        view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
+        view
+    }
+
+    /// Cancels a job.
+    pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
+        let mut inner = self.lock();
+        let changes = inner.model.cancel(job, now_ms)?;
+        self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
+        inner.job(job).end();
+        tracing::info!(job_id = %job, "job cancelled");
+        Ok(self.view(&inner, job, now_ms))
+    }
+
+    /// One job.
+    ///
+    /// Answered only once everything the view shows is committed (uploads are answered after
+    /// their commit but become visible before it), so a client never sees progress that a
+    /// crash could take back.
+    pub fn get(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
+        let inner = self.lock();
+        let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
+        let view = self.view(&inner, &j.id, now_ms);
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(view)
+    }
+
+    /// Every job, newest first (committed state, as [`JobService::get`]).
+    pub fn list(&self, now_ms: u64) -> Result<Vec<JobView>, ServiceError> {
+        let inner = self.lock();
+        let mut jobs: Vec<_> = inner.model.jobs.values().collect();
+        jobs.sort_by_key(|j| std::cmp::Reverse(j.seq));
+        let views = jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect();
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok(views)
+    }
+
+    /// A finished job's EXR or PNG.
+    pub fn output(&self, job: &str, kind: OutputKind) -> Result<Vec<u8>, ServiceError> {
+        let digest = {
+            let inner = self.lock();
+            let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
+            if j.state != JobState::Done {
+                return Err(ServiceError::FailedPrecondition(format!("job {job} is {}, not done", j.state.as_str())));
+            }
+            let files = inner.jobs.get(job).map(|r| r.files.clone()).unwrap_or_default();
+            match kind {
+                OutputKind::Exr => files.result_exr,
+                OutputKind::Png => files.preview_png,
+            }
+        };
+        let digest = digest.ok_or_else(|| ServiceError::NotFound(format!("job {job} has no stored result")))?;
+        self.blob(&digest)
+    }
+
+    /// A content-addressed blob.
+    pub fn blob(&self, digest: &str) -> Result<Vec<u8>, ServiceError> {
+        self.blobs.get(digest)?.ok_or_else(|| ServiceError::NotFound(format!("blob {digest} not found")))
+    }
+
+    /// Registered workers with their current leases.
+    pub fn workers(&self, now_ms: u64) -> Vec<WorkerView> {
+        let inner = self.lock();
+        inner
+            .workers
+            .values()
+            .map(|w| WorkerView {
+                id: w.id.clone(),
+                name: w.name.clone(),
+                threads: w.threads,
+                last_seen_s_ago: now_ms.saturating_sub(w.last_seen_ms) as f64 / 1000.0,
+                leases: inner.model.leases_of(&w.id).len(),
+            })
+            .collect()
+    }
+
+    /// Counters and gauges for `/metrics`.
+    pub fn metrics(&self) -> Metrics {
+        let inner = self.lock();
+        let mut metrics = Metrics { counters: inner.counters.clone(), ..Metrics::default() };
+        for j in inner.model.jobs.values() {
+            *metrics.jobs_by_state.entry(j.state.as_str()).or_default() += 1;
+            if !j.state.is_terminal() {
+                metrics.tiles_queued += j.tiles.iter().filter(|t| t.state == TileState::Queued).count();
+                metrics.tiles_leased += j.tiles.iter().filter(|t| matches!(t.state, TileState::Leased { .. })).count();
+            }
+        }
+        metrics
+    }
+}

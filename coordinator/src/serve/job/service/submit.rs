@@ -1,0 +1,96 @@
+//! Submission: a scene bundle and settings are checked, the bundle is stored as a blob and
+//! unpacked, the scene is loaded from it to refuse a bad one with its file, line and column,
+//! and the job is queued.
+
+use super::{Bundle, JobService, ServiceError};
+use crate::serve::job::emis::EmisJob;
+use crate::serve::job::model::JobSpec;
+use crate::serve::job::view::JobView;
+use std::path::Path;
+use tessera_common::film::Film;
+use tessera_common::scene::Scene;
+use tessera_common::settings::RenderSettings;
+
+impl JobService {
+    /// Validates and stores a scene bundle and settings, and queues the job.
+    #[tracing::instrument(skip_all, fields(scene = %bundle.scene_path))]
+    pub fn submit(
+        &self,
+        bundle: Bundle,
+        settings: RenderSettings,
+        priority: i32,
+        name: Option<String>,
+        now_ms: u64,
+    ) -> Result<JobView, ServiceError> {
+        settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        let (digest, scene) = self.store_bundle(&bundle, &settings)?;
+        let integrator_settings = settings.resolved(&scene);
+        integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        let spec = JobSpec {
+            name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
+            priority,
+            full_frame: integrator_settings.integrator.full_frame(),
+            settings: integrator_settings,
+            width: scene.camera.width,
+            height: scene.camera.height,
+            bundle_digest: digest,
+            scene_path: bundle.scene_path.clone(),
+        };
+        let id = uuid::Uuid::new_v4().to_string();
+        let mut inner = self.lock();
+        let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
+        let runtime = inner.job(&id);
+        runtime.film = Some(Film::new(spec.width, spec.height));
+        runtime.emis = EmisJob::new(&spec);
+        self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
+        tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
+        self.work.notify_waiters();
+        Ok(self.view(&inner, &id, now_ms))
+    }
+
+    /// Stores the bundle blob, unpacks it and loads the scene from it to validate it. Scene
+    /// errors name the file inside the bundle, its line and column.
+    fn store_bundle(&self, bundle: &Bundle, settings: &RenderSettings) -> Result<(String, Scene), ServiceError> {
+        let invalid = ServiceError::InvalidArgument;
+        if tessera_common::bundle::safe_relative_path(&bundle.scene_path).is_none() {
+            return Err(invalid(format!("bundle scene path \"{}\" is not a relative path", bundle.scene_path)));
+        }
+        if !bundle.files.iter().any(|(p, _)| *p == bundle.scene_path) {
+            return Err(invalid(format!("bundle has no file \"{}\" (the scene)", bundle.scene_path)));
+        }
+        for (path, _) in &bundle.files {
+            if tessera_common::bundle::safe_relative_path(path).is_none() {
+                return Err(invalid(format!("bundle file path \"{path}\" must be relative without \"..\"")));
+            }
+        }
+        let digest = self.blobs.put(&tessera_proto::bundle::encode(bundle))?;
+        let dir = self.scenes_dir.join(&digest);
+        if !dir.exists() {
+            let tmp = self.scenes_dir.join(format!("{digest}.{}", uuid::Uuid::new_v4()));
+            for (path, data) in &bundle.files {
+                let p = tmp.join(tessera_common::bundle::safe_relative_path(path).expect("invariant: checked above"));
+                std::fs::create_dir_all(p.parent().expect("invariant: joined path has a parent"))?;
+                std::fs::write(&p, data)?;
+            }
+            if std::fs::rename(&tmp, &dir).is_err() {
+                // another submission unpacked the same bundle first
+                let _ = std::fs::remove_dir_all(&tmp);
+            }
+        }
+        let scene = Scene::load_with(&dir.join(&bundle.scene_path), &settings.define_map()).map_err(|e| {
+            let prefix = format!("{}/", dir.display());
+            invalid(e.to_string().replace(&prefix, ""))
+        })?;
+        Ok((digest, scene))
+    }
+}
+
+fn default_name(scene_path: &str) -> String {
+    let p = Path::new(scene_path);
+    let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("job");
+    match (stem, p.parent().and_then(|d| d.file_name()).and_then(|s| s.to_str())) {
+        ("scene", Some(dir)) => dir.to_string(),
+        _ => stem.to_string(),
+    }
+}
