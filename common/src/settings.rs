@@ -124,11 +124,11 @@ pub struct RenderSettings {
     pub defines: BTreeMap<String, String>,
     /// EMIS: optimise after these many iterations (increasing, above 0).
     pub emis_updates: Vec<u32>,
-    /// EMIS: count ratio of merge candidates in the moment estimator (decision 3a).
+    /// EMIS: count ratio of merge candidates in the moment estimator (docs/emis.md, decision 3a).
     pub merge_ratio: MergeRatio,
-    /// EMIS: how merge samples enter the moments (decision 3b).
+    /// EMIS: how merge samples enter the moments (docs/emis.md, decision 3b).
     pub merge_kernel: MergeKernel,
-    /// EMIS: the cost heuristic's constants (decision 8).
+    /// EMIS: the cost heuristic's constants (docs/emis.md, decision 8).
     pub cost_model: CostModel,
     /// EMIS: whether moments are made relative before or after the box filter.
     pub moment_filter: MomentFilter,

@@ -1,7 +1,7 @@
-//! Emis-spec checklist §10: the optimiser's decisions with the denoised 1-iteration pilot image
-//! as Ī are within one candidate step of the decisions made with the converged reference as Ī
-//! (ν and c each at most one step apart in their candidate lists; merge-mask coverage within
-//! 0.1 of the image).
+//! The denoiser's acceptance test (docs/emis.md, checklist 10): the optimiser's decisions with
+//! the denoised 1-iteration pilot image as Ī are within one candidate step of the decisions
+//! made with the converged reference as Ī (ν and c each at most one step apart in their
+//! candidate lists; merge-mask coverage within 0.1 of the image).
 
 mod common;
 

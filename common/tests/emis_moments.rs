@@ -1,13 +1,15 @@
-//! Emis-spec checklist §5–6 on a real scene: the second moments one pilot predicts for other
-//! candidates agree with the second moments measured by rendering each candidate itself, and
-//! the estimator's buffers are deterministic and merge across "workers".
+//! The estimator's acceptance tests on a real scene (docs/emis.md, checklist 5 and 6): the
+//! second moments one pilot predicts for other candidates agree with the second moments
+//! measured by rendering each candidate itself, and the estimator's buffers are deterministic
+//! and merge across "workers".
 //!
 //! What is compared: per iteration, Σ over pixels of Σ over samples of y² (the quantity M
 //! estimates; by linearity of expectation it needs no independence assumption). The pilot's
 //! δ-reweighted estimate for candidate n and n's own measurement are independent renders, so
 //! their means must agree within 4 combined standard errors (per-iteration spread, 10
-//! iterations each, more with `EMIS_IT`). Merging is left out here: the merge kernel's two moment conventions are
-//! compared with measured variances by `tessera bench --ground-truth` (decision 3).
+//! iterations each, more with `EMIS_IT`). Merging is left out here: the merge kernel's two
+//! moment conventions are compared with measured variances by `tessera bench --ground-truth`
+//! (docs/emis.md, decision 3).
 
 mod common;
 

@@ -227,7 +227,7 @@ mod bidirectional {
         check_scene_with("env-lit", Some(env_lit_cube(&scene)), render_bdpt, 16, MAX_BIAS, MAX_RATIO);
     }
 
-    /// Changing ν and c changes noise, not the mean (emis-spec checklist §2): each setting
+    /// Changing ν and c changes noise, not the mean (docs/emis.md, checklist 2): each setting
     /// agrees with the reference on its own.
     #[test]
     fn light_path_and_connection_counts_do_not_change_the_mean() {
@@ -265,7 +265,7 @@ mod merging {
         check_scene_with("env-lit", Some(env_lit_cube(&scene)), render_vcm, 16, 0.02, 1.5);
     }
 
-    /// χ and the correlation-aware factor change noise, not the mean (emis-spec checklist §2).
+    /// χ and the correlation-aware factor change noise, not the mean (docs/emis.md, checklist 2).
     #[test]
     fn merge_probability_and_correlation_factor_do_not_change_the_mean() {
         fn partial_merging(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {

@@ -1,5 +1,5 @@
-//! Calibration of the cost heuristic's constants from measured render times (emis-spec
-//! decision 8, "calibrate the constants from measured per-technique time").
+//! Calibration of the cost heuristic's constants from measured render times
+//! (docs/emis.md, decision 8: the constants fitted to measured times on this renderer).
 //!
 //! Every term of [`pixel_cost`](super::cost::pixel_cost) is a constant times a feature of the
 //! candidate and the scene's statistics, so a measured cost (a configuration's time per
@@ -52,10 +52,11 @@ pub fn cost_features(s: &PathStatistics, candidate: &Candidate, pixels: u32) -> 
     std::array::from_fn(|pick| pixel_cost(&with_term(pick, 1.0), s, candidate, chi, candidate.merge, pixels))
 }
 
-/// The configurations to time on every scene (emis-spec §2's timing runs): the bidirectional
-/// engine at ν = 0 first (the unit), light tracing at ν = 0.25, 1 and 2, connections c = 1 and
-/// 4 (at ν = 1) and c = 4 (at ν = 0.25), merging at ν = 0.5, 1 and 2, and connections with
-/// merging. Path tracing's own integrator is timed beside them for [`CostConstants::path_tracing`].
+/// The configurations to time on every scene (the timing runs of docs/emis.md §2): the
+/// bidirectional engine at ν = 0 first (the unit), light tracing at ν = 0.25, 1 and 2,
+/// connections c = 1 and 4 (at ν = 1) and c = 4 (at ν = 0.25), merging at ν = 0.5, 1 and 2, and
+/// connections with merging. Path tracing's own integrator is timed beside them for
+/// [`CostConstants::path_tracing`].
 pub fn calibration_configurations() -> Vec<Candidate> {
     let c = |nu: f32, connections: u32, merge: bool| Candidate { nu, connections, merge };
     vec![

@@ -1,6 +1,6 @@
-//! Candidate strategies (Tessera decision 1): image level ν ∈ {0.25, 0.5, 0.75, 1, 2} light
-//! paths per pixel and c ∈ {0, 1, 2, 4, 8} connections per camera vertex; pixel level merging
-//! on or off; plus pure path tracing. 51 candidates for VCM, 26 for BDPT. The sets are
+//! Candidate strategies (docs/emis.md, decision 1): image level ν ∈ {0.25, 0.5, 0.75, 1, 2}
+//! light paths per pixel and c ∈ {0, 1, 2, 4, 8} connections per camera vertex; pixel level
+//! merging on or off; plus pure path tracing. 51 candidates for VCM, 26 for BDPT. The sets are
 //! configuration, not constants.
 
 use serde::{Deserialize, Serialize};
@@ -43,17 +43,17 @@ pub struct CandidateConfig {
 }
 
 impl CandidateConfig {
-    /// Decision 1 for VCM.
+    /// The VCM set of docs/emis.md, decision 1.
     pub fn vcm() -> Self {
         CandidateConfig { nu: vec![0.25, 0.5, 0.75, 1.0, 2.0], connections: vec![0, 1, 2, 4, 8], merging: true }
     }
 
-    /// Decision 1 for BDPT.
+    /// The BDPT set of docs/emis.md, decision 1.
     pub fn bdpt() -> Self {
         CandidateConfig { merging: false, ..Self::vcm() }
     }
 
-    /// The path-tracing start's reduced set (emis-spec §1, the reference's `OnDemandVcm`):
+    /// The path-tracing start's reduced set (docs/emis.md §1.2, the reference's `OnDemandVcm`):
     /// ν ∈ {0.5, 1}, c ∈ {0, 1}, merging as in `self`, plus path tracing: 9 candidates for
     /// VCM, 5 for BDPT. A few strategies likely to beat path tracing where anything does,
     /// judged from path-tracing moments alone.

@@ -1,4 +1,4 @@
-//! The cost heuristic (emis-spec §2, "current heuristic"): the cost of a pixel under a
+//! The cost heuristic (docs/emis.md §2, "current heuristic"): the cost of a pixel under a
 //! candidate, in units of one camera-path vertex with its NEE shadow ray, including the
 //! image-wide work (light tracing, photon-map build) amortised over the pixels.
 //!
@@ -7,12 +7,12 @@
 //! B = k_build·L̄l·ν·ln(N·L̄l), Q = k_query·L̄c·ln(N·L̄l) (both 0 when N·L̄l ≤ 1) and
 //! S = k_shade·φ·L̄c·N; pure path tracing costs L̄c·k_pt.
 //!
-//! The two walk terms and k_pt go beyond the reference (decision 8): Tessera computes MIS
-//! weights by walking the path's full pdf arrays, so every light-tracing splat costs in
-//! proportion to the light path's length and every connection to the whole path's; and when
-//! path tracing wins it is rendered by the `pt` integrator, cheaper per camera vertex than the
-//! bidirectional engine the other candidates run in. The reference constants set the walks to
-//! 0 and k_pt to 1, which is exactly the reference formula.
+//! The two walk terms and k_pt go beyond the reference (docs/emis.md, decision 8): Tessera
+//! computes MIS weights by walking the path's full pdf arrays, so every light-tracing splat
+//! costs in proportion to the light path's length and every connection to the whole path's;
+//! and when path tracing wins it is rendered by the `pt` integrator, cheaper per camera vertex
+//! than the bidirectional engine the other candidates run in. The reference constants set the
+//! walks to 0 and k_pt to 1, which is exactly the reference formula.
 
 use super::candidate::Candidate;
 use serde::{Deserialize, Serialize};
@@ -41,7 +41,7 @@ pub struct CostConstants {
 }
 
 /// Which constants the heuristic uses. The default is [`CostModel::Calibrated`] (see
-/// [`CostConstants::calibrated`] for the evidence); [`CostModel::Reference`] reproduces the
+/// [`CostConstants::calibrated`] for why); [`CostModel::Reference`] reproduces the
 /// reference implementation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -49,7 +49,7 @@ pub enum CostModel {
     /// [`CostConstants::calibrated`]: fitted to this renderer's measured times.
     #[default]
     Calibrated,
-    /// [`CostConstants::reference`]: the reference implementation's constants (emis-spec §2).
+    /// [`CostConstants::reference`]: the reference implementation's constants (docs/emis.md §2).
     Reference,
 }
 
@@ -64,7 +64,7 @@ impl CostModel {
 }
 
 impl CostConstants {
-    /// The reference implementation's "current heuristic" constants (emis-spec §2).
+    /// The reference implementation's "current heuristic" constants (docs/emis.md §2).
     pub fn reference() -> Self {
         CostConstants {
             camera_vertex: 1.0,
@@ -79,29 +79,12 @@ impl CostConstants {
         }
     }
 
-    /// Constants fitted to this renderer (decision 8) by `tessera bench --calibrate-costs
-    /// --spp 4 --repeats 3` (11 configurations × 6 scenes, fastest of 3 interleaved rounds,
-    /// 2 threads, 2026-11-22). Against the measured costs the reference constants are off by
-    /// 92 % rms (max 332 %: merging 2–4× too expensive, light vertices up to 1.8× in short-path
-    /// scenes, connections 2× too cheap in long-path ones); these by 14 % rms (max 39 %,
-    /// connections at c = 4 on cornell-box, whose shadow rays cost more than the fit's mean).
-    /// The build and query terms fit to 0: their cost is absorbed by the per-photon term.
-    ///
-    /// Why they are the default: `tessera bench --ground-truth 64 --ground-truth-pilot 16`
-    /// (2026-11-22) gives each of 19 candidates its pilot-predicted relative moment and, as
-    /// truth, its relMSE × K × its measured time. Applying both cost models to those figures
-    /// (image level), the reference constants choose ν = 0.25, c = 1 with merging on
-    /// caustic-glass, 2.73× the best candidate's error at equal time, where these choose
-    /// ν = 1, c = 1 with merging (1.08×); on the other five scenes both choose within 1.15× of
-    /// the best (these within 1.10×). The same command with these constants, on caustic-glass
-    /// alone, chose ν = 1, c = 1 with merging at 1.06×. The earlier calibration without the
-    /// walk terms and the `pt` constant chose ν = 2 on cornell-box (1.45×): it priced its long
-    /// light paths' splats too cheaply.
-    /// At equal time (`tessera bench --equal-time 20` twice and `--equal-time 60` once, 2
-    /// threads, 2026-11-22) emis-vcm reached 0.94×, 0.94× (20 s) and 0.95× (60 s) of vcm on
-    /// caustic-glass, against 0.78× with the reference constants the day before; over the six
-    /// scenes emis-vcm/vcm 1.56×, 1.55× and 1.51×, emis-bdpt/bdpt 1.34×, 1.30× and 1.30×, and
-    /// emis-vcm at least 0.91×, 0.92× and 0.95× the better of pt and vcm on every scene.
+    /// Constants fitted to this renderer (docs/emis.md, decision 8) by
+    /// `tessera bench --calibrate-costs`. The build and query terms fit to 0: their cost is
+    /// absorbed by the per-photon term. Why they are the default: on this renderer the
+    /// reference constants price merging too high and connections too low, and these choose
+    /// better against measured errors and at equal time
+    /// (docs/decisions/0002-calibrated-cost-constants.md).
     pub fn calibrated() -> Self {
         CostConstants {
             camera_vertex: 1.0,

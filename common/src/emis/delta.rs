@@ -1,11 +1,11 @@
-//! The correction factor δ_{n,m}(x) (emis-spec §3.2): it re-weights a pilot sample, drawn with
-//! strategy m, so that it estimates candidate n's second moment. Evaluated through a proxy
+//! The correction factor δ_{n,m}(x) (docs/emis.md §3.2): it re-weights a pilot sample, drawn
+//! with strategy m, so that it estimates candidate n's second moment. Evaluated through a proxy
 //! strategy a whose techniques all have non-zero counts, from five aggregated proxy weights:
 //!
 //! S(k) = Σ_t (k_t/a_t)·w̄_t, T(k) = Σ_t (k_t/a_t)·c_t·w̄_t, δ = S(m)²·T(n) / (S(n)²·T(m)).
 //!
 //! With c ≡ 1 (no correlation-aware factor) δ = S(m) / S(n). A candidate that cannot sample
-//! the path (S(n) = 0) gets an infinite moment, flagged, never NaN (decision 4).
+//! the path (S(n) = 0) gets an infinite moment, flagged, never NaN (docs/emis.md, decision 4).
 
 use super::proxy::ProxyWeights;
 
@@ -18,7 +18,7 @@ pub struct CountRatios {
     pub lt: f64,
     /// Connections: c/4 against the proxy's 4.
     pub con: f64,
-    /// Merges: χ (the reference code) or χ·ν (principled; decision 3a).
+    /// Merges: χ (the reference code) or χ·ν (principled; docs/emis.md, decision 3a).
     pub vm: f64,
 }
 
@@ -84,8 +84,8 @@ mod tests {
         assert_eq!(correction(&w, &pt_only, &pilot), Delta::Infinite);
     }
 
-    /// The 1-D toy of checklist §5: two techniques with pdfs p1 = 1 and p2 = 2x on [0, 1],
-    /// f(x) = x² + 0.1. Pilot m = (1, 1); for candidates n the pilot's Σ δ·y² estimates
+    /// The 1-D toy of docs/emis.md, checklist 5: two techniques with pdfs p1 = 1 and p2 = 2x on
+    /// [0, 1], f(x) = x² + 0.1. Pilot m = (1, 1); for candidates n the pilot's Σ δ·y² estimates
     /// M[n] = ∫ f² / (n1 p1 + n2 p2) within 3σ.
     #[test]
     fn pilot_estimates_match_analytic_second_moments() {

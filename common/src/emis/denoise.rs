@@ -1,8 +1,9 @@
-//! DENOISEIMAGE (emis-spec §5 and checklist §10, decision 7): the pilot image Ī the relative
-//! moments are normalised by. Intel OIDN is not installable here, so this is an edge-avoiding
-//! à-trous wavelet filter (Dammertz et al. 2010) guided by the pilot's albedo, normal and depth
-//! AOVs, on the albedo-demodulated image, followed by the reference's channel mean and radius-3
-//! box. Colour is not an edge-stopping guide: at one sample per pixel it is mostly noise.
+//! DENOISEIMAGE (docs/emis.md §5.4, decision 7 and checklist 10): the pilot image Ī the
+//! relative moments are normalised by. Intel OIDN is not installable here, so this is an
+//! edge-avoiding à-trous wavelet filter (Dammertz et al. 2010) guided by the pilot's albedo,
+//! normal and depth AOVs, on the albedo-demodulated image, followed by the reference's channel
+//! mean and radius-3 box. Colour is not an edge-stopping guide: at one sample per pixel it is
+//! mostly noise.
 //!
 //! Edge stopping between pixels p and q at step s: normals max(0, n_p·n_q)^σn; albedo
 //! exp(−|a_p − a_q|₁/σa); depth exp(−|z_p − z_q| / (σz·|∇z_p|·s·|offset| + ε)) as in SVGF, so

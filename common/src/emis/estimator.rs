@@ -1,6 +1,6 @@
-//! The moment estimator (emis-spec §3.3, checklist 4–7): a sample observer that re-weights
-//! every pilot sample by δ for every candidate and adds δ·w2 into per-pixel × per-candidate
-//! sums, and that sums the path statistics of the cost model.
+//! The moment estimator (docs/emis.md §3.3, checklist 4 to 7): a sample observer that
+//! re-weights every pilot sample by δ for every candidate and adds δ·w2 into per-pixel ×
+//! per-candidate sums, and that sums the path statistics of the cost model.
 //!
 //! Per sample: the proxy strategy's grouped balance weights w̄ (counts a = 1 for hits and NEE,
 //! P light paths, 4 connections per camera vertex, χ = 1 merges of P light paths, the pixel's
@@ -12,25 +12,14 @@
 //! the density a candidate with c = 4 has whatever its N; so a candidate's connection ratio is
 //! exactly c/4. (The reference uses 4/L̄l, off by the emitter vertex, which cannot be chosen.)
 //!
-//! Two switches (decision 3), each settled by `tessera bench --ground-truth`:
+//! Two switches (docs/emis.md, decision 3), each settled by `tessera bench --ground-truth`:
 //! * [`MergeRatio`]: a merge candidate's count ratio χ·ν (principled: merges use N light
 //!   paths) or χ (the reference code);
 //! * [`MergeKernel`]: merge moments (contribution × kernel)² (the literal squared estimate) or
 //!   contribution² × kernel (the reference code).
 //!
-//! Evidence for the defaults (Principled, Squared): `tessera bench --ground-truth 16` (4 pilot
-//! iterations; 19 candidates × 16 iterations each; all six scenes; 2026-11-21). The regret is
-//! the variance-based work-normalised error of the candidate a variant chooses over the best
-//! candidate's. Geometric-mean regret: Principled/Squared 1.000, Reference/Squared 1.027,
-//! Principled/Reference and Reference/Reference 1.044 (the measured second moments of each
-//! candidate themselves: 1.011). Only caustic-glass separates them: Principled/Squared picks
-//! the variance-best ν = 1, c = 1 with merging (Spearman ρ 0.83 against the variances); the
-//! reference kernel picks ν = 0.25, c = 1 without merging (regret 1.29, ρ 0.29), the reference
-//! ratio ν = 0.25 with merging (regret 1.17, ρ 0.75). On the other five scenes all four agree
-//! with the variance-based choice. Re-run with the later truth (each candidate's relMSE × K,
-//! no pixel dropped) and relative-first filtering, `--ground-truth 32`: Principled/Squared and
-//! Reference/Squared 1.148, both Reference-kernel variants 1.208 (measured second moments
-//! 1.005); the defaults stand.
+//! The defaults (Principled, Squared) are the variants whose choices agreed best with the
+//! measured variances (docs/decisions/0001-estimator-switches.md).
 //!
 //! Determinism: camera-path samples of a pixel come from one thread, in order, so they are
 //! added to the pixel's sums directly. Light-tracing samples land in arbitrary pixels from any
@@ -49,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-/// The count ratio of merge candidates (decision 3a).
+/// The count ratio of merge candidates (docs/emis.md, decision 3a).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MergeRatio {
@@ -59,7 +48,7 @@ pub enum MergeRatio {
     Reference,
 }
 
-/// How merge samples enter the moments (decision 3b).
+/// How merge samples enter the moments (docs/emis.md, decision 3b).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MergeKernel {
@@ -72,9 +61,9 @@ pub enum MergeKernel {
 /// The estimator's switches.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MomentSettings {
-    /// Decision 3a.
+    /// The merge count ratio (docs/emis.md, decision 3a).
     pub merge_ratio: MergeRatio,
-    /// Decision 3b.
+    /// The merge kernel (docs/emis.md, decision 3b).
     pub merge_kernel: MergeKernel,
 }
 
@@ -122,7 +111,7 @@ pub struct MomentEstimator {
     /// f32 bits, indexed `pixel * candidates + candidate`.
     sums: Vec<AtomicU32>,
     /// Light-tracing samples of the iteration, one queue per pool thread: a single queue's
-    /// lock, taken once per splat, serialised the threads.
+    /// lock, taken once per splat, would serialise the threads.
     queued: Vec<Mutex<Vec<Queued>>>,
     statistics: Mutex<StatisticsSums>,
 }
@@ -224,8 +213,8 @@ impl MomentEstimator {
     }
 
     /// The moments and statistics, as a mergeable buffer, reusing the sums' memory (a pilot
-    /// iteration's buffer is megabytes; copying it per iteration cost a visible share of the
-    /// collecting iterations).
+    /// iteration's buffer is megabytes; copying it per iteration would cost a visible share of
+    /// the collecting iterations).
     pub fn into_snapshot(self) -> (MomentBuffer, StatisticsSums) {
         let statistics = self.statistics.into_inner().expect("invariant: statistics lock is never poisoned");
         let buffer = MomentBuffer {

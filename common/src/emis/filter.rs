@@ -1,4 +1,4 @@
-//! Image filters of the optimiser (emis-spec §5), on single-channel row-major images:
+//! Image filters of the optimiser (docs/emis.md §5.1), on single-channel row-major images:
 //!
 //! * box: 3×3 mean whose divisor at the border is the number of in-image taps; radius r means r
 //!   successive passes;

@@ -1,9 +1,9 @@
-//! Denoiser guides (emis-spec §5, decision 7): per pixel, the albedo and shading normal at the
-//! primary hit and its distance, averaged over the pilot iterations. Albedo is a one-sample
-//! estimate of the directional albedo (the weight of one BSDF sample), which works for every
-//! material, delta lobes included. The pilot's own camera paths supply them through the
-//! sample hooks ([`GuideCollector`]), so guides cost no extra rays. Sums with a sample count,
-//! so buffers from workers add up.
+//! Denoiser guides (docs/emis.md §5.4 and decision 7): per pixel, the albedo and shading normal
+//! at the primary hit and its distance, averaged over the pilot iterations. Albedo is a
+//! one-sample estimate of the directional albedo (the weight of one BSDF sample), which works
+//! for every material, delta lobes included. The pilot's own camera paths supply them through
+//! the sample hooks ([`GuideCollector`]), so guides cost no extra rays. Sums with a sample
+//! count, so buffers from workers add up.
 
 use crate::integrator::observer::{IterationStart, PrimaryHit, SampleObserver, SampleRecord};
 use std::ops::Range;

@@ -1,8 +1,9 @@
-//! Moment buffers (decision 2): per pixel × candidate, the sum of δ·w2 over all pilot samples,
-//! kept as an unnormalised sum with an iteration count, so that buffers from different workers
-//! add up. A candidate that cannot sample a pixel's path is flagged by an infinite sum: every
-//! term is non-negative, so a flag stays infinite through any merge and never becomes NaN.
-//! Sums are f32 (4 bytes per pixel and candidate: 13 MB for 51 candidates at 256²).
+//! Moment buffers (docs/emis.md, decision 2): per pixel × candidate, the sum of δ·w2 over all
+//! pilot samples, kept as an unnormalised sum with an iteration count, so that buffers from
+//! different workers add up. A candidate that cannot sample a pixel's path is flagged by an
+//! infinite sum: every term is non-negative, so a flag stays infinite through any merge and
+//! never becomes NaN. Sums are f32 (4 bytes per pixel and candidate: 13 MB for 51 candidates at
+//! 256²).
 
 use super::delta::Delta;
 

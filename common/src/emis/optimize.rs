@@ -1,5 +1,5 @@
-//! The optimiser (emis-spec §6, checklist 11–12) as a pure function: filtered moments, costs
-//! and the denoised image in; ν, c and the per-pixel merge mask χ out.
+//! The optimiser (docs/emis.md §6, checklist 11 and 12) as a pure function: filtered moments,
+//! costs and the denoised image in; ν, c and the per-pixel merge mask χ out.
 //!
 //! 0. Filtering: each candidate's moments become relative moments M_j / (Ī_j² + 1e-4) with a
 //!    radius-3 box filter, in the order [`MomentFilter`] says (default: per pixel first, then
@@ -13,47 +13,18 @@
 //!    argmin wins. Before step 0, [`OutlierStage::Shared`] (the default) takes out the outliers
 //!    of the part of each pixel's moment that all candidates share.
 //!
-//! With [`MergeScope::Global`] (the path-tracing start's first decisions, emis-spec §1 and §4)
-//! there is no pixel level: every candidate (ν, c, merge) is an image-level candidate that
-//! merges everywhere or nowhere, and χ is 1 or 0 in every pixel.
+//! With [`MergeScope::Global`] (the path-tracing start's first decisions, docs/emis.md §1.2
+//! and §4) there is no pixel level: every candidate (ν, c, merge) is an image-level candidate
+//! that merges everywhere or nowhere, and χ is 1 or 0 in every pixel.
 //!
-//! Why relative first (evidence, 2026-11-21): the box filter keeps each candidate's total
-//! moment but moves it between pixels. Around a small, very bright feature (a visible light
-//! source, its glossy reflection) it carries that feature's huge absolute moment M ≈ Ī² into
-//! dark neighbours, where dividing by their Ī² makes it enormous: a halo of relative moment
-//! around every light, far wider than the 0.1 % the outlier rejection drops, and largest for
-//! the candidates that see the lights worst. On veach-mis this made path tracing look 10–16×
-//! worse than ν = 0.25, c = 0 (mean relative moment 28–85 against 3.6 after the filter, 2.95
-//! against 2.80 without it), while at equal time pt beats that choice by 1.3–1.7× in relMSE.
-//! Filtering the per-pixel relative moment keeps the filter's noise reduction and leaves every
-//! pixel's value on its own brightness scale, which is what relMSE measures. On the other five
-//! scenes both orders make the same decisions (all four updates, emis-vcm and emis-bdpt).
-//! `tessera bench --ground-truth 32` (truth: each candidate's relMSE × K; 2026-11-21):
-//! geometric-mean regret 1.148 relative, 1.305 absolute over the six scenes. Absolute loses on
-//! cornell-box (1.25), glossy-interreflection (1.44) and veach-mis (1.73; its predicted pt
-//! figure is 6909 against 1.54 relative and 1.52 from pt's own samples); relative loses on
-//! caustic-glass (2.21 against 1.60), where the pilot's merge moments are nearly flat in ν
-//! (15.0–19.5 for every merging candidate after 4 iterations) and ν = 0.25 wins a near-tie.
+//! Why relative first: the box filter would carry a small bright feature's huge absolute moment
+//! into its dark neighbours, where dividing by their Ī² makes it a halo of relative moment
+//! (docs/decisions/0003-moment-filter-order.md).
 //!
-//! Why the shared part's outliers go first (evidence, 2026-11-22): some paths only the
-//! camera's own techniques can sample (caustic-glass: the floor's caustic seen through the
-//! glass, emitter hits only), so δ = 1 for every candidate and each such sample adds the same
-//! amount to all of them. Rare and huge, they cannot be changed by any strategy, but they lift
-//! every candidate's mean alike and so hand the choice to the cheapest. Box-filtered, one
-//! sample covers 49 pixels, and a few escape the 0.1 % rejection: over a 128-iteration bdpt
-//! pilot, the shared part's image mean (relative to the reference, unfiltered) was 0.16–0.25
-//! for 8 iterations, then one sample lifted it to 125, while the part that depends on c stayed
-//! at 5.5–7 for c = 0 and 2.4 for c = 1 (ν = 0.25). The updates at 64 then chose c = 0 in
-//! three of four seeds on a near-tie (30.51 against 30.80 for c = 1), and emis-bdpt lost
-//! 2.7–3.8× to bdpt there. The minimum over candidates is the shared part (plus the best
-//! candidate's own); taking it out where it is in its top 0.1 %, before the filter, keeps every
-//! candidate's own excess. `tessera bench --equal-time 20 --seeds 1,2,3` on caustic-glass,
-//! each rule in its own run beside bdpt and vcm: emis-bdpt 0.47× bdpt with the reference's
-//! rule, 1.06× with this one; emis-vcm 0.94× and 0.93× vcm. Rejecting each candidate's own
-//! per-pixel outliers before the filter (tried too) fixed emis-bdpt (0.95×) but took c = 0's
-//! real excess away with the fireflies and chose c = 0 with merging for emis-vcm (0.73× vcm).
-//! On the other five scenes the rules make the same decision at the update after 64 (both
-//! methods, seed 1).
+//! Why the shared part's outliers go first: rare samples that every candidate receives alike
+//! (δ = 1 for all) change no strategy, but once the filter spreads them a few escape the 0.1 %
+//! rejection and hand the choice to the cheapest candidate
+//! (docs/decisions/0008-shared-outliers-first.md).
 
 use super::candidate::Candidate;
 use super::cost::{CostConstants, CostTerms, PathStatistics};
@@ -62,7 +33,7 @@ use super::moments::MomentBuffer;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// Filter radii (decision 6).
+/// Filter radii (docs/emis.md, decision 6).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FilterSettings {
     /// Box passes on each candidate's moments.
@@ -79,8 +50,8 @@ pub struct FilterSettings {
     pub outliers: OutlierStage,
 }
 
-/// What the image-level outlier rejection takes out (a Tessera decision; see the module
-/// documentation for the evidence).
+/// What the image-level outlier rejection takes out (docs/emis.md §5.5; why the default:
+/// docs/decisions/0008-shared-outliers-first.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum OutlierStage {
@@ -94,8 +65,8 @@ pub enum OutlierStage {
     Shared,
 }
 
-/// The order of the moment filter and the division by the image (a Tessera decision; see the
-/// module documentation for the evidence).
+/// The order of the moment filter and the division by the image (docs/emis.md §5.2; why the
+/// default: docs/decisions/0003-moment-filter-order.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum MomentFilter {
@@ -198,7 +169,7 @@ pub fn remove_shared_outliers(planes: &mut [Image], norm: &[f32], quantile: f64)
 /// Where the merge decision is made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MergeScope {
-    /// Per pixel: the merge mask χ of the pixel level (decision 1).
+    /// Per pixel: the merge mask χ of the pixel level (docs/emis.md, decision 1).
     PerPixel,
     /// For the whole image: merging everywhere and nowhere are separate image-level
     /// candidates (the path-tracing start's reduced set).
@@ -342,7 +313,8 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
                 }
                 let mut moment = filtered[c].data[p];
                 // outliers are zeroed, but an infinite moment (the candidate cannot sample this
-                // pixel's paths) stays infinite, so that candidate cannot win (decision 4)
+                // pixel's paths) stays infinite, so that candidate cannot win
+                // (docs/emis.md, decision 4)
                 if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
                     moment = 0.0;
                 }

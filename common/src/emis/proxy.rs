@@ -22,7 +22,7 @@ pub struct ProxyWeights {
     pub vm_correlated: f64,
 }
 
-/// The balance weights of the proxy strategy `proxy` (emis-spec §3.2), aggregated by technique
+/// The balance weights of the proxy strategy `proxy` (docs/emis.md §3.2), aggregated by technique
 /// group: hits and next-event estimation together, light tracing, all connections, all merges,
 /// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
 /// technique of the proxy can sample counts as path tracing's (the reference's convention).
@@ -62,9 +62,10 @@ mod tests {
     use crate::integrator::path::mis::tests::{brute_force_pdf, random_path};
     use crate::integrator::path::mis::{MergeCounts, correlation_factor};
 
-    /// Checklist §4: the proxy's grouped weights sum to 1, the correlated merge weight never
-    /// exceeds the merge weight, and each group equals the brute-force balance weights of the
-    /// proxy counts (a = 1 for hits and NEE, P for light tracing, 4 connections, χ = 1 merges).
+    /// The proxy's acceptance test (docs/emis.md, checklist 4): its grouped weights sum to 1,
+    /// the correlated merge weight never exceeds the merge weight, and each group equals the
+    /// brute-force balance weights of the proxy counts (a = 1 for hits and NEE, P for light
+    /// tracing, 4 connections, χ = 1 merges).
     #[test]
     fn proxy_weights_sum_to_one_and_match_brute_force() {
         let pixels = 256.0f64 * 256.0;

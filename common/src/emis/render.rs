@@ -1,19 +1,19 @@
 //! The integrators `emis-bdpt` and `emis-vcm`: efficiency-aware MIS (Grittmann et al. 2022;
-//! `shared/docs/emis-spec.md`) on the bidirectional engine.
+//! docs/emis.md) on the bidirectional engine.
 //!
-//! A pilot renders with a fixed strategy (decision 5: `emis-vcm` VCM with N = P, c = 1, χ = 1
-//! and correlation-aware weights; `emis-bdpt` BDPT with N = P, c = 1) while a
-//! [`MomentEstimator`] records every candidate's second moment per pixel. After iterations 1,
-//! 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from the
-//! merged moments, the denoised image and the path statistics; rendering continues with that
-//! strategy (moments still collected, each sample with the counts it was drawn with; while
-//! that strategy is pt, in a quarter of the iterations, see [`collects_moments`]) until the last
-//! update the budget can reach, then without moments. Every iteration, pilot included,
+//! A pilot renders with a fixed strategy (docs/emis.md, decision 5: `emis-vcm` VCM with
+//! N = P, c = 1, χ = 1 and correlation-aware weights; `emis-bdpt` BDPT with N = P, c = 1) while
+//! a [`MomentEstimator`] records every candidate's second moment per pixel. After iterations
+//! 1, 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from
+//! the merged moments, the denoised image and the path statistics; rendering continues with
+//! that strategy (moments still collected, each sample with the counts it was drawn with;
+//! while that strategy is pt, in a quarter of the iterations, see [`collects_moments`]) until
+//! the last update the budget can reach, then without moments. Every iteration, pilot included,
 //! stays in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
 //!
-//! [`PilotStart::PathTracing`] starts with path tracing instead (the reference's
-//! `OnDemandVcm`; decision 5's option, checklist 13): its updates choose from a reduced set
+//! [`PilotStart::PathTracing`] starts with path tracing instead (the reference's `OnDemandVcm`;
+//! docs/emis.md, decision 5 and checklist 13): its updates choose from a reduced set
 //! (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt wins. The first
 //! update a bidirectional candidate wins discards the image so far, restarts the moments for
 //! the full set and renders a sample budget's iterations in full after it; the updates that
@@ -44,21 +44,20 @@ use std::ops::Range;
 use std::time::Instant;
 
 /// Iterations one [`render_iterations`] call (one farm tile) renders once moments are no
-/// longer collected. A call is a barrier: one iteration per call left the threads waiting on
-/// each other once per iteration, and final iterations ran 8 % slower than `pt`'s own tiles
-/// (cornell-box, 2 threads, 35.1 against 32.5 ms per iteration). Eight make that wait small
-/// while a farm still gets one tile per worker out of a pass of a few dozen iterations.
+/// longer collected. Why eight: a call is a barrier at which the threads wait for each other;
+/// eight make that wait small while a farm still gets one tile per worker out of a pass of a
+/// few dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
 
 /// Whether a collecting call over `iterations` records moments when the current strategy
 /// has `nu` light paths per pixel. While path tracing is the strategy, only a quarter of the
 /// iterations do (those ≡ 2 mod 4, and iteration 0, the pilot of a path-tracing start):
 /// recording a pt iteration's moments needs the bidirectional integrator's densities of every
-/// technique plus the 51-candidate estimator, twice the cost of the pt iteration itself
-/// (cornell-box, 2 threads, 70 against 35 ms), which on a scene where pt stays best is pure
-/// overhead. The updates at 4, 16 and 64 still get 1, 4 and 16 iterations of moments on top
-/// of the pilot's. With a bidirectional strategy the estimator adds a smaller share and every
-/// iteration records.
+/// technique plus the 51-candidate estimator, which costs more than the pt iteration itself
+/// and on a scene where pt stays best is pure overhead
+/// (docs/decisions/0005-recording-under-path-tracing.md). The updates at 4, 16 and 64 still
+/// get 1, 4 and 16 iterations of moments on top of the pilot's. With a bidirectional strategy
+/// the estimator adds a smaller share and every iteration records.
 pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
     nu > 0.0 || iterations.clone().any(records_under_path_tracing)
 }
@@ -70,9 +69,10 @@ fn records_under_path_tracing(iteration: u32) -> bool {
 /// The first call (farm tile) of a collecting pass over the non-empty `iterations`: one
 /// iteration if it records moments under path tracing ([`collects_moments`]), else the run of
 /// iterations up to the next one that does (at most [`FINAL_ITERATIONS_PER_CALL`]). While
-/// path tracing is the strategy such a run is rendered by `pt` in one call instead of one call
-/// per iteration, each a barrier for the threads (33-40 against 31-35 ms per iteration on
-/// cornell-box); a bidirectional strategy records every iteration of the run in one call.
+/// path tracing is the strategy such a run is rendered by `pt` in one call, not one call per
+/// iteration, each a barrier for the threads
+/// (docs/decisions/0006-path-tracing-runs-in-one-call.md); a bidirectional strategy records
+/// every iteration of the run in one call.
 /// The cut depends on iteration numbers only, so a farm plans it before knowing the strategy,
 /// and local and farm renders add the same calls.
 pub fn collecting_call(iterations: Range<u32>) -> Range<u32> {
@@ -84,15 +84,10 @@ pub fn collecting_call(iterations: Range<u32>) -> Range<u32> {
     start..end.min(start + FINAL_ITERATIONS_PER_CALL)
 }
 
-/// Side of the square tiles in which path tracing renders the iterations it wins. A call is a
-/// barrier, and at its end one thread may still render a last tile while the other waits:
-/// in calls of 8 iterations, rows of the image ran 3-5 % slower per iteration than `pt`'s own
-/// render of all the iterations (cornell-box, 2 threads, 304 iterations, alternated pairs: rows
-/// 31.1-34.2 against 30.2-33.0 ms in six pairs, 32² tiles 31.8-32.8 against 29.5-31.6 in
-/// three); 16² tiles are equal to it within the host's noise (29.8-31.4 against 30.4-30.6 ms
-/// in three). `tessera render --time 20` on cornell-box then gave emis-vcm 0.95 and 0.98 of
-/// pt's iterations (612 and 596 against 647 and 608), against 0.88 with rows (540 and 560
-/// against 614 and 635).
+/// Side of the square tiles in which path tracing renders the iterations it wins. Why small
+/// tiles: a call is a barrier, and at its end one thread may still render a last piece while
+/// the other waits; 16² tiles keep that tail as short as `pt`'s own render has it
+/// (docs/decisions/0007-pt-tiles-in-emis.md).
 const PT_TILE: u32 = 16;
 
 /// Denoiser guides are summed in collecting iterations below this count only: they are a
@@ -111,14 +106,14 @@ pub enum EmisMethod {
     Vcm,
 }
 
-/// How an `emis-*` render starts (decision 5).
+/// How an `emis-*` render starts (docs/emis.md, decision 5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PilotStart {
     /// The method's own pilot: VCM (or BDPT) with N = P, c = 1 (and χ = 1), kept in the image.
     #[default]
     Bidirectional,
-    /// Path tracing first (the reference's `OnDemandVcm`, emis-spec §1 and §4): updates
+    /// Path tracing first (the reference's `OnDemandVcm`, docs/emis.md §1.2 and §4): updates
     /// choose from the reduced set ([`CandidateSet::Reduced`]) while path tracing wins. The
     /// first update a bidirectional candidate wins discards the iterations rendered so far
     /// (the image restarts with the new strategy, and a sample budget counts the kept
@@ -129,7 +124,7 @@ pub enum PilotStart {
 /// Which candidates moments are recorded for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CandidateSet {
-    /// The method's full set (decision 1): 51 for VCM, 26 for BDPT.
+    /// The method's full set (docs/emis.md, decision 1): 51 for VCM, 26 for BDPT.
     Full,
     /// The path-tracing start's reduced set (see `CandidateConfig::reduced`), decided with
     /// global merging.
@@ -141,26 +136,26 @@ pub enum CandidateSet {
 pub struct EmisConfig {
     /// BDPT or VCM.
     pub method: EmisMethod,
-    /// The candidate set (decision 1).
+    /// The candidate set (docs/emis.md, decision 1).
     pub candidates: CandidateConfig,
-    /// Optimise after these many iterations (decision 5).
+    /// Optimise after these many iterations (docs/emis.md, decision 5).
     pub updates: Vec<u32>,
     /// Correlation-aware merge weights (pilot and final).
     pub correlation_aware: bool,
-    /// The estimator's switches (decision 3).
+    /// The estimator's switches (docs/emis.md, decision 3).
     pub moments: MomentSettings,
-    /// Cost heuristic constants (decision 8).
+    /// Cost heuristic constants (docs/emis.md, decision 8).
     pub constants: CostConstants,
-    /// Filter radii (decision 6).
+    /// Filter radii (docs/emis.md, decision 6).
     pub filters: FilterSettings,
-    /// The denoiser (decision 7).
+    /// The denoiser (docs/emis.md, decision 7).
     pub denoise: DenoiseSettings,
     /// The pilot: the method's own, or path tracing first.
     pub pilot: PilotStart,
 }
 
 impl EmisConfig {
-    /// The update schedule of decision 5.
+    /// The update schedule of docs/emis.md, decision 5.
     pub const DEFAULT_UPDATES: [u32; 4] = [1, 4, 16, 64];
 
     /// The defaults of `method`.
@@ -228,7 +223,7 @@ impl Strategy {
         }
     }
 
-    /// The pilot strategy of decision 5.
+    /// The pilot strategy of docs/emis.md, decision 5.
     pub fn pilot(method: EmisMethod) -> Self {
         Strategy {
             nu: 1.0,

@@ -1,8 +1,9 @@
 //! Sample hooks: every sample of the bidirectional integrators can be reported to an observer
 //! with its technique, pixel, MIS-weighted contribution, and the gathered path densities and
-//! sample counts a proxy-weight evaluation needs (emis-spec §3), plus per-iteration path
-//! statistics for the cost model (§2). The integrators are generic over the observer; with
-//! [`NoObserver`] every call inlines to nothing, so unobserved rendering pays nothing.
+//! sample counts a proxy-weight evaluation needs (docs/emis.md §3.2), plus per-iteration path
+//! statistics for the cost model (docs/emis.md §2). The integrators are generic over the
+//! observer; with [`NoObserver`] every call inlines to nothing, so unobserved rendering pays
+//! nothing.
 
 use super::path::mis::{PathPdfs, SampleCounts, Technique};
 use crate::math::Rgb;
@@ -31,7 +32,7 @@ pub struct SampleRecord<'a> {
     pub counts: &'a SampleCounts,
 }
 
-/// A camera path's first surface vertex, for the denoiser's guides (emis-spec §10).
+/// A camera path's first surface vertex, for the denoiser's guides (docs/emis.md §5.4).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PrimaryHit {
     /// The pixel the camera path goes through.
@@ -58,7 +59,7 @@ pub struct IterationStart {
     pub selectable_vertices: u64,
 }
 
-/// Work counted over one iteration, for the cost model (emis-spec §2).
+/// Work counted over one iteration, for the cost model (docs/emis.md §2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PathCounters {
     /// Surface vertices of all camera paths.

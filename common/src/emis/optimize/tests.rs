@@ -1,4 +1,4 @@
-//! Tests of the optimiser on synthetic moments (checklist 11–12).
+//! Tests of the optimiser on synthetic moments (docs/emis.md, checklist 11 and 12).
 
 use super::*;
 use crate::emis::candidate::CandidateConfig;

@@ -1,5 +1,5 @@
 //! Vertex merging, the technique `vcm` adds to `bdpt` (Georgiev et al. 2012, "Light transport simulation with vertex
-//! connection and merging"), with SeeSharp's choices (emis-spec §7):
+//! connection and merging"), with SeeSharp's choices (docs/emis.md §7):
 //!
 //! * radius: a global maximum r_max = 0.75·√(mean pixel footprint area), measured with 5
 //!   primary rays at fixed image positions (scene radius / 300 if none hits); per camera path

@@ -136,10 +136,10 @@ fn can_connect(p: &PathPdfs, s: usize) -> bool {
     !(s < p.len && p.delta[s]) && !(s >= 1 && p.delta[s - 1])
 }
 
-/// The correlation-aware factor c_i of a merge at vertex i (Grittmann et al. 2021; emis-spec
-/// §3): the probability that the camera side reaches vertex i, against both sides, clamped
-/// below at 1/N. The probabilities are products of up to 63 factors, so they are formed in
-/// f64: in f32 both underflow on long paths and their ratio is noise.
+/// The correlation-aware factor c_i of a merge at vertex i (Grittmann et al. 2021;
+/// docs/emis.md §3.4): the probability that the camera side reaches vertex i, against both
+/// sides, clamped below at 1/N. The probabilities are products of up to 63 factors, so they are
+/// formed in f64: in f32 both underflow on long paths and their ratio is noise.
 pub fn correlation_factor(p: &PathPdfs, i: usize, m: &MergeCounts) -> f32 {
     let k = p.len - 1;
     let a = m.correlation_area as f64;
