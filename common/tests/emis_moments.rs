@@ -8,7 +8,7 @@
 //! δ-reweighted estimate for candidate n and n's own measurement are independent renders, so
 //! their means must agree within 4 combined standard errors (per-iteration spread, 10
 //! iterations each, more with `EMIS_IT`). Merging is left out here: the merge kernel's two
-//! moment conventions are compared with measured variances by `tessera bench --ground-truth`
+//! moment conventions are compared with measured variances by `tessera bench ground-truth`
 //! (docs/emis.md, decision 3).
 
 mod common;

@@ -121,7 +121,7 @@ impl From<EmisPilotArg> for PilotStart {
     }
 }
 
-/// How an EMIS render starts (decision 5).
+/// How an EMIS render starts (docs/emis.md, decision 5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum EmisPilotArg {
     /// The method's own pilot: VCM (BDPT) with N = P, c = 1 (χ = 1), kept in the image.
@@ -176,12 +176,12 @@ impl From<CostModelArg> for CostModel {
     }
 }
 
-/// The cost heuristic's constants (decision 8).
+/// The cost heuristic's constants (docs/emis.md, decision 8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum CostModelArg {
-    /// Fitted to this renderer's measured times (`tessera bench --calibrate-costs`).
+    /// Fitted to this renderer's measured times (`tessera bench calibrate-costs`).
     Calibrated,
-    /// The reference implementation's constants (emis-spec §2).
+    /// The reference implementation's constants (docs/emis.md §2).
     Reference,
 }
 
@@ -209,7 +209,7 @@ impl IntegratorArgs {
     }
 }
 
-/// Count ratio of merge candidates in the EMIS correction factor (decision 3a).
+/// Count ratio of merge candidates in the EMIS correction factor (docs/emis.md, decision 3a).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum MergeRatioArg {
     /// χ·ν: merges scale with the light paths, as in the MIS weights.
@@ -218,7 +218,7 @@ pub enum MergeRatioArg {
     Reference,
 }
 
-/// How merge samples enter the EMIS moments (decision 3b).
+/// How merge samples enter the EMIS moments (docs/emis.md, decision 3b).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum MergeKernelArg {
     /// (contribution × kernel)².

@@ -1,6 +1,7 @@
 //! Mitsuba's `perspective` sensor: a pinhole camera looking down +z in camera space, with
-//! camera +x on the image's left (see mitsuba-conventions.md §5.1), plus the importance
-//! function and its pdfs that light tracing needs.
+//! camera +x on the image's left (Mitsuba's film mapping scales x and y by -0.5,
+//! `include/mitsuba/render/sensor.h`), plus the importance function and its pdfs that light
+//! tracing needs.
 
 use crate::geometry::{Ray, Transform};
 use glam::{Vec2, Vec3};

@@ -80,7 +80,7 @@ impl CostConstants {
     }
 
     /// Constants fitted to this renderer (docs/emis.md, decision 8) by
-    /// `tessera bench --calibrate-costs`. The build and query terms fit to 0: their cost is
+    /// `tessera bench calibrate-costs`. The build and query terms fit to 0: their cost is
     /// absorbed by the per-photon term. Why they are the default: on this renderer the
     /// reference constants price merging too high and connections too low, and these choose
     /// better against measured errors and at equal time

@@ -12,7 +12,7 @@
 //! the density a candidate with c = 4 has whatever its N; so a candidate's connection ratio is
 //! exactly c/4. (The reference uses 4/L̄l, off by the emitter vertex, which cannot be chosen.)
 //!
-//! Two switches (docs/emis.md, decision 3), each settled by `tessera bench --ground-truth`:
+//! Two switches (docs/emis.md, decision 3), each settled by `tessera bench ground-truth`:
 //! * [`MergeRatio`]: a merge candidate's count ratio χ·ν (principled: merges use N light
 //!   paths) or χ (the reference code);
 //! * [`MergeKernel`]: merge moments (contribution × kernel)² (the literal squared estimate) or

@@ -285,50 +285,8 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         MergeScope::Global => None,
     };
     // ---- image level ----
-    let thresholds: Vec<f32> = filtered
-        .par_iter()
-        .map(|img| {
-            let basis: Vec<f32> = img.data.iter().zip(&norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
-            Image::from_data(w, h, basis).histogram_quantile(input.filters.outlier_quantile)
-        })
-        .collect();
     let groups = image_level_groups(input.candidates, input.merge_scope);
-    // χ_j of group `g` in pixel `p`
-    let chi_at = |g: &Group, p: usize| match (g.merge, &pixel_mask) {
-        (Some(merge), _) => merge as u8 as f32,
-        (None, Some(mask)) => mask.data[p],
-        (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
-    };
-    let scores: Vec<ImageLevelScore> = groups
-        .par_iter()
-        .map(|g| {
-            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
-            for p in 0..w * h {
-                let chi = chi_at(g, p) as f64;
-                let Some(c) = g.variant(chi > 0.1) else { continue };
-                total_cost += costs[c].at(if input.candidates[c].merge { chi } else { 0.0 }) / pixels as f64;
-                let i = input.image.data[p] as f64;
-                if i == 0.0 {
-                    continue;
-                }
-                let mut moment = filtered[c].data[p];
-                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
-                // pixel's paths) stays infinite, so that candidate cannot win
-                // (docs/emis.md, decision 4)
-                if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
-                    moment = 0.0;
-                }
-                rel += moment as f64 / (i * i + 1e-4) / pixels as f64;
-            }
-            ImageLevelScore {
-                nu: g.nu,
-                connections: g.connections,
-                merge: g.merge,
-                relative_moment: rel,
-                cost: total_cost,
-            }
-        })
-        .collect();
+    let scores = image_level_scores(input, &groups, &filtered, &norm, &costs, pixel_mask.as_ref());
     let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
         let score = |g: usize| scores[g].relative_moment * scores[g].cost;
         score(a).total_cmp(&score(b))
@@ -354,6 +312,65 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
             .collect(),
     );
     Decision { nu, connections, merge_mask, scores, relative_moment }
+}
+
+/// Every image-level group's relative moment (outliers above each candidate's quantile
+/// zeroed) and cost, each pixel taking the group's merging or non-merging variant by its χ
+/// (`pixel_mask`, or the group's own global choice).
+fn image_level_scores(
+    input: &OptimizerInput,
+    groups: &[Group],
+    filtered: &[Image],
+    norm: &[f32],
+    costs: &[CostTerms],
+    pixel_mask: Option<&Image>,
+) -> Vec<ImageLevelScore> {
+    let (w, h) = (input.moments.width as usize, input.moments.height as usize);
+    let pixels = (w * h) as f64;
+    let order = input.filters.order;
+    let thresholds: Vec<f32> = filtered
+        .par_iter()
+        .map(|img| {
+            let basis: Vec<f32> = img.data.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+            Image::from_data(w, h, basis).histogram_quantile(input.filters.outlier_quantile)
+        })
+        .collect();
+    // χ_j of group `g` in pixel `p`
+    let chi_at = |g: &Group, p: usize| match (g.merge, pixel_mask) {
+        (Some(merge), _) => merge as u8 as f32,
+        (None, Some(mask)) => mask.data[p],
+        (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
+    };
+    groups
+        .par_iter()
+        .map(|g| {
+            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+            for p in 0..w * h {
+                let chi = chi_at(g, p) as f64;
+                let Some(c) = g.variant(chi > 0.1) else { continue };
+                total_cost += costs[c].at(if input.candidates[c].merge { chi } else { 0.0 }) / pixels;
+                let i = input.image.data[p] as f64;
+                if i == 0.0 {
+                    continue;
+                }
+                let mut moment = filtered[c].data[p];
+                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
+                // pixel's paths) stays infinite, so that candidate cannot win
+                // (docs/emis.md, decision 4)
+                if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
+                    moment = 0.0;
+                }
+                rel += moment as f64 / (i * i + 1e-4) / pixels;
+            }
+            ImageLevelScore {
+                nu: g.nu,
+                connections: g.connections,
+                merge: g.merge,
+                relative_moment: rel,
+                cost: total_cost,
+            }
+        })
+        .collect()
 }
 
 /// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered

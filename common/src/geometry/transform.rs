@@ -133,7 +133,8 @@ mod tests {
     #[test]
     fn document_order_composition_matches_mitsuba() {
         // <scale x="2"/><rotate z="1" angle="90"/><translate x="10"/> on [-1,1]^3
-        // gives x in [9,11], y in [-2,2] (mitsuba-conventions.md §5.2)
+        // gives x in [9,11], y in [-2,2] in Mitsuba 3.9.1, whose parser left-multiplies each
+        // element (`src/core/parser.cpp`)
         let s = Transform::scale(DVec3::new(2.0, 1.0, 1.0)).unwrap();
         let r = Transform::rotate(DVec3::Z, 90.0).unwrap();
         let t = Transform::translate(DVec3::new(10.0, 0.0, 0.0));

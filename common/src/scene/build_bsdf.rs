@@ -34,7 +34,8 @@ const NAMED_IORS: &[(&str, f32)] = &[
     ("diamond", 2.419),
 ];
 
-/// Named conductors as Mitsuba's `*_rgb` variants resolve them (mitsuba-conventions.md §5.5).
+/// Named conductors as Mitsuba's `*_rgb` variants resolve them (`src/bsdfs/conductor.cpp`,
+/// the spectra integrated to RGB).
 const NAMED_CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
     ("Au", [0.143036, 0.375307, 1.44205], [3.983, 2.38556, 1.60336]),
     ("Cu", [0.201005, 0.92375, 1.10222], [3.91326, 2.45305, 2.14209]),

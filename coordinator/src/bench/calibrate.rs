@@ -1,4 +1,4 @@
-//! `tessera bench --calibrate-costs`: the timing runs of emis-spec §2 on our renderer. On each
+//! `tessera bench calibrate-costs`: the timing runs of docs/emis.md §2 on our renderer. On each
 //! scene it times the configurations of [`calibration_configurations`] through the
 //! bidirectional engine, and path tracing through the `pt` integrator, interleaved and the
 //! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units

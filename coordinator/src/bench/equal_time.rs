@@ -120,109 +120,131 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
     Ok(rows)
 }
 
+/// The mean relMSE of column `name` in a scene's row.
+fn err(rows: &Row, name: &str) -> Option<f64> {
+    rows.iter().find(|c| c.name == name).map(Cell::mean)
+}
+
+/// The relMSE of column `name` for the `i`-th seed alone.
+fn err_at(rows: &Row, name: &str, i: usize) -> Option<f64> {
+    rows.iter().find(|c| c.name == name).map(|c| c.relmse[i])
+}
+
+/// One scene's line of the table: each column's relMSE, speed-up over pt and samples/s.
+fn table_line(name: &str, rows: &Row) -> String {
+    let pt = err(rows, "pt");
+    let cells: Vec<String> = rows
+        .iter()
+        .map(|c| {
+            let (e, sps) = (c.mean(), c.samples_per_s);
+            match pt {
+                Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
+                None => format!("{e:.5} ({:.2e} S/s)", sps),
+            }
+        })
+        .collect();
+    format!("| {name} | {} |", cells.join(" | "))
+}
+
+/// The speed-ups the EMIS targets are stated in, geometric means over the scenes.
+fn print_speedups(table: &[(String, Row)]) {
+    let ratio =
+        |a: &str, b: &str| -> Vec<f64> { table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect() };
+    for (a, b, target) in [
+        ("emis-vcm", "vcm", 1.2),
+        ("emis-bdpt", "bdpt", 1.1),
+        ("emis-vcm", "pt", 0.0),
+        ("emis-vcm/pt-start", "emis-vcm", 0.0),
+        ("emis-bdpt/pt-start", "emis-bdpt", 0.0),
+    ] {
+        let r = ratio(a, b);
+        if r.is_empty() {
+            continue;
+        }
+        let per_scene: Vec<String> = r.iter().map(|x| format!("{x:.2}x")).collect();
+        let verdict = if target > 0.0 {
+            format!(" (target ≥ {target}x: {})", if geometric_mean(&r) >= target { "met" } else { "NOT met" })
+        } else {
+            String::new()
+        };
+        println!(
+            "speed-up of {a} over {b}: geometric mean {:.2}x{verdict}; per scene {}",
+            geometric_mean(&r),
+            per_scene.join(", ")
+        );
+    }
+}
+
+/// emis-vcm against the better of pt and vcm on every scene (the floor), for the mean over
+/// seeds and, with several seeds, for each seed alone.
+fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
+    let floor: Vec<(String, f64)> = table
+        .iter()
+        .filter_map(|(s, r)| Some((s.clone(), err(r, "pt")?.min(err(r, "vcm")?) / err(r, "emis-vcm")?)))
+        .collect();
+    if floor.is_empty() {
+        return;
+    }
+    let met = floor.iter().all(|(_, x)| *x >= 0.9);
+    println!(
+        "emis-vcm against the better of pt and vcm: {} (target: never below 0.9x: {})",
+        floor.iter().map(|(s, x)| format!("{s} {x:.2}x")).collect::<Vec<_>>().join(", "),
+        if met { "met" } else { "NOT met" }
+    );
+    if seeds.len() > 1 {
+        for (i, seed) in seeds.iter().enumerate() {
+            let per_seed: Vec<String> = table
+                .iter()
+                .filter_map(|(s, r)| {
+                    let best = err_at(r, "pt", i)?.min(err_at(r, "vcm", i)?);
+                    Some(format!("{s} {:.2}x", best / err_at(r, "emis-vcm", i)?))
+                })
+                .collect();
+            println!("  seed {seed} alone: {}", per_seed.join(", "));
+        }
+    }
+}
+
+/// Draws the speed-ups over pt of one duration as `CHART-{seconds}s.svg`.
+fn write_chart(chart: &Path, seconds: f64, names: &[String], table: &[(String, Row)]) -> anyhow::Result<()> {
+    let stem = chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time");
+    let file = chart.with_file_name(format!("{stem}-{seconds}s.svg"));
+    let groups: Vec<Group> = table
+        .iter()
+        .map(|(s, r)| {
+            let pt = err(r, "pt").unwrap_or(f64::NAN);
+            Group { label: s.clone(), values: r.iter().map(|c| pt / c.mean()).collect() }
+        })
+        .collect();
+    write_bar_chart(&file, &format!("speed-up over pt at equal time {seconds} s"), names, &groups)?;
+    println!("chart: {}", file.display());
+    Ok(())
+}
+
 /// Runs `tessera bench equal-time`: the comparison for every duration.
 pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
     let scenes = args.scenes.scenes()?;
+    let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
     for &seconds in &args.seconds {
-        println!(
-            "\n## equal time {seconds} s ({} threads)\n",
-            args.scenes.threads.map_or("all".into(), |t| t.to_string())
-        );
+        let threads = args.scenes.threads.map_or("all".into(), |t| t.to_string());
+        println!("\n## equal time {seconds} s ({threads} threads)\n");
         println!(
             "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}), speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
             args.seeds
         );
-        let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
         println!("| scene | {} |", names.join(" | "));
         println!("|---|{}", "---|".repeat(names.len()));
         let mut table = Vec::new();
         for path in &scenes {
             let rows = equal_time_scene(args, path, seconds)?;
-            let pt = rows.iter().find(|c| c.name == "pt").map(Cell::mean);
-            let cells: Vec<String> = rows
-                .iter()
-                .map(|c| {
-                    let (e, sps) = (c.mean(), c.samples_per_s);
-                    match pt {
-                        Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
-                        None => format!("{e:.5} ({:.2e} S/s)", sps),
-                    }
-                })
-                .collect();
-            println!("| {} | {} |", scene_name(path), cells.join(" | "));
+            println!("{}", table_line(&scene_name(path), &rows));
             table.push((scene_name(path), rows));
         }
-        let err = |rows: &Row, n: &str| rows.iter().find(|c| c.name == n).map(Cell::mean);
-        // the relMSE of seed number `i`
-        let err_at = |rows: &Row, n: &str, i: usize| rows.iter().find(|c| c.name == n).map(|c| c.relmse[i]);
-        let ratio = |a: &str, b: &str| -> Vec<f64> {
-            table.iter().filter_map(|(_, r)| Some(err(r, b)? / err(r, a)?)).collect::<Vec<f64>>()
-        };
         println!();
-        for (a, b, target) in [
-            ("emis-vcm", "vcm", 1.2),
-            ("emis-bdpt", "bdpt", 1.1),
-            ("emis-vcm", "pt", 0.0),
-            ("emis-vcm/pt-start", "emis-vcm", 0.0),
-            ("emis-bdpt/pt-start", "emis-bdpt", 0.0),
-        ] {
-            let r = ratio(a, b);
-            if !r.is_empty() {
-                let per_scene: Vec<String> = r.iter().map(|x| format!("{x:.2}x")).collect();
-                let verdict = if target > 0.0 {
-                    format!(" (target ≥ {target}x: {})", if geometric_mean(&r) >= target { "met" } else { "NOT met" })
-                } else {
-                    String::new()
-                };
-                println!(
-                    "speed-up of {a} over {b}: geometric mean {:.2}x{verdict}; per scene {}",
-                    geometric_mean(&r),
-                    per_scene.join(", ")
-                );
-            }
-        }
-        let worst: Vec<(String, f64)> = table
-            .iter()
-            .filter_map(|(s, r)| {
-                let best = err(r, "pt")?.min(err(r, "vcm")?);
-                Some((s.clone(), best / err(r, "emis-vcm")?))
-            })
-            .collect();
-        if !worst.is_empty() {
-            let below: Vec<&(String, f64)> = worst.iter().filter(|(_, x)| *x < 0.9).collect();
-            println!(
-                "emis-vcm against the better of pt and vcm: {} (target: never below 0.9x: {})",
-                worst.iter().map(|(s, x)| format!("{s} {x:.2}x")).collect::<Vec<_>>().join(", "),
-                if below.is_empty() { "met" } else { "NOT met" }
-            );
-            if args.seeds.len() > 1 {
-                for (i, seed) in args.seeds.iter().enumerate() {
-                    let per_seed: Vec<String> = table
-                        .iter()
-                        .filter_map(|(s, r)| {
-                            let best = err_at(r, "pt", i)?.min(err_at(r, "vcm", i)?);
-                            Some(format!("{s} {:.2}x", best / err_at(r, "emis-vcm", i)?))
-                        })
-                        .collect();
-                    println!("  seed {seed} alone: {}", per_seed.join(", "));
-                }
-            }
-        }
+        print_speedups(&table);
+        print_floor(&table, &args.seeds);
         if let Some(chart) = &args.chart {
-            let file = chart.with_file_name(format!(
-                "{}-{}s.svg",
-                chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time"),
-                seconds
-            ));
-            let groups: Vec<Group> = table
-                .iter()
-                .map(|(s, r)| {
-                    let pt = err(r, "pt").unwrap_or(f64::NAN);
-                    Group { label: s.clone(), values: r.iter().map(|c| pt / c.mean()).collect() }
-                })
-                .collect();
-            write_bar_chart(&file, &format!("speed-up over pt at equal time {seconds} s"), &names, &groups)?;
-            println!("chart: {}", file.display());
+            write_chart(chart, seconds, &names, &table)?;
         }
     }
     Ok(())

@@ -1,7 +1,7 @@
-//! `tessera bench --ground-truth K` (emis-spec checklist §15, decision 3): do the pilot's
+//! `tessera bench ground-truth K` (docs/emis.md, checklist 15 and decision 3): do the pilot's
 //! moments choose what the true variances would choose?
 //!
-//! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--ground-truth-pilot`
+//! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--pilot`
 //! iterations) runs four moment estimators at once, one per setting of the two switches of
 //! decision 3. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
 //! off / everywhere, plus path tracing: 19) renders K iterations itself, timed the way a final
@@ -26,8 +26,9 @@
 
 use super::{SceneArgs, cpu_seconds, geometric_mean};
 use crate::options::{CostModelArg, MomentOutliersArg, scene_name};
+use std::path::Path;
 use tessera_common::emis::candidate::Candidate;
-use tessera_common::emis::cost::{CostModel, pixel_cost};
+use tessera_common::emis::cost::{CostModel, StatisticsSums, pixel_cost};
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
@@ -122,204 +123,252 @@ fn strategy_of(c: &Candidate) -> Strategy {
     Strategy { nu: c.nu, connections: c.connections, merge: Some(MergeMask::Constant(if c.merge { 1.0 } else { 0.0 })) }
 }
 
+/// One scene with its reference, as the measurements need it.
+struct Subject {
+    scene: Scene,
+    reference: Vec<[f32; 3]>,
+    /// The reference's mean of R, G, B per pixel.
+    ref_mean: Vec<f32>,
+    settings: PathSettings,
+    config: EmisConfig,
+}
+
+impl Subject {
+    fn load(path: &Path) -> anyhow::Result<Subject> {
+        let scene = Scene::load(path)?;
+        let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?.pixels;
+        let ref_mean = reference.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect();
+        let settings = PathSettings::from_scene(&scene, None);
+        Ok(Subject { scene, reference, ref_mean, settings, config: EmisConfig::new(EmisMethod::Vcm) })
+    }
+
+    fn size(&self) -> (usize, usize) {
+        (self.scene.camera.width as usize, self.scene.camera.height as usize)
+    }
+}
+
+/// The `vcm` pilot with one estimator per setting of [`VARIANTS`]: each one's moment buffer
+/// and path statistics.
+fn pilot_moments(
+    s: &Subject,
+    candidates: &[Candidate],
+    iterations: u32,
+    pool: &rayon::ThreadPool,
+) -> Vec<(MomentBuffer, StatisticsSums)> {
+    let (w, h) = (s.scene.camera.width, s.scene.camera.height);
+    let full = Rect::full(w, h);
+    let estimators: Vec<MomentEstimator> = VARIANTS
+        .iter()
+        .map(|&(merge_ratio, merge_kernel)| {
+            MomentEstimator::new(w, h, candidates, MomentSettings { merge_ratio, merge_kernel })
+        })
+        .collect();
+    let pilot = Strategy::pilot(EmisMethod::Vcm).integrator(s.settings, s.config.correlation_aware);
+    pool.install(|| {
+        pilot.with_observer(&estimators[..]).render_tile(
+            &s.scene,
+            &TileRequest { rect: full, samples: 0..iterations, seed: 7 },
+            &mut TileAccum::new(full),
+        )
+    });
+    estimators.iter().map(|e| e.snapshot()).collect()
+}
+
+/// Every candidate rendered on its own: unscaled relMSE × K (all pixels, and with the top
+/// 0.1 % dropped), the relative moment of its own samples, CPU seconds per iteration.
+#[derive(Default)]
+struct Measured {
+    error: Vec<f64>,
+    error_dropped: Vec<f64>,
+    own_moment: Vec<f64>,
+    seconds: Vec<f64>,
+}
+
+fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayon::ThreadPool) -> Measured {
+    let (w, h) = s.size();
+    let full = Rect::full(w as u32, h as u32);
+    let mut m = Measured::default();
+    for c in candidates {
+        let own = MomentEstimator::new(w as u32, h as u32, std::slice::from_ref(c), MomentSettings::default());
+        let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
+        let integrator = strategy_of(c).integrator(s.settings, s.config.correlation_aware);
+        pool.install(|| integrator.with_observer(&own).render_tile(&s.scene, &request, &mut TileAccum::new(full)));
+        // The image and the time come from a second render without the moment observer: the
+        // same samples, timed the way an equal-time render spends them.
+        let started = cpu_seconds();
+        let (accum, _) = pool.install(|| {
+            render_iterations(&s.scene, s.settings, &s.config, &strategy_of(c), request.seed, request.samples, None)
+        });
+        m.seconds.push((cpu_seconds() - started) / k as f64);
+        let mut film = Film::new(w as u32, h as u32);
+        film.merge_tile(&accum);
+        let image = film.average();
+        m.error.push(relmse(&image, &s.reference, 0.0) * k as f64);
+        m.error_dropped.push(relmse(&image, &s.reference, 0.001) * k as f64);
+        let own_moments = moments_of(&own.snapshot().0, 0);
+        m.own_moment.push(relative_mean(w, h, own_moments, &s.ref_mean, MomentFilter::default()));
+    }
+    m
+}
+
+/// The image-level relative moment × cost each candidate gets from a pilot's moments, with the
+/// filter `order` and the outlier rule `outliers`.
+fn predict(
+    s: &Subject,
+    moments: &MomentBuffer,
+    costs: &[f64],
+    order: MomentFilter,
+    outliers: OutlierStage,
+) -> Vec<f64> {
+    let (w, h) = s.size();
+    let mut planes: Vec<Image> = (0..costs.len()).map(|c| Image::from_data(w, h, moments_of(moments, c))).collect();
+    if outliers == OutlierStage::Shared {
+        let norm: Vec<f32> = s.ref_mean.iter().map(|&r| r * r + 1e-4).collect();
+        remove_shared_outliers(&mut planes, &norm, 0.999);
+    }
+    planes
+        .into_iter()
+        .enumerate()
+        .map(|(c, plane)| relative_mean(w, h, plane.data, &s.ref_mean, order) * costs[c])
+        .collect()
+}
+
+fn name_of(c: &Candidate) -> String {
+    if c.is_path_tracing() {
+        "pt".to_string()
+    } else {
+        format!("nu {} c {}{}", c.nu, c.connections, if c.merge { " merge" } else { "" })
+    }
+}
+
+fn argmin(v: &[f64]) -> usize {
+    (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0)
+}
+
+/// Regrets collected over the scenes, for the closing geometric means.
+struct Regrets {
+    /// Per estimator variant of [`VARIANTS`], relative filter order.
+    variants: Vec<Vec<f64>>,
+    /// The candidates' own measured moments.
+    direct: Vec<f64>,
+    /// Per filter order of [`MomentFilter::ALL`], the first variant.
+    orders: [Vec<f64>; 2],
+}
+
+/// The table of one scene, each prediction's choice and regret, and one JSON line with every
+/// figure.
+#[allow(clippy::too_many_arguments)]
+fn report_scene(
+    name: &str,
+    candidates: &[Candidate],
+    costs: &[f64],
+    m: &Measured,
+    by_order: &[Vec<f64>],
+    by_variant: &[Vec<f64>],
+    regrets: &mut Regrets,
+    json: serde_json::Value,
+) {
+    let times_cost = |v: &[f64]| -> Vec<f64> { v.iter().zip(costs).map(|(x, c)| x * c).collect() };
+    let (variance, variance_dropped, direct) =
+        (times_cost(&m.error), times_cost(&m.error_dropped), times_cost(&m.own_moment));
+    // Equal-time truth: relMSE × K × measured CPU seconds per iteration, in units of the cost
+    // model's (its cost per unit is fitted over the candidates, so only the ranking and the
+    // model's relative errors show).
+    let unit = m.seconds.iter().zip(costs).map(|(s, c)| s / c).sum::<f64>() / candidates.len() as f64;
+    let timed: Vec<f64> = m.error.iter().zip(&m.seconds).map(|(e, s)| e * s / unit).collect();
+    let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
+    println!("\n### {name}: truth's choice {} ", name_of(&candidates[argmin(&timed)]));
+    println!(
+        "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for (i, c) in candidates.iter().enumerate() {
+        println!(
+            "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
+            name_of(c),
+            costs[i],
+            m.seconds[i] / unit,
+            variance[i],
+            timed[i],
+            variance_dropped[i],
+            direct[i],
+            by_order[0][i],
+            by_order[1][i]
+        );
+    }
+    let verdict = |label: String, predicted: &[f64], into: &mut Vec<f64>| {
+        let choice = argmin(predicted);
+        into.push(timed[choice] / timed_best);
+        println!(
+            "{label}: choose {} (regret {:.2}x, spearman {:.2})",
+            name_of(&candidates[choice]),
+            timed[choice] / timed_best,
+            spearman(predicted, &timed)
+        );
+    };
+    for ((order, predicted), into) in MomentFilter::ALL.iter().zip(by_order).zip(&mut regrets.orders) {
+        verdict(format!("pilot moments (principled, squared), {order:?} filter order"), predicted, into);
+    }
+    verdict("measured second moments".into(), &direct, &mut regrets.direct);
+    for (((ratio, kernel), predicted), into) in VARIANTS.iter().zip(by_variant).zip(&mut regrets.variants) {
+        verdict(format!("pilot moments, ratio {ratio:?}, kernel {kernel:?}"), predicted, into);
+    }
+    println!("json: {json}");
+}
+
 /// Runs `tessera bench ground-truth`: the comparison on every scene with `iterations` per
 /// candidate.
 pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
     let scenes = args.scenes.scenes()?;
-    let k = args.iterations;
-    let pool = args.scenes.pool()?;
+    let (k, pool) = (args.iterations, args.scenes.pool()?);
     let candidates = reduced_candidates();
-    let pilot_iterations = args.pilot;
     let outliers: OutlierStage = args.moment_outliers.into();
+    let constants = CostModel::from(args.cost_model).constants();
     println!(
-        "ground truth: pilot {pilot_iterations} vcm iterations; {} candidates × {k} iterations each",
+        "ground truth: pilot {} vcm iterations; {} candidates × {k} iterations each",
+        args.pilot,
         candidates.len()
     );
-    let mut regrets = vec![Vec::new(); VARIANTS.len()];
-    let mut direct_regrets = Vec::new();
-    let mut order_regrets = [Vec::new(), Vec::new()];
+    let mut regrets =
+        Regrets { variants: vec![Vec::new(); VARIANTS.len()], direct: Vec::new(), orders: [Vec::new(), Vec::new()] };
     for path in &scenes {
-        let scene = Scene::load(path)?;
-        let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
-        let ref_mean: Vec<f32> = reference.pixels.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect();
-        let (w, h) = (scene.camera.width, scene.camera.height);
-        let (wu, hu) = (w as usize, h as usize);
-        let settings = PathSettings::from_scene(&scene, None);
-        let config = EmisConfig::new(EmisMethod::Vcm);
-        let full = Rect::full(w, h);
-        // ---- the pilot, four estimators at once ----
-        let estimators: Vec<MomentEstimator> = VARIANTS
+        let s = Subject::load(path)?;
+        let pixels = s.scene.camera.width * s.scene.camera.height;
+        let snapshots = pilot_moments(&s, &candidates, args.pilot, &pool);
+        let statistics = snapshots[0].1.statistics(pixels);
+        let costs: Vec<f64> = candidates
             .iter()
-            .map(|&(merge_ratio, merge_kernel)| {
-                MomentEstimator::new(w, h, &candidates, MomentSettings { merge_ratio, merge_kernel })
-            })
+            .map(|c| pixel_cost(&constants, &statistics, c, c.merge as u8 as f64, !c.is_path_tracing(), pixels))
             .collect();
-        let pilot = Strategy::pilot(EmisMethod::Vcm).integrator(settings, config.correlation_aware);
-        pool.install(|| {
-            pilot.with_observer(&estimators[..]).render_tile(
-                &scene,
-                &TileRequest { rect: full, samples: 0..pilot_iterations, seed: 7 },
-                &mut TileAccum::new(full),
-            )
-        });
-        let snapshots: Vec<_> = estimators.iter().map(|e| e.snapshot()).collect();
-        let statistics = snapshots[0].1.statistics(w * h);
-        let constants = CostModel::from(args.cost_model).constants();
-        let cost = |c: &Candidate| {
-            pixel_cost(&constants, &statistics, c, if c.merge { 1.0 } else { 0.0 }, !c.is_path_tracing(), w * h)
-        };
-        // ---- every candidate on its own ----
-        // per candidate, unscaled: relMSE × K (all pixels, top 0.1 % dropped), the relative
-        // moment of its own samples, CPU seconds per iteration
-        let (mut error, mut error_dropped, mut own_moment, mut seconds) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for c in &candidates {
-            let own = MomentEstimator::new(w, h, std::slice::from_ref(c), MomentSettings::default());
-            let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
-            pool.install(|| {
-                strategy_of(c).integrator(settings, config.correlation_aware).with_observer(&own).render_tile(
-                    &scene,
-                    &request,
-                    &mut TileAccum::new(full),
-                )
-            });
-            // The image and the time come from a second render without the moment observer:
-            // the same samples, timed the way an equal-time render spends them.
-            let started = cpu_seconds();
-            let (accum, _) = pool.install(|| {
-                render_iterations(
-                    &scene,
-                    settings,
-                    &config,
-                    &strategy_of(c),
-                    request.seed,
-                    request.samples.clone(),
-                    None,
-                )
-            });
-            seconds.push((cpu_seconds() - started) / k as f64);
-            let mut film = Film::new(w, h);
-            film.merge_tile(&accum);
-            let image = film.average();
-            error.push(relmse(&image, &reference.pixels, 0.0) * k as f64);
-            error_dropped.push(relmse(&image, &reference.pixels, 0.001) * k as f64);
-            own_moment.push(relative_mean(
-                wu,
-                hu,
-                moments_of(&own.snapshot().0, 0),
-                &ref_mean,
-                MomentFilter::default(),
-            ));
-        }
-        let costs: Vec<f64> = candidates.iter().map(cost).collect();
-        let times_cost = |v: &[f64]| -> Vec<f64> { v.iter().zip(&costs).map(|(x, c)| x * c).collect() };
-        let (variance, variance_dropped, direct) =
-            (times_cost(&error), times_cost(&error_dropped), times_cost(&own_moment));
-        let name_of = |i: usize| {
-            let c = &candidates[i];
-            if c.is_path_tracing() {
-                "pt".to_string()
-            } else {
-                format!("nu {} c {}{}", c.nu, c.connections, if c.merge { " merge" } else { "" })
-            }
-        };
-        let argmin = |v: &[f64]| (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
-        let predict = |snapshot: usize, order: MomentFilter| -> Vec<f64> {
-            let mut planes: Vec<Image> = (0..candidates.len())
-                .map(|ci| Image::from_data(wu, hu, moments_of(&snapshots[snapshot].0, ci)))
-                .collect();
-            if outliers == OutlierStage::Shared {
-                let norm: Vec<f32> = ref_mean.iter().map(|&r| r * r + 1e-4).collect();
-                remove_shared_outliers(&mut planes, &norm, 0.999);
-            }
-            planes
-                .into_iter()
-                .enumerate()
-                .map(|(ci, plane)| relative_mean(wu, hu, plane.data, &ref_mean, order) * costs[ci])
-                .collect()
-        };
-        let by_order: Vec<Vec<f64>> = MomentFilter::ALL.iter().map(|&order| predict(0, order)).collect();
-        // Equal-time truth: relMSE × K × measured CPU seconds per iteration, in units of the
-        // cost model's (its cost per unit is fitted over the candidates, so only the ranking and
-        // the model's relative errors show).
-        let unit = seconds.iter().zip(&costs).map(|(s, c)| s / c).sum::<f64>() / candidates.len() as f64;
-        let timed: Vec<f64> = error.iter().zip(&seconds).map(|(e, s)| e * s / unit).collect();
-        let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
-        println!("\n### {}: truth's choice {} ", scene_name(path), name_of(argmin(&timed)));
-        println!(
-            "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
-        );
-        println!("|---|---|---|---|---|---|---|---|---|");
-        for i in 0..candidates.len() {
-            println!(
-                "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
-                name_of(i),
-                costs[i],
-                seconds[i] / unit,
-                variance[i],
-                timed[i],
-                variance_dropped[i],
-                direct[i],
-                by_order[0][i],
-                by_order[1][i]
-            );
-        }
-        for ((order, predicted), regrets) in MomentFilter::ALL.iter().zip(&by_order).zip(&mut order_regrets) {
-            let choice = argmin(predicted);
-            regrets.push(timed[choice] / timed_best);
-            println!(
-                "pilot moments (principled, squared), {order:?} filter order: choose {} (regret {:.2}x, spearman {:.2})",
-                name_of(choice),
-                timed[choice] / timed_best,
-                spearman(predicted, &timed)
-            );
-        }
-        let d = argmin(&direct);
-        println!(
-            "measured second moments: choose {} (regret {:.2}x, spearman {:.2})",
-            name_of(d),
-            timed[d] / timed_best,
-            spearman(&direct, &timed)
-        );
-        direct_regrets.push(timed[d] / timed_best);
-        for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
-            let predicted = predict(vi, MomentFilter::default());
-            let choice = argmin(&predicted);
-            regrets[vi].push(timed[choice] / timed_best);
-            println!(
-                "pilot moments, ratio {ratio:?}, kernel {kernel:?}: choose {} (regret {:.2}x, spearman {:.2})",
-                name_of(choice),
-                timed[choice] / timed_best,
-                spearman(&predicted, &timed)
-            );
-        }
-        // everything above as one JSON line, for analyses beyond this table
+        let measured = measure_candidates(&s, &candidates, k, &pool);
+        let by_order: Vec<Vec<f64>> =
+            MomentFilter::ALL.iter().map(|&order| predict(&s, &snapshots[0].0, &costs, order, outliers)).collect();
+        let by_variant: Vec<Vec<f64>> =
+            snapshots.iter().map(|(m, _)| predict(&s, m, &costs, MomentFilter::default(), outliers)).collect();
+        // everything as one JSON line, for analyses beyond the table
         let rows: Vec<serde_json::Value> = candidates
             .iter()
             .enumerate()
             .map(|(i, c)| {
                 serde_json::json!({
                     "nu": c.nu, "connections": c.connections, "merge": c.merge,
-                    "cost": costs[i], "seconds": seconds[i],
-                    "relmse_k": error[i], "relmse_k_dropped": error_dropped[i],
-                    "measured_moment": own_moment[i], "predicted_moment": by_order[0][i] / costs[i],
+                    "cost": costs[i], "seconds": measured.seconds[i],
+                    "relmse_k": measured.error[i], "relmse_k_dropped": measured.error_dropped[i],
+                    "measured_moment": measured.own_moment[i], "predicted_moment": by_order[0][i] / costs[i],
                 })
             })
             .collect();
-        println!(
-            "json: {}",
-            serde_json::json!({"scene": scene_name(path), "k": k, "pilot": pilot_iterations,
-                "statistics": statistics, "candidates": rows})
-        );
+        let json = serde_json::json!({"scene": scene_name(path), "k": k, "pilot": args.pilot,
+            "statistics": statistics, "candidates": rows});
+        report_scene(&scene_name(path), &candidates, &costs, &measured, &by_order, &by_variant, &mut regrets, json);
     }
-    let gm = geometric_mean;
     println!("\n### geometric-mean regret over {} scenes", scenes.len());
-    println!("measured second moments: {:.3}x", gm(&direct_regrets));
-    for (order, regrets) in MomentFilter::ALL.iter().zip(&order_regrets) {
-        println!("filter order {order:?} (principled, squared): {:.3}x", gm(regrets));
+    println!("measured second moments: {:.3}x", geometric_mean(&regrets.direct));
+    for (order, r) in MomentFilter::ALL.iter().zip(&regrets.orders) {
+        println!("filter order {order:?} (principled, squared): {:.3}x", geometric_mean(r));
     }
-    for (vi, (ratio, kernel)) in VARIANTS.iter().enumerate() {
-        println!("ratio {ratio:?}, kernel {kernel:?}: {:.3}x", gm(&regrets[vi]));
+    for ((ratio, kernel), r) in VARIANTS.iter().zip(&regrets.variants) {
+        println!("ratio {ratio:?}, kernel {kernel:?}: {:.3}x", geometric_mean(r));
     }
     Ok(())
 }

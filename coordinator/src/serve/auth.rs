@@ -20,9 +20,12 @@ pub struct Tokens {
 const WORKER_PREFIX: &str = "/tessera.v1.WorkerService/";
 const GRPC_PREFIX: &str = "/tessera.v1.";
 
-/// Compares in time independent of where the strings differ.
+/// Compares in time independent of the contents and of both lengths: the tokens are hashed to
+/// fixed-size digests first, which are compared in constant time.
 fn same(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+    use sha2::Digest;
+    use subtle::ConstantTimeEq;
+    sha2::Sha256::digest(a).ct_eq(&sha2::Sha256::digest(b)).into()
 }
 
 /// The axum middleware.
@@ -48,5 +51,19 @@ pub async fn require_token(State(tokens): State<Arc<Tokens>>, req: Request, next
     } else {
         let code = crate::serve::error::ErrorCode::Unauthenticated;
         (code.http(), axum::Json(serde_json::json!({"error": message, "code": code.as_str()}))).into_response()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tokens_match_only_when_equal() {
+        assert!(same(b"secret", b"secret"));
+        assert!(!same(b"secret", b"secreT"));
+        assert!(!same(b"secret", b"secret2"));
+        assert!(!same(b"", b"secret"));
+        assert!(same(b"", b""));
     }
 }

@@ -214,6 +214,7 @@ proptest! {
     /// Under any interleaving, each tile is accepted at most once, merged exactly once when
     /// the job completes, epochs never go back, and the merged prefix is exactly the merged
     /// tiles; a fresh well-behaved worker always finishes a job that has not failed.
+    // long: one scenario, its interleaving then the invariants over the state it left
     #[test]
     fn exactly_once_merge_under_arbitrary_interleavings(
         events in proptest::collection::vec(event(), 1..120),
