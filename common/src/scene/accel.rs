@@ -16,15 +16,13 @@ use obvhs::{
     cwbvh::{CwBvh, Traversal, bvh2_to_cwbvh::bvh2_to_cwbvh},
 };
 
-/// Scenes with at most this many primitives skip the BVH and test every primitive. Decoding a
-/// compressed wide node costs more than that for a handful of primitives. Measured with
-/// `tessera bench --threads 1`: glossy-interreflection (5 primitives) 8 % faster than the BVH
-/// and 6 % faster than the boxed scan below.
+/// Scenes with at most this many primitives skip the BVH and test every primitive: decoding a
+/// compressed wide node costs more than that for a handful of primitives
+/// (docs/decisions/0011-small-scene-scans.md).
 const FLAT_LIMIT: usize = 8;
 
 /// Up to this many primitives, the boxes are tested four at a time first, then the primitives
-/// whose boxes the ray meets: veach-mis (10 primitives) 6–14 % faster than the BVH, where
-/// testing every primitive was 3 % slower.
+/// whose boxes the ray meets (docs/decisions/0011-small-scene-scans.md).
 const BOXED_FLAT_LIMIT: usize = 16;
 
 /// How a scene too small for the BVH is scanned.

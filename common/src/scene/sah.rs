@@ -1,10 +1,8 @@
 //! A top-down binned surface-area-heuristic (SAH) builder for a binary BVH over primitive
 //! bounds. [`super::accel`] collapses its output into obvhs's wide BVH.
 //!
-//! Against obvhs's own PLOC builder (`fast_build`), measured with `tessera bench --threads 1`
-//! on the bundled scenes: cornell-box +5 %, env-lit +3 %, indirect-room and veach-mis −3 %;
-//! PLOC's `very_slow_build` was within noise of this one. Kept for the room-like scenes and
-//! because it is a plain, dependency-free function of the boxes.
+//! Why our own rather than obvhs's PLOC builder: faster traversal on room-like scenes, and a
+//! plain, dependency-free function of the boxes (docs/decisions/0010-sah-builder.md).
 
 use glam::Vec3;
 

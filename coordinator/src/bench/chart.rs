@@ -1,6 +1,6 @@
 //! The bar chart of `tessera bench equal-time --chart`: one group of bars per scene, one bar
-//! per integrator, the speed-up over path tracing on a log axis, as SVG (plotters; SVG needs no
-//! font files).
+//! per integrator, the speed-up over path tracing on a log₂ axis, as SVG (plotters; SVG needs
+//! no font files).
 
 use anyhow::Context;
 use plotters::prelude::*;
@@ -34,9 +34,10 @@ pub fn write_bar_chart(path: &Path, title: &str, names: &[String], groups: &[Gro
 }
 
 fn draw(path: &Path, title: &str, names: &[String], groups: &[Group]) -> Result<(), Box<dyn std::error::Error>> {
+    // the axis is log₂ of the speed-up, labelled with the powers of two
     let finite = groups.iter().flat_map(|g| g.values.iter().copied()).filter(|v| v.is_finite() && *v > 0.0);
     let (lo, hi) = finite.fold((1.0f64, 1.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    let (lo, hi) = (2f64.powf(lo.log2().floor().min(-1.0)), 2f64.powf(hi.log2().ceil().max(1.0)));
+    let (lo, hi) = (lo.log2().floor().min(-1.0), hi.log2().ceil().max(1.0));
     let width = (120 + groups.len() * (names.len() * 16 + 40)).max(480) as u32;
     let root = SVGBackend::new(path, (width, 420)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -45,7 +46,7 @@ fn draw(path: &Path, title: &str, names: &[String], groups: &[Group]) -> Result<
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(56)
-        .build_cartesian_2d(0.0..groups.len() as f64, (lo..hi).log_scale())?;
+        .build_cartesian_2d(0.0..groups.len() as f64, lo..hi)?;
     let labels: Vec<String> = groups.iter().map(|g| g.label.clone()).collect();
     chart
         .configure_mesh()
@@ -61,7 +62,11 @@ fn draw(path: &Path, title: &str, names: &[String], groups: &[Group]) -> Result<
             }
         })
         .y_desc("speed-up over pt")
-        .y_label_formatter(&|v| format!("{v}x"))
+        .y_labels((hi - lo) as usize + 1)
+        .y_label_formatter(&|e| match e.round() as i32 {
+            e if e >= 0 => format!("{}x", 1u64 << e),
+            e => format!("1/{}x", 1u64 << -e),
+        })
         .draw()?;
     let bar = 0.8 / names.len().max(1) as f64;
     for (i, name) in names.iter().enumerate() {
@@ -69,14 +74,14 @@ fn draw(path: &Path, title: &str, names: &[String], groups: &[Group]) -> Result<
         let bars = groups.iter().enumerate().filter_map(|(g, group)| {
             let v = *group.values.get(i)?;
             let x0 = g as f64 + 0.1 + i as f64 * bar;
-            (v.is_finite() && v > 0.0).then(|| Rectangle::new([(x0, 1.0), (x0 + bar * 0.9, v)], color.filled()))
+            (v.is_finite() && v > 0.0).then(|| Rectangle::new([(x0, 0.0), (x0 + bar * 0.9, v.log2())], color.filled()))
         });
         chart
             .draw_series(bars)?
             .label(name.as_str())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], color.filled()));
     }
-    chart.draw_series(std::iter::once(PathElement::new(vec![(0.0, 1.0), (groups.len() as f64, 1.0)], BLACK)))?;
+    chart.draw_series(std::iter::once(PathElement::new(vec![(0.0, 0.0), (groups.len() as f64, 0.0)], BLACK)))?;
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)

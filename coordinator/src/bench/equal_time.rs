@@ -20,8 +20,8 @@ use tessera_common::settings::{IntegratorName, RenderSettings};
 #[derive(clap::Args, Debug, Clone)]
 pub struct EqualTimeArgs {
     /// Seconds per render, comma-separated durations run one after another (e.g. 20,60).
-    #[arg(value_delimiter = ',', num_args = 1, required = true)]
-    pub seconds: Vec<f64>,
+    #[arg(value_parser = parse_durations)]
+    pub seconds: Durations,
     /// Scenes and threads.
     #[command(flatten)]
     pub scenes: SceneArgs,
@@ -47,6 +47,21 @@ pub struct EqualTimeArgs {
     /// Also draw the speed-ups as an SVG bar chart, one file per duration (NAME-20s.svg ...).
     #[arg(long)]
     pub chart: Option<PathBuf>,
+}
+
+/// The durations of one run, in seconds.
+#[derive(Clone, Debug)]
+pub struct Durations(pub Vec<f64>);
+
+/// Parses `20,60`: positive seconds, comma-separated. One argument, so that scenes can follow.
+fn parse_durations(s: &str) -> Result<Durations, String> {
+    s.split(',')
+        .map(|d| match d.trim().parse::<f64>() {
+            Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+            _ => Err(format!("\"{d}\" is not a positive number of seconds")),
+        })
+        .collect::<Result<Vec<f64>, String>>()
+        .map(Durations)
 }
 
 /// One integrator's equal-time results on one scene.
@@ -225,7 +240,7 @@ fn write_chart(chart: &Path, seconds: f64, names: &[String], table: &[(String, R
 pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
     let scenes = args.scenes.scenes()?;
     let names: Vec<String> = columns(args).into_iter().map(|c| c.2).collect();
-    for &seconds in &args.seconds {
+    for &seconds in &args.seconds.0 {
         let threads = args.scenes.threads.map_or("all".into(), |t| t.to_string());
         println!("\n## equal time {seconds} s ({threads} threads)\n");
         println!(

@@ -47,3 +47,30 @@ pub fn run() -> anyhow::Result<()> {
         Command::Bench(command) => crate::bench::run(&command),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn bench_subcommands_parse_their_positional_arguments() {
+        let cli = Cli::try_parse_from(["tessera", "bench", "equal-time", "20,60", "a.xml", "b.xml", "--seeds", "1,2"])
+            .unwrap();
+        let Command::Bench(crate::bench::BenchCommand::EqualTime(args)) = cli.command else { panic!("not equal-time") };
+        assert_eq!(args.seconds.0, vec![20.0, 60.0]);
+        assert_eq!(args.scenes.scenes.len(), 2);
+        assert_eq!(args.seeds, vec![1, 2]);
+        assert!(Cli::try_parse_from(["tessera", "bench", "equal-time", "0"]).is_err());
+        let cli = Cli::try_parse_from(["tessera", "bench", "ground-truth", "8", "--pilot", "2"]).unwrap();
+        let Command::Bench(crate::bench::BenchCommand::GroundTruth(args)) = cli.command else { panic!() };
+        assert_eq!((args.iterations, args.pilot), (8, 2));
+        assert!(Cli::try_parse_from(["tessera", "bench-farm", "--ingest"]).is_err());
+        assert!(Cli::try_parse_from(["tessera", "bench", "farm", "--ingest"]).is_ok());
+    }
+}

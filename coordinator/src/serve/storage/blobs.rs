@@ -1,7 +1,9 @@
-//! The blob directory: content-addressed blobs (scene bundles, result EXRs and PNGs, keyed by
-//! the SHA-256 of their bytes) and checkpoints of merged films. (Accepted tile results live in
-//! the database; [`BlobStore::get_result`] reads those that earlier versions kept as files.) Every file is written to a temporary name and renamed into place, so a crash
-//! never leaves a half-written blob under a real name.
+//! The blob directory: content-addressed blobs (scene bundles, merge masks, result EXRs and
+//! PNGs, named by [`tessera_proto::blob_digest`]) and checkpoints of merged films. Every file is
+//! written to a temporary name and renamed into place, so a crash never leaves a half-written
+//! blob under a real name. Accepted tile results live in the database
+//! (docs/decisions/0009-results-in-the-database.md); [`BlobStore::get_result`] reads the result
+//! files a data directory may still hold from before that.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -71,7 +73,7 @@ impl BlobStore {
         self.root.join("results").join(job).join(format!("{tile}-{epoch}.bin"))
     }
 
-    /// An accepted tile result's payload as earlier versions stored it (non-finite count, then
+    /// An accepted tile result's payload stored as a file (non-finite count, then
     /// the payload).
     pub fn get_result(&self, job: &str, tile: usize, epoch: u64) -> std::io::Result<Vec<u8>> {
         std::fs::read(self.result_path(job, tile, epoch))
