@@ -92,6 +92,19 @@ pub struct IntegratorArgs {
     /// emis-*: merge moments with the kernel squared or (as the reference) once.
     #[arg(long, value_enum, default_value = "squared")]
     pub merge_kernel: MergeKernelArg,
+    /// The EMIS optimiser's model: cost constants, moment filter order, outlier rule.
+    #[command(flatten)]
+    pub model: EmisModelArgs,
+    /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
+    /// switches to the full candidate set, discarding the iterations so far, once a
+    /// bidirectional strategy wins.
+    #[arg(long, value_enum, default_value = "bidirectional")]
+    pub emis_pilot: EmisPilotArg,
+}
+
+/// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
+#[derive(clap::Args, Debug, Clone)]
+pub struct EmisModelArgs {
     /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
     #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: CostModelArg,
@@ -105,11 +118,61 @@ pub struct IntegratorArgs {
     /// it over the neighbours; or apply the reference's rule alone.
     #[arg(long, value_enum, default_value = "shared")]
     pub moment_outliers: MomentOutliersArg,
-    /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
-    /// switches to the full candidate set, discarding the iterations so far, once a
-    /// bidirectional strategy wins.
-    #[arg(long, value_enum, default_value = "bidirectional")]
-    pub emis_pilot: EmisPilotArg,
+}
+
+impl EmisModelArgs {
+    /// Sets these options in `settings`.
+    pub fn apply(&self, settings: &mut RenderSettings) {
+        settings.cost_model = self.cost_model.into();
+        settings.moment_filter = self.moment_filter.into();
+        settings.moment_outliers = self.moment_outliers.into();
+    }
+}
+
+/// What to render with what, shared by `tessera render` and `tessera submit`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct JobArgs {
+    /// Rendering algorithm.
+    #[arg(long, value_enum, default_value = "pt")]
+    pub integrator: IntegratorKind,
+    /// Samples per pixel; iterations for lt, bdpt and vcm [default: the scene's sampler sample_count].
+    #[arg(long, conflicts_with = "time")]
+    pub spp: Option<u32>,
+    /// Render for this many seconds instead of a fixed sample count.
+    #[arg(long)]
+    pub time: Option<f64>,
+    /// Seed of all random numbers; the same seed gives the same image [default: the scene's, or 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Path length, sample counts, merging and EMIS options.
+    #[command(flatten)]
+    pub mis: IntegratorArgs,
+    /// Set a scene parameter ($name), overriding its <default>: -D name=value.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    pub define: Vec<String>,
+}
+
+impl JobArgs {
+    /// The `-D` definitions.
+    pub fn defines(&self) -> anyhow::Result<HashMap<String, String>> {
+        parse_defines(&self.define)
+    }
+
+    /// The settings these arguments ask for, checked (spp, time and seed unresolved where
+    /// not given: the scene supplies them).
+    pub fn settings(&self) -> anyhow::Result<RenderSettings> {
+        let mut settings = RenderSettings {
+            integrator: self.integrator.into(),
+            spp: self.spp,
+            time_s: self.time,
+            seed: self.seed,
+            defines: self.defines()?.into_iter().collect(),
+            ..RenderSettings::default()
+        };
+        self.mis.apply(&mut settings);
+        settings.validate().map_err(|e| anyhow!(flag_error(e)))?;
+        Ok(settings)
+    }
 }
 
 impl From<EmisPilotArg> for PilotStart {
@@ -202,9 +265,7 @@ impl IntegratorArgs {
             MergeKernelArg::Squared => MergeKernel::Squared,
             MergeKernelArg::Reference => MergeKernel::Reference,
         };
-        settings.cost_model = self.cost_model.into();
-        settings.moment_filter = self.moment_filter.into();
-        settings.moment_outliers = self.moment_outliers.into();
+        self.model.apply(settings);
         settings.emis_pilot = self.emis_pilot.into();
     }
 }
@@ -268,8 +329,16 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
 /// Builds the renderer of `settings` (the rules shared with the farm), naming the command-line
 /// flag of a bad value.
 pub fn make_renderer(settings: &RenderSettings, scene: &Scene) -> anyhow::Result<Renderer> {
-    settings.make_renderer(scene).map_err(|e| match e {
-        SettingsError::Invalid { field, message } => anyhow!("--{} {message}", field.replace('_', "-")),
-        other => anyhow!(other),
-    })
+    settings.make_renderer(scene).map_err(|e| anyhow!(flag_error(e)))
+}
+
+/// A settings error, naming the command-line flag of a bad field.
+fn flag_error(e: SettingsError) -> String {
+    match e {
+        // the settings' field names, except `time_s`, are the flags' names
+        SettingsError::Invalid { field, message } => {
+            format!("--{} {message}", if field == "time_s" { "time".into() } else { field.replace('_', "-") })
+        }
+        other => other.to_string(),
+    }
 }

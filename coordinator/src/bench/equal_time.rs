@@ -6,9 +6,7 @@
 
 use super::chart::{Group, write_bar_chart};
 use super::{SceneArgs, geometric_mean};
-use crate::options::{
-    CostModelArg, EmisPilotArg, IntegratorKind, MomentFilterArg, MomentOutliersArg, make_renderer, scene_name,
-};
+use crate::options::{EmisModelArgs, EmisPilotArg, IntegratorKind, make_renderer, scene_name};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::emis::PilotStart;
@@ -32,15 +30,9 @@ pub struct EqualTimeArgs {
     /// reported per seed, so that a verdict shows the run-to-run spread.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     pub seeds: Vec<u64>,
-    /// The EMIS cost heuristic's constants.
-    #[arg(long, value_enum, default_value = "calibrated")]
-    pub cost_model: CostModelArg,
-    /// The EMIS moment filter order.
-    #[arg(long, value_enum, default_value = "relative")]
-    pub moment_filter: MomentFilterArg,
-    /// The EMIS outlier rejection.
-    #[arg(long, value_enum, default_value = "shared")]
-    pub moment_outliers: MomentOutliersArg,
+    /// The EMIS optimiser's model.
+    #[command(flatten)]
+    pub model: EmisModelArgs,
     /// The pilots each `emis-*` integrator runs with (each a column).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "bidirectional")]
     pub emis_pilot: Vec<EmisPilotArg>,
@@ -107,17 +99,9 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
     for (kind, pilot, name) in columns(args) {
-        let renderer = make_renderer(
-            &RenderSettings {
-                integrator: kind.into(),
-                cost_model: args.cost_model.into(),
-                moment_filter: args.moment_filter.into(),
-                moment_outliers: args.moment_outliers.into(),
-                emis_pilot: pilot,
-                ..RenderSettings::default()
-            },
-            &scene,
-        )?;
+        let mut settings = RenderSettings { integrator: kind.into(), emis_pilot: pilot, ..RenderSettings::default() };
+        args.model.apply(&mut settings);
+        let renderer = make_renderer(&settings, &scene)?;
         let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
         for &seed in &args.seeds {
             let opts = RenderOptions {

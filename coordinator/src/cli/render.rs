@@ -1,7 +1,7 @@
 //! `tessera render`: renders a scene on this machine with no setup, writing an EXR (beauty RGB
 //! plus per-pixel sample counts) and an sRGB PNG preview beside it (see [`crate::output`]).
 
-use crate::options::{IntegratorArgs, IntegratorKind, make_renderer, parse_defines, scene_name};
+use crate::options::{JobArgs, make_renderer, scene_name};
 use crate::output::{Outputs, Provenance};
 use anyhow::bail;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -9,7 +9,6 @@ use std::path::PathBuf;
 use std::time::Duration;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
-use tessera_common::settings::RenderSettings;
 
 /// Arguments of `tessera render`.
 #[derive(clap::Args, Debug, Clone)]
@@ -19,61 +18,30 @@ pub struct RenderArgs {
     /// Output EXR [default: the scene's name in the working directory, e.g. cornell-box.exr].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Rendering algorithm.
-    #[arg(long, value_enum, default_value = "pt")]
-    pub integrator: IntegratorKind,
-    /// Samples per pixel; iterations for lt, bdpt and vcm [default: the scene's sampler sample_count].
-    #[arg(long, conflicts_with = "time")]
-    pub spp: Option<u32>,
-    /// Render for this many seconds instead of a fixed sample count.
-    #[arg(long)]
-    pub time: Option<f64>,
-    /// Seed of all random numbers; the same seed gives the same image [default: the scene's, or 0].
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// Integrator, samples or time, seed, options and scene parameters.
+    #[command(flatten)]
+    pub job: JobArgs,
     /// Render threads [default: all cores].
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Path length, sample counts, merging and EMIS options.
-    #[command(flatten)]
-    pub mis: IntegratorArgs,
-    /// Set a scene parameter ($name), overriding its <default>: -D name=value.
-    #[arg(short = 'D', value_name = "NAME=VALUE")]
-    pub define: Vec<String>,
-}
-
-/// The settings `tessera render`'s arguments ask for (spp, seed and time stay with the
-/// command: they are resolved against the scene there).
-pub fn settings_from_args(args: &RenderArgs) -> RenderSettings {
-    let mut settings = RenderSettings { integrator: args.integrator.into(), ..RenderSettings::default() };
-    args.mis.apply(&mut settings);
-    settings
 }
 
 /// Runs `tessera render`.
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
-    let defines = parse_defines(&args.define)?;
-    if let Some(t) = args.time {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!("--time must be a positive number of seconds, got {t}");
-        }
-    }
-    if args.spp == Some(0) {
-        bail!("--spp must be at least 1");
-    }
+    let settings = args.job.settings()?;
     if args.threads == Some(0) {
         bail!("--threads must be at least 1");
     }
-    let scene = Scene::load_with(&args.scene, &defines)?;
-    let renderer = make_renderer(&settings_from_args(args), &scene)?;
+    let scene = Scene::load_with(&args.scene, &settings.define_map())?;
+    let renderer = make_renderer(&settings, &scene)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
-    let budget = match args.time {
+    let budget = match settings.time_s {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
-        None => Budget::Samples(args.spp.unwrap_or(scene.spp)),
+        None => Budget::Samples(settings.spp.unwrap_or(scene.spp)),
     };
     let opts = RenderOptions {
         budget,
-        seed: args.seed.unwrap_or(scene.seed),
+        seed: settings.seed.unwrap_or(scene.seed),
         threads: args.threads.unwrap_or(0),
         tile_size: 32,
     };

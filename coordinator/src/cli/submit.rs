@@ -2,11 +2,10 @@
 //! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG.
 
 use super::client::{Client, ServerArgs, runtime, status_error};
-use crate::options::{IntegratorArgs, parse_defines, scene_name};
+use crate::options::{JobArgs, scene_name};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-use tessera_common::settings::{IntegratorName, RenderSettings};
 use tessera_proto::state_name;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
@@ -19,27 +18,12 @@ pub struct SubmitArgs {
     /// Coordinator.
     #[command(flatten)]
     pub server: ServerArgs,
-    /// Rendering algorithm: pt, lt, bdpt, vcm, emis-bdpt or emis-vcm.
-    #[arg(long, default_value = "pt")]
-    pub integrator: IntegratorName,
-    /// Samples per pixel (iterations for lt, bdpt, vcm) [default: the scene's].
-    #[arg(long, conflicts_with = "time")]
-    pub spp: Option<u32>,
-    /// Render for this many seconds instead.
-    #[arg(long)]
-    pub time: Option<f64>,
-    /// Seed [default: the scene's, or 0].
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// Integrator, samples or time, seed, options and scene parameters.
+    #[command(flatten)]
+    pub job: JobArgs,
     /// Higher priorities run first.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub priority: i32,
-    /// Path length, sample counts, merging and EMIS options.
-    #[command(flatten)]
-    pub mis: IntegratorArgs,
-    /// Set a scene parameter: -D name=value.
-    #[arg(short = 'D', value_name = "NAME=VALUE")]
-    pub define: Vec<String>,
     /// Job name [default: the scene's name].
     #[arg(long)]
     pub name: Option<String>,
@@ -53,18 +37,8 @@ pub struct SubmitArgs {
 
 /// Runs `tessera submit`.
 pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
-    let defines = parse_defines(&args.define)?;
-    let mut settings = RenderSettings {
-        integrator: args.integrator,
-        spp: args.spp,
-        time_s: args.time,
-        seed: args.seed,
-        defines: defines.clone().into_iter().collect(),
-        ..RenderSettings::default()
-    };
-    args.mis.apply(&mut settings);
-    settings.validate()?;
-    let bundle = tessera_common::bundle::pack(&args.scene, &defines)?;
+    let settings = args.job.settings()?;
+    let bundle = tessera_common::bundle::pack(&args.scene, &settings.define_map())?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
