@@ -60,7 +60,8 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
         assert_eq!(second.lease.as_ref().unwrap().epoch, 1);
         let mut sums = vec![[0.5f64; 3]; pixels];
         sums[7][1] = f64::NAN;
-        let nan = tessera_proto::encode_tile_payload(&sums, &vec![1; pixels]);
+        let mut nan = Vec::new();
+        tessera_proto::payload::write_channels(&mut nan, &sums, None, None, &vec![1; pixels]).unwrap();
         let e = upload(&mut client, &worker, &second, nan).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::InvalidArgument);
         assert!(e.message().contains("not finite"), "{}", e.message());
@@ -73,9 +74,9 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
             RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), seed: Some(6), ..Default::default() };
         let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(&scene) else { panic!("a tile integrator") };
         let rect = Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 };
-        let mut accum = TileAccum::new(rect);
+        let mut accum = TileAccum::new(rect, &scene.film);
         integrator.render_tile(&scene, &TileRequest { rect, samples: 0..1, seed: 6 }, &mut accum);
-        let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        let payload = tessera_proto::payload::encode_tile(&accum);
         let ok = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();
         assert_eq!(ok.outcome, pb::UploadOutcome::Accepted as i32);
         let again = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();

@@ -72,6 +72,46 @@ fn grpc_submit_pt_with_two_workers_equals_local_render() {
     assert_same_image(&out, &local_render(dir.path(), &box_scene, "pt", 3, 5));
 }
 
+/// Mitsuba's default Gaussian filter reaches across 64² tile borders (pt) and spreads splats
+/// (bdpt), and a crop window renders part of the film: the farm still adds exactly what a
+/// local render adds.
+#[test]
+fn a_gaussian_filter_and_a_crop_window_render_on_the_farm_as_locally() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = std::fs::read_to_string(scene("cornell-box")).unwrap();
+    let filtered = xml.replace(
+        r#"<rfilter type="box"/>"#,
+        r#"<integer name="crop_offset_x" value="20"/><integer name="crop_offset_y" value="40"/>
+           <integer name="crop_width" value="150"/><integer name="crop_height" value="130"/>"#,
+    );
+    assert_ne!(filtered, xml, "the box filter line is gone, so the default Gaussian applies");
+    let path = dir.path().join("filtered.xml");
+    std::fs::write(&path, filtered).unwrap();
+    let (c, _w) = farm(dir.path(), 2);
+    for integrator in ["pt", "bdpt"] {
+        let out = dir.path().join(format!("farm-{integrator}.exr"));
+        let (ok, _, stderr) = tessera(&[
+            "submit",
+            path.to_str().unwrap(),
+            "--server",
+            &c.url,
+            "--integrator",
+            integrator,
+            "--spp",
+            "2",
+            "--seed",
+            "9",
+            "--wait",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "submit failed: {stderr}\nlog: {}", c.log.display());
+        let local = local_render(dir.path(), &path, integrator, 2, 9);
+        assert_eq!(tessera_common::film::exr::read_rgb(&local).unwrap().width, 150);
+        assert_same_image(&out, &local);
+    }
+}
+
 #[test]
 fn rest_submit_vcm_equals_local_render_and_reports_progress() {
     let dir = tempfile::tempdir().unwrap();

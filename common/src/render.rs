@@ -76,7 +76,7 @@ pub fn render(
     // image-level integrators render the full frame, one iteration per tile, parallel inside
     let tiles = if integrator.full_frame() { vec![Rect::full(w, h)] } else { Rect::tiles(w, h, opts.tile_size) };
     let max_pass = if integrator.full_frame() { 1 } else { u32::MAX };
-    let mut film = Film::new(w, h);
+    let mut film = Film::new(&scene.film);
     let start = Instant::now();
     let pixels = w as u64 * h as u64;
     let done = std::sync::atomic::AtomicU64::new(0);
@@ -112,7 +112,7 @@ pub fn render(
             tiles
                 .par_iter()
                 .map(|rect| {
-                    let mut accum = TileAccum::new(*rect);
+                    let mut accum = TileAccum::new(*rect, &scene.film);
                     integrator.render_tile(
                         scene,
                         &TileRequest { rect: *rect, samples: samples.clone(), seed: opts.seed },

@@ -25,7 +25,7 @@ fn check(name: &str) {
     let pilot = Strategy::pilot(EmisMethod::Vcm);
     let (accum, data) = render_iterations(&scene, settings, &config, &pilot, 3, 0..1, Some(CandidateSet::Full));
     let PilotData { moments, statistics, guides } = data.expect("the pilot collects moments");
-    let mut film = Film::new(w, h);
+    let mut film = Film::new(&scene.film);
     film.merge_tile(&accum);
     let (albedo, normal, depth) = guides.means();
     let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };

@@ -21,16 +21,13 @@
 
 pub mod bundle;
 pub mod convert;
+pub mod payload;
 
 /// Generated `tessera.v1` messages, clients and servers.
 #[allow(missing_docs)]
 pub mod v1 {
     tonic::include_proto!("tessera.v1");
 }
-
-/// Bytes per pixel of a tile result payload: three little-endian f64 sums then, after all
-/// pixels' sums, one little-endian u32 sample count per pixel (see `TileResultHeader`).
-pub const RESULT_BYTES_PER_PIXEL: usize = 3 * 8 + 4;
 
 /// Upper bound of the EMIS pilot data per pixel a result may carry (moment sums of up to 64
 /// candidates and seven guide channels, all f32); the exact size is checked on decoding.
@@ -103,35 +100,6 @@ pub fn result_header(
     }
 }
 
-/// Encodes a tile result payload: every pixel's three sums, then every pixel's count, all
-/// little-endian (the layout `TileResultHeader` documents).
-pub fn encode_tile_payload(sum: &[[f64; 3]], count: &[u32]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(sum.len() * 24 + count.len() * 4);
-    for s in sum {
-        for c in s {
-            out.extend_from_slice(&c.to_le_bytes());
-        }
-    }
-    for c in count {
-        out.extend_from_slice(&c.to_le_bytes());
-    }
-    out
-}
-
-/// Decodes a tile result payload for `pixels` pixels; `None` when the length is not exactly
-/// `pixels` × [`RESULT_BYTES_PER_PIXEL`].
-pub fn decode_tile_payload(bytes: &[u8], pixels: usize) -> Option<(Vec<[f64; 3]>, Vec<u32>)> {
-    if bytes.len() != pixels.checked_mul(RESULT_BYTES_PER_PIXEL)? {
-        return None;
-    }
-    let (sums, counts) = bytes.split_at(pixels * 24);
-    let f = |b: &[u8]| f64::from_le_bytes(b.try_into().expect("invariant: 8-byte chunk"));
-    let sum = sums.chunks_exact(24).map(|p| [f(&p[0..8]), f(&p[8..16]), f(&p[16..24])]).collect();
-    let count =
-        counts.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().expect("invariant: 4-byte chunk"))).collect();
-    Some((sum, count))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,20 +110,5 @@ mod tests {
         assert_eq!(d, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");
         assert!(is_blob_digest(&d));
         assert!(!is_blob_digest(&d.to_uppercase()) && !is_blob_digest("../x") && !is_blob_digest(&d[1..]));
-    }
-
-    #[test]
-    fn tile_payload_round_trips_bit_exactly_and_checks_length() {
-        let sum = vec![[0.1, -0.0, f64::MAX], [1e-300, 2.5, 3.0]];
-        let count = vec![7, u32::MAX];
-        let bytes = encode_tile_payload(&sum, &count);
-        assert_eq!(bytes.len(), 2 * RESULT_BYTES_PER_PIXEL);
-        let (s, c) = decode_tile_payload(&bytes, 2).unwrap();
-        assert_eq!(c, count);
-        for (a, b) in s.iter().flatten().zip(sum.iter().flatten()) {
-            assert_eq!(a.to_bits(), b.to_bits());
-        }
-        assert!(decode_tile_payload(&bytes, 3).is_none());
-        assert!(decode_tile_payload(&bytes[1..], 2).is_none());
     }
 }

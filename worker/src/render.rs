@@ -73,7 +73,7 @@ pub fn render_batch(
             .par_iter()
             .map(|t| {
                 let start = Instant::now();
-                let mut accum = TileAccum::new(t.rect);
+                let mut accum = TileAccum::new(t.rect, &scene.film);
                 let req = TileRequest { rect: t.rect, samples: t.samples.clone(), seed: t.seed };
                 integrator.render_tile(scene, &req, &mut accum);
                 TileOutput { accum, seconds: start.elapsed().as_secs_f64(), pilot: Vec::new() }

@@ -226,7 +226,7 @@ async fn render_and_upload(
             render_seconds: seconds,
             pilot_bytes: pilot.len() as u64,
         };
-        let mut payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+        let mut payload = tessera_proto::payload::encode_tile(&accum);
         payload.extend_from_slice(&pilot);
         upload(client, header, payload).await?;
         tracing::debug!(job_id = %lease.job_id, tile = lease.tile, seconds, non_finite = accum.non_finite, "tile uploaded");

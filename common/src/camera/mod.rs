@@ -15,19 +15,21 @@ pub struct PerspectiveCamera {
     pub origin: Vec3,
     /// View direction (camera +z in world space).
     pub forward: Vec3,
-    /// Image width in pixels.
+    /// Width in pixels of the rendered image (the film's crop window).
     pub width: u32,
-    /// Image height in pixels.
+    /// Height in pixels of the rendered image.
     pub height: u32,
+    /// The crop window's offset within the full film, and the full film's size.
+    window: (f32, f32, f32, f32),
     /// tan(fov_x / 2).
     pub tan_half_x: f32,
-    /// Width / height.
+    /// Width / height of the full film.
     pub aspect: f32,
     /// Near clip distance along camera z.
     pub near_clip: f32,
     /// Far clip distance along camera z.
     pub far_clip: f32,
-    /// Area of the image rectangle on the plane z = 1.
+    /// Area of the rendered image's rectangle on the plane z = 1.
     image_plane_area: f32,
     /// Camera to world, rounded to f32 for ray generation.
     to_world_f32: glam::Mat4,
@@ -65,6 +67,7 @@ impl PerspectiveCamera {
             forward,
             width,
             height,
+            window: (0.0, 0.0, width as f32, height as f32),
             tan_half_x,
             aspect,
             near_clip,
@@ -75,11 +78,23 @@ impl PerspectiveCamera {
         }
     }
 
+    /// The camera rendering only the `width × height` window at `(x, y)` of its film (Mitsuba's
+    /// `crop_*`): raster positions and the image's importance refer to the window, the
+    /// projection to the full film.
+    pub fn with_crop(mut self, x: u32, y: u32, width: u32, height: u32) -> Self {
+        let (full_w, full_h) = (self.width as f32, self.height as f32);
+        self.image_plane_area *= (width as f32 * height as f32) / (full_w * full_h);
+        (self.width, self.height) = (width, height);
+        self.window = (x as f32, y as f32, full_w, full_h);
+        self
+    }
+
     /// The primary ray through continuous raster position `raster` (pixels, (0,0) = top-left).
     #[inline]
     pub fn generate_ray(&self, raster: Vec2) -> Ray {
-        let u = raster.x / self.width as f32;
-        let v = raster.y / self.height as f32;
+        let (x0, y0, full_w, full_h) = self.window;
+        let u = (raster.x + x0) / full_w;
+        let v = (raster.y + y0) / full_h;
         let d_cam = Vec3::new((1.0 - 2.0 * u) * self.tan_half_x, (1.0 - 2.0 * v) * self.tan_half_x / self.aspect, 1.0);
         let inv_len = 1.0 / d_cam.length();
         let d = self.to_world_f32.transform_vector3(d_cam * inv_len).normalize();
@@ -96,7 +111,8 @@ impl PerspectiveCamera {
         }
         let u = 0.5 * (1.0 - dc.x / (dc.z * self.tan_half_x));
         let v = 0.5 * (1.0 - self.aspect * dc.y / (dc.z * self.tan_half_x));
-        let r = Vec2::new(u * self.width as f32, v * self.height as f32);
+        let (x0, y0, full_w, full_h) = self.window;
+        let r = Vec2::new(u * full_w - x0, v * full_h - y0);
         (r.x >= 0.0 && r.y >= 0.0 && r.x < self.width as f32 && r.y < self.height as f32).then_some(r)
     }
 
@@ -170,6 +186,23 @@ mod tests {
         let t = (30f32).to_radians().tan();
         let edge = c.raster_of(Vec3::new(-t * 0.999, 0.0, 1.0).normalize()).unwrap();
         assert!(edge.x > 199.0);
+    }
+
+    #[test]
+    fn a_cropped_camera_sees_its_window_of_the_full_view() {
+        let full = cam();
+        let crop = cam().with_crop(50, 20, 100, 40);
+        for (x, y) in [(0.5f32, 0.5f32), (99.5, 39.5), (37.25, 12.75)] {
+            let a = crop.generate_ray(Vec2::new(x, y)).d;
+            let b = full.generate_ray(Vec2::new(x + 50.0, y + 20.0)).d;
+            assert!((a - b).length() < 1e-6);
+            assert!((crop.raster_of(a).unwrap() - Vec2::new(x, y)).length() < 1e-3);
+        }
+        assert!(crop.raster_of(full.generate_ray(Vec2::new(10.0, 10.0)).d).is_none());
+        // the window's importance integrates to 1 over the window
+        let d = crop.generate_ray(Vec2::new(50.0, 20.0)).d;
+        let ratio = crop.importance(d) / full.importance(d);
+        assert!((ratio - 200.0 * 100.0 / (100.0 * 40.0)).abs() < 1e-3);
     }
 
     #[test]

@@ -272,7 +272,7 @@ pub fn render_iterations(
 ) -> (TileAccum, Option<PilotData>) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let rect = Rect::full(w, h);
-    let mut accum = TileAccum::new(rect);
+    let mut accum = TileAccum::new(rect, &scene.film);
     let request = TileRequest { rect, samples: iterations.clone(), seed };
     let collect = collect.filter(|_| collects_moments(strategy.nu, &iterations));
     if collect.is_none() && strategy.nu == 0.0 {
@@ -284,22 +284,14 @@ pub fn render_iterations(
             Rect::tiles(w, h, PT_TILE)
                 .into_par_iter()
                 .map(|rect| {
-                    let mut tile = TileAccum::new(rect);
+                    let mut tile = TileAccum::new(rect, &scene.film);
                     pt.render_tile(scene, &TileRequest { rect, samples: iterations.clone(), seed }, &mut tile);
                     tile
                 })
                 .collect()
         };
         for tile in &tiles {
-            let r = tile.rect;
-            let tile_width = (r.x1 - r.x0) as usize;
-            for y in r.y0..r.y1 {
-                let from = (y - r.y0) as usize * tile_width;
-                let to = (y * w + r.x0) as usize;
-                accum.sum[to..to + tile_width].copy_from_slice(&tile.sum[from..from + tile_width]);
-                accum.count[to..to + tile_width].copy_from_slice(&tile.count[from..from + tile_width]);
-            }
-            accum.non_finite += tile.non_finite;
+            accum.add(tile);
         }
         return (accum, None);
     }
@@ -340,7 +332,7 @@ pub fn render_emis(
     let (w, h) = (scene.camera.width, scene.camera.height);
     let pixels = w as u64 * h as u64;
     let mut state = EmisState::new(config.clone(), w, h);
-    let mut film = Film::new(w, h);
+    let mut film = Film::new(&scene.film);
     let start = Instant::now();
     let mut done = 0u32;
     // iterations the budget allows at the rate so far (unknown before the first); a sample
@@ -393,7 +385,7 @@ pub fn render_emis(
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
         if state.update_due(done) && done < total && pool.install(|| state.update(&film.average(), done)).restarted {
-            film = Film::new(w, h);
+            film = Film::new(&scene.film);
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })

@@ -110,8 +110,9 @@ impl<O: SampleObserver> Bidir<O> {
         SampleCounts { hit: 1.0, next_event: 1.0, connect, light_trace: n, merge }
     }
 
-    /// Light-tracing splats of every cached vertex, by chunks merged in order.
-    fn splats(&self, scene: &Scene, it: &Iteration, scale: f32) -> Vec<Vec<(u32, Rgb)>> {
+    /// Light-tracing splats (raster position, value) of every cached vertex, by chunks merged
+    /// in order.
+    fn splats(&self, scene: &Scene, it: &Iteration, scale: f32) -> Vec<Vec<(Vec2, Rgb)>> {
         let cache = &it.cache;
         let width = scene.camera.width;
         let chunk = 4096usize;
@@ -133,7 +134,7 @@ impl<O: SampleObserver> Bidir<O> {
                     let pixel = raster.y as u32 * width + raster.x as u32;
                     let counts = self.counts(it, pixel, (light[light.len() - 1].p - scene.camera.origin).length());
                     if let Some((w, raster)) = light_trace(scene, light, &counts, scale, &self.observer, i as u32) {
-                        out.push((raster.y as u32 * width + raster.x as u32, w.value));
+                        out.push((raster, w.value));
                     }
                 }
                 out
@@ -141,8 +142,8 @@ impl<O: SampleObserver> Bidir<O> {
             .collect()
     }
 
-    /// One camera path through pixel (x, y): the sum of its weighted contributions. Its work
-    /// is added to `counters`.
+    /// One camera path through pixel (x, y): the sum of its weighted contributions and the
+    /// raster position it started from. Its work is added to `counters`.
     #[allow(clippy::too_many_arguments)]
     fn camera_path(
         &self,
@@ -154,7 +155,7 @@ impl<O: SampleObserver> Bidir<O> {
         iteration: u32,
         verts: &mut Vec<PathVertex>,
         counters: &mut PathCounters,
-    ) -> Rgb {
+    ) -> (Rgb, Vec2) {
         let cam = &scene.camera;
         let cache = &it.cache;
         let pixels = (cam.width * cam.height) as f32;
@@ -164,7 +165,8 @@ impl<O: SampleObserver> Bidir<O> {
         let mut counts = self.counts(it, pixel, 1.0);
         let mut radius = 0.0;
         let report = Report { observer: &self.observer, pixel };
-        let mut ray = cam.generate_ray(Vec2::new(x as f32, y as f32) + sampler.next_2d());
+        let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+        let mut ray = cam.generate_ray(raster);
         let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
         let mut beta = Rgb::ONE;
         let mut eta = 1.0f32;
@@ -309,7 +311,7 @@ impl<O: SampleObserver> Bidir<O> {
             }
             ray = hit.spawn_ray(frame.to_world(bs.wi));
         }
-        total
+        (total, raster)
     }
 }
 
@@ -328,8 +330,8 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
         let n = light_path_count(self.light_paths_per_pixel, w * h);
         for iteration in tile.samples.clone() {
             if self.settings.max_depth == 0 {
-                for i in 0..(w * h) as usize {
-                    accum.add(i, Rgb::ZERO);
+                for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
+                    accum.add_sample(x, y, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), Rgb::ZERO);
                 }
                 let start = IterationStart { iteration, ..IterationStart::default() };
                 self.observer.on_iteration_start(&start);
@@ -356,7 +358,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             let it = Iteration { cache, photons, radius_max };
             self.observer.on_iteration_start(&start);
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
-            let rows: Vec<(Vec<Rgb>, PathCounters)> = (0..h)
+            let rows: Vec<(Vec<(Rgb, Vec2)>, PathCounters)> = (0..h)
                 .into_par_iter()
                 .map_init(Vec::new, |verts, y| {
                     let mut counters = PathCounters::default();
@@ -372,15 +374,15 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 .collect();
             let mut counters = PathCounters::default();
             for (y, (row, row_counters)) in rows.iter().enumerate() {
-                for (x, value) in row.iter().enumerate() {
-                    accum.add(y * w as usize + x, *value);
+                for (x, (value, raster)) in row.iter().enumerate() {
+                    accum.add_sample(x as u32, y as u32, *raster, *value);
                 }
                 counters += *row_counters;
             }
             self.observer.on_iteration_end(&start, &counters);
             for chunk in &splats {
-                for (pixel, value) in chunk {
-                    accum.add_splat(*pixel as usize, *value);
+                for (raster, value) in chunk {
+                    accum.add_splat(*raster, *value);
                 }
             }
         }

@@ -16,6 +16,7 @@ use crate::film::TileAccum;
 use crate::math::Rgb;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
+use glam::Vec2;
 use rayon::prelude::*;
 
 /// The light tracer.
@@ -41,18 +42,16 @@ impl LightTracer {
         iteration: u32,
         range: std::ops::Range<u32>,
         scale: f32,
-    ) -> Vec<(u32, Rgb)> {
+    ) -> Vec<(Vec2, Rgb)> {
         let mut splats = Vec::new();
         let mut vertices = Vec::with_capacity(16);
-        let width = scene.camera.width;
         for index in range {
             vertices.clear();
             let mut sampler = Sampler::for_light_path(seed, index, iteration);
             trace_light_path(scene, &mut sampler, self.max_edges(), self.settings.rr_depth, &mut vertices);
             for v in &vertices {
                 if let Some((value, raster)) = connect_to_camera(scene, v) {
-                    let pixel = raster.y as u32 * width + raster.x as u32;
-                    splats.push((pixel, value * scale));
+                    splats.push((raster, value * scale));
                 }
             }
         }
@@ -80,7 +79,7 @@ impl Integrator for LightTracer {
         // the pixel filter's importance is P times the image-normalised We
         let scale = (w * h) as f32 / n as f32;
         for iteration in tile.samples.clone() {
-            let chunks: Vec<Vec<(u32, Rgb)>> = (0..n.div_ceil(LIGHT_PATH_CHUNK))
+            let chunks: Vec<Vec<(Vec2, Rgb)>> = (0..n.div_ceil(LIGHT_PATH_CHUNK))
                 .into_par_iter()
                 .map(|c| {
                     self.trace_chunk(
@@ -93,8 +92,8 @@ impl Integrator for LightTracer {
                 })
                 .collect();
             for splats in &chunks {
-                for (pixel, value) in splats {
-                    accum.add_splat(*pixel as usize, *value);
+                for (raster, value) in splats {
+                    accum.add_splat(*raster, *value);
                 }
             }
             accum.count_iterations(1);

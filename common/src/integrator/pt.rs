@@ -200,14 +200,13 @@ impl Integrator for PathTracer {
         let width = scene.camera.width;
         for y in r.y0..r.y1 {
             for x in r.x0..r.x1 {
-                let local = ((y - r.y0) * (r.x1 - r.x0) + (x - r.x0)) as usize;
                 let pixel = y * width + x;
                 for s in tile.samples.clone() {
                     let mut sampler = Sampler::for_pixel(tile.seed, pixel, s);
-                    let jitter = sampler.next_2d();
-                    let ray = scene.camera.generate_ray(Vec2::new(x as f32, y as f32) + jitter);
+                    let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                    let ray = scene.camera.generate_ray(raster);
                     let l = self.li(scene, ray, &mut sampler);
-                    accum.add(local, l);
+                    accum.add_sample(x, y, raster, l);
                 }
             }
         }

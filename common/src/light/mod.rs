@@ -4,6 +4,7 @@
 //! estimation) with the matching solid-angle pdf, and emission samples (for light paths) with
 //! their position pdf (area measure) and direction pdf (solid angle).
 
+pub mod envmap;
 pub mod sampler;
 
 use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};

@@ -9,6 +9,8 @@ use super::xml::{Element, SceneTree};
 use super::{IntegratorSettings, Scene};
 use crate::bsdf::{Bxdf, Diffuse, Material};
 use crate::camera::PerspectiveCamera;
+use crate::film::FilmSpec;
+use crate::film::filter::{Filter, FilterKind, MAX_RADIUS};
 use crate::light::Light;
 use crate::math::{PI, Rgb};
 use glam::Vec3;
@@ -29,6 +31,7 @@ struct Builder<'a> {
 
 struct SensorSettings {
     camera: PerspectiveCamera,
+    film: FilmSpec,
     spp: u32,
     seed: u64,
 }
@@ -96,6 +99,7 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
         b.lights,
         b.light_weights,
         sensor.camera,
+        sensor.film,
         sensor.spp,
         sensor.seed,
         integrator,
@@ -140,15 +144,11 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
             format!("unsupported sensor \"{}\" (supported: perspective)", e.plugin),
         ));
     }
-    let (mut width, mut height) = (768u32, 576u32);
+    let mut film: Option<FilmSettings> = None;
     let (mut spp, mut seed) = (4u32, 0u64);
-    let mut have_film = false;
     for c in &e.children {
         match (c.tag.as_str(), c.plugin.as_str()) {
-            ("film", "hdrfilm") => {
-                have_film = true;
-                (width, height) = build_film(c)?;
-            }
+            ("film", "hdrfilm") => film = Some(build_film(c)?),
             ("film", other) => {
                 return Err(SceneError::at(&c.location, format!("unsupported film \"{other}\" (supported: hdrfilm)")));
             }
@@ -174,10 +174,11 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
             (tag, _) => return Err(SceneError::at(&c.location, format!("a sensor cannot contain <{tag}>"))),
         }
     }
-    if !have_film {
+    let film = film.unwrap_or_else(|| {
         tracing::warn!(file = %e.location, "sensor has no film: using Mitsuba's default 768x576");
-    }
-    let aspect = width as f64 / height as f64;
+        FilmSettings { width: 768, height: 576, crop: (0, 0, 768, 576), filter: Filter::new(FilterKind::DEFAULT) }
+    });
+    let aspect = film.width as f64 / film.height as f64;
     let fov_x = fov_x_degrees(e, aspect)?;
     let to_world = e.transform("to_world")?;
     if to_world.uniform_scale(1e-3).is_none_or(|s| (s - 1.0).abs() > 1e-3) {
@@ -195,11 +196,10 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
         ));
     }
     e.check_all_used()?;
-    Ok(SensorSettings {
-        camera: PerspectiveCamera::new(to_world, fov_x as f32, width, height, near_clip, far_clip),
-        spp,
-        seed,
-    })
+    let camera = PerspectiveCamera::new(to_world, fov_x as f32, film.width, film.height, near_clip, far_clip)
+        .with_crop(film.crop.0, film.crop.1, film.crop.2, film.crop.3);
+    let film = FilmSpec::new(film.crop.2, film.crop.3, film.filter);
+    Ok(SensorSettings { camera, film, spp, seed })
 }
 
 /// Mitsuba's `parse_fov`: the horizontal field of view from `fov` + `fov_axis` or `focal_length`.
@@ -265,7 +265,17 @@ fn fov_x_degrees(e: &Element, aspect: f64) -> Result<f64, SceneError> {
     Ok(fov_x)
 }
 
-fn build_film(c: &Element) -> Result<(u32, u32), SceneError> {
+/// The film's size, crop window and reconstruction filter.
+struct FilmSettings {
+    /// The full film.
+    width: u32,
+    height: u32,
+    /// The rendered window: offset and size within the full film.
+    crop: (u32, u32, u32, u32),
+    filter: Filter,
+}
+
+fn build_film(c: &Element) -> Result<FilmSettings, SceneError> {
     let dim = |name: &str, default: i64| -> Result<u32, SceneError> {
         match c.integer(name)?.unwrap_or(default) {
             v if v > 0 && v <= 65_536 => Ok(v as u32),
@@ -289,30 +299,69 @@ fn build_film(c: &Element) -> Result<(u32, u32), SceneError> {
             ));
         }
     }
-    match c.children.as_slice() {
-        [] => {
-            tracing::warn!(file = %c.location, "hdrfilm has no rfilter: Mitsuba would use a gaussian, Tessera renders with a box filter")
-        }
-        [f] if f.tag == "rfilter" && f.plugin == "box" => {
-            if let Some(r) = f.float("radius")? {
-                if (r - 0.5).abs() > 1e-6 {
-                    return Err(SceneError::at(
-                        f.location_of("radius"),
-                        "only the box filter's default radius 0.5 is supported",
-                    ));
-                }
-            }
-            f.check_all_used()?;
-        }
-        [f] if f.tag == "rfilter" => {
-            return Err(SceneError::at(&f.location, format!("unsupported rfilter \"{}\" (supported: box)", f.plugin)));
-        }
+    let crop = crop_window(c, w, h)?;
+    let filter = match c.children.as_slice() {
+        // Mitsuba's default
+        [] => Filter::new(FilterKind::DEFAULT),
+        [f] if f.tag == "rfilter" => build_rfilter(f)?,
         [f, ..] => {
             return Err(SceneError::at(&f.location, format!("a film can contain one <rfilter>, found <{}>", f.tag)));
         }
-    }
+    };
     c.check_all_used()?;
-    Ok((w, h))
+    Ok(FilmSettings { width: w, height: h, crop, filter })
+}
+
+/// `crop_offset_x/y` and `crop_width/height` (default: the whole film), checked to lie inside.
+fn crop_window(c: &Element, w: u32, h: u32) -> Result<(u32, u32, u32, u32), SceneError> {
+    let get = |name: &str, default: u32| -> Result<u32, SceneError> {
+        match c.integer(name)? {
+            None => Ok(default),
+            Some(v) if v >= 0 && v <= 65_536 => Ok(v as u32),
+            Some(v) => Err(SceneError::at(c.location_of(name), format!("\"{name}\" must lie in 0..=65536, found {v}"))),
+        }
+    };
+    let (x, y) = (get("crop_offset_x", 0)?, get("crop_offset_y", 0)?);
+    let (cw, ch) = (get("crop_width", w.saturating_sub(x))?, get("crop_height", h.saturating_sub(y))?);
+    if cw == 0 || ch == 0 || x + cw > w || y + ch > h {
+        return Err(SceneError::at(
+            c.location_of("crop_width"),
+            format!("the crop window {cw}x{ch} at ({x}, {y}) does not fit the {w}x{h} film"),
+        ));
+    }
+    Ok((x, y, cw, ch))
+}
+
+/// An `<rfilter>` with Mitsuba's parameters and defaults.
+fn build_rfilter(f: &Element) -> Result<Filter, SceneError> {
+    // a radius of at most MAX_RADIUS bounds the border a tile's sums carry
+    let positive = |name: &str, default: f32, max: f32| -> Result<f32, SceneError> {
+        match f.float_or(name, default)? {
+            v if v > 0.0 && v <= max => Ok(v),
+            v => Err(SceneError::at(f.location_of(name), format!("\"{name}\" must lie in (0, {max}], found {v}"))),
+        }
+    };
+    let kind = match f.plugin.as_str() {
+        "box" => FilterKind::Box,
+        "tent" => FilterKind::Tent { radius: positive("radius", 1.0, MAX_RADIUS)? },
+        "gaussian" => FilterKind::Gaussian { stddev: positive("stddev", 0.5, MAX_RADIUS / 4.0)? },
+        "mitchell" => FilterKind::Mitchell { b: f.float_or("B", 1.0 / 3.0)?, c: f.float_or("C", 1.0 / 3.0)? },
+        "catmullrom" => FilterKind::CatmullRom,
+        "lanczos" => match f.integer("lobes")?.unwrap_or(3) {
+            l if (1..=16).contains(&l) => FilterKind::Lanczos { lobes: l as u32 },
+            l => {
+                return Err(SceneError::at(f.location_of("lobes"), format!("\"lobes\" must lie in 1..=16, found {l}")));
+            }
+        },
+        other => {
+            return Err(SceneError::at(
+                &f.location,
+                format!("rfilter \"{other}\" is not supported (box, tent, gaussian, mitchell, catmullrom, lanczos)"),
+            ));
+        }
+    };
+    f.check_all_used()?;
+    Ok(Filter::new(kind))
 }
 
 impl Builder<'_> {

@@ -17,6 +17,7 @@ pub mod xml;
 
 use crate::bsdf::Material;
 use crate::camera::PerspectiveCamera;
+use crate::film::FilmSpec;
 use crate::geometry::{Ray, SurfaceInteraction};
 use crate::light::{Light, LightContext, LightSampler};
 use crate::math::Frame;
@@ -56,8 +57,10 @@ pub struct Scene {
     pub infinite_lights: Vec<u32>,
     /// Distribution for choosing a light.
     pub light_sampler: LightSampler,
-    /// The camera.
+    /// The camera; its `width` and `height` are the rendered image's (the film's crop window).
     pub camera: PerspectiveCamera,
+    /// The rendered image's size and reconstruction filter.
+    pub film: FilmSpec,
     /// Samples per pixel from the file's sampler.
     pub spp: u32,
     /// Seed from the file's sampler (0 when absent).
@@ -103,6 +106,7 @@ impl Scene {
         lights: Vec<Light>,
         light_weights: Vec<f32>,
         camera: PerspectiveCamera,
+        film: FilmSpec,
         spp: u32,
         seed: u64,
         integrator: IntegratorSettings,
@@ -155,6 +159,7 @@ impl Scene {
             infinite_lights,
             light_sampler: LightSampler::new(&light_weights),
             camera,
+            film,
             spp,
             seed,
             integrator,

@@ -83,7 +83,7 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
             let samples = 2 + round * iterations..2 + (round + 1) * iterations;
             let request = TileRequest { rect: Rect::full(w, h), samples, seed: 7 };
             let t = Instant::now();
-            pool.install(|| integrator.render_tile(scene, &request, &mut TileAccum::new(request.rect)));
+            pool.install(|| integrator.render_tile(scene, &request, &mut TileAccum::new(request.rect, &scene.film)));
             if round > 0 {
                 best[i] = best[i].min(t.elapsed().as_secs_f64());
             }

@@ -168,7 +168,7 @@ fn pilot_moments(
         pilot.with_observer(&estimators[..]).render_tile(
             &s.scene,
             &TileRequest { rect: full, samples: 0..iterations, seed: 7 },
-            &mut TileAccum::new(full),
+            &mut TileAccum::new(full, &s.scene.film),
         )
     });
     estimators.iter().map(|e| e.snapshot()).collect()
@@ -192,7 +192,9 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
         let own = MomentEstimator::new(w as u32, h as u32, std::slice::from_ref(c), MomentSettings::default());
         let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
         let integrator = strategy_of(c).integrator(s.settings, s.config.correlation_aware);
-        pool.install(|| integrator.with_observer(&own).render_tile(&s.scene, &request, &mut TileAccum::new(full)));
+        pool.install(|| {
+            integrator.with_observer(&own).render_tile(&s.scene, &request, &mut TileAccum::new(full, &s.scene.film))
+        });
         // The image and the time come from a second render without the moment observer: the
         // same samples, timed the way an equal-time render spends them.
         let started = cpu_seconds();
@@ -200,7 +202,7 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
             render_iterations(&s.scene, s.settings, &s.config, &strategy_of(c), request.seed, request.samples, None)
         });
         m.seconds.push((cpu_seconds() - started) / k as f64);
-        let mut film = Film::new(w as u32, h as u32);
+        let mut film = Film::new(&s.scene.film);
         film.merge_tile(&accum);
         let image = film.average();
         m.error.push(relmse(&image, &s.reference, 0.0) * k as f64);

@@ -45,7 +45,7 @@ pub fn measure(scene_path: &Path) -> anyhow::Result<TileTimes> {
     let mut pixels = 0usize;
     pool.install(|| {
         for rect in &picked {
-            let mut accum = TileAccum::new(*rect);
+            let mut accum = TileAccum::new(*rect, &scene.film);
             pt.render_tile(&scene, &TileRequest { rect: *rect, samples: 0..spp, seed: 1 }, &mut accum);
             pixels += rect.area();
         }
@@ -59,7 +59,7 @@ pub fn measure(scene_path: &Path) -> anyhow::Result<TileTimes> {
     let t = Instant::now();
     pool.install(|| {
         for i in 0..iterations {
-            let mut accum = TileAccum::new(full);
+            let mut accum = TileAccum::new(full, &scene.film);
             vcm.render_tile(&scene, &TileRequest { rect: full, samples: i..i + 1, seed: 1 }, &mut accum);
         }
     });

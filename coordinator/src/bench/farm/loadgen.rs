@@ -26,6 +26,9 @@ pub struct SimResult {
     pub payload: Vec<u8>,
 }
 
+/// Bytes per pixel of the box-filtered sums the generated scene's tiles carry.
+const BOX_BYTES_PER_PIXEL: usize = 28;
+
 /// A valid result for `lease`: every pixel's sums finite and plausible (a smooth pattern of
 /// radiance sums, so the bytes are not all equal), every count the lease's sample count; for an
 /// EMIS lease that collects moments, followed by pilot data of the job's size (every
@@ -43,7 +46,9 @@ pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
         }
     }
     let count = vec![n; pixels];
-    let mut payload = tessera_proto::encode_tile_payload(&sum, &count);
+    let mut payload = Vec::with_capacity(pixels * BOX_BYTES_PER_PIXEL);
+    tessera_proto::payload::write_channels(&mut payload, &sum, None, None, &count)
+        .expect("invariant: writing into a Vec cannot fail");
     let pilot = pilot_data(lease, w, h, n);
     payload.extend_from_slice(&pilot);
     SimResult { header: tessera_proto::result_header(worker_id, lease, 0, 0.0, pilot.len() as u64), payload }
@@ -283,7 +288,7 @@ fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cp
     per_second.sort_by(f64::total_cmp);
     IngestReport {
         case: case.into(),
-        tile_pixels: samples.first().map_or(0, |s| (s.bytes / tessera_proto::RESULT_BYTES_PER_PIXEL) as u64),
+        tile_pixels: samples.first().map_or(0, |s| (s.bytes / BOX_BYTES_PER_PIXEL) as u64),
         tiles,
         not_accepted,
         seconds,

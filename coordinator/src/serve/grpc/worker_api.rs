@@ -78,7 +78,7 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
                 header.pilot_bytes
             )));
         }
-        let limit = rect.area() * tessera_proto::RESULT_BYTES_PER_PIXEL + header.pilot_bytes as usize;
+        let limit = self.0.svc.result_bytes(&lease, rect) + header.pilot_bytes as usize;
         let mut payload = Vec::with_capacity(limit.min(1 << 28));
         while let Some(msg) = stream.next().await {
             match msg?.part {

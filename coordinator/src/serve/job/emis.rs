@@ -192,6 +192,7 @@ mod tests {
             full_frame: true,
             bundle_digest: "d".into(),
             scene_path: "scene.xml".into(),
+            filter: tessera_common::film::filter::FilterKind::Box,
         }
     }
 
@@ -208,7 +209,7 @@ mod tests {
     fn an_update_runs_once_per_barrier() {
         let mut job = EmisJob::new(&spec()).unwrap();
         job.absorb(&pilot(&job, 1)).unwrap();
-        let film = Film::new(4, 2);
+        let film = Film::for_filter(4, 2, &tessera_common::film::filter::Filter::BOX);
         let restarted = job.update(&film, 1);
         let (strategy, reports) = (job.state.strategy.clone(), job.state.reports.len());
         assert_eq!(job.update(&film, 1), restarted);

@@ -166,6 +166,7 @@ mod tests {
             full_frame: integrator.full_frame(),
             bundle_digest: "d".into(),
             scene_path: "scene.xml".into(),
+            filter: tessera_common::film::filter::FilterKind::Box,
         }
     }
 

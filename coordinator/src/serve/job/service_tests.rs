@@ -30,9 +30,9 @@ fn upload(
     let tile = svc.lease_spec(lease).unwrap();
     let settings = RenderSettings { spp: Some(1), seed: Some(3), ..Default::default() };
     let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(scene) else { panic!("a tile integrator") };
-    let mut accum = TileAccum::new(tile.rect);
+    let mut accum = TileAccum::new(tile.rect, &scene.film);
     integrator.render_tile(scene, &TileRequest { rect: tile.rect, samples: tile.samples.clone(), seed: 3 }, &mut accum);
-    let payload = tessera_proto::encode_tile_payload(&accum.sum, &accum.count);
+    let payload = tessera_proto::payload::encode_tile(&accum);
     let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite, pilot_bytes: 0 };
     svc.upload(worker, lease, &claim, &payload, now)
 }

@@ -4,7 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
-use tessera_common::film::Rect;
+use tessera_common::film::filter::{Filter, FilterKind};
+use tessera_common::film::{Layout, Rect};
 use tessera_common::settings::RenderSettings;
 
 /// The immutable description of a job, fixed at submission.
@@ -26,6 +27,20 @@ pub struct JobSpec {
     pub bundle_digest: String,
     /// The scene XML's path inside the bundle.
     pub scene_path: String,
+    /// The film's reconstruction filter (jobs stored before filters carry none: the box).
+    #[serde(default = "box_filter")]
+    pub filter: FilterKind,
+}
+
+fn box_filter() -> FilterKind {
+    FilterKind::Box
+}
+
+impl JobSpec {
+    /// The channels and pixels of the sums of a tile over `rect`.
+    pub fn layout(&self, rect: Rect) -> Layout {
+        Layout::of(rect, self.width, self.height, &Filter::new(self.filter))
+    }
 }
 
 /// What a tile renders.

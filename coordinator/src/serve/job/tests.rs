@@ -18,6 +18,7 @@ fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
         full_frame: integrator.full_frame(),
         bundle_digest: "digest".into(),
         scene_path: "scene.xml".into(),
+        filter: tessera_common::film::filter::FilterKind::Box,
     }
 }
 

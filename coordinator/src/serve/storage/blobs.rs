@@ -9,6 +9,11 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
 
+/// The first word of a film checkpoint ("TSCK").
+pub const CHECKPOINT_MAGIC: u32 = u32::from_le_bytes(*b"TSCK");
+/// The checkpoint format this version writes.
+pub const CHECKPOINT_VERSION: u32 = 2;
+
 /// Blob storage under one directory.
 #[derive(Clone, Debug)]
 pub struct BlobStore {
@@ -80,46 +85,61 @@ impl BlobStore {
     }
 
     /// Writes a checkpoint of `film` holding `tiles[..merged]`, followed by `trailer` (an EMIS
-    /// state, or nothing); returns its file name.
+    /// state, or nothing); returns its file name. The format: [`CHECKPOINT_MAGIC`], a version,
+    /// flags (weights, splats), width, height, the non-finite count, then the film's channels
+    /// in the payload order (`tessera_proto::payload`), then the trailer.
     pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film, trailer: &[u8]) -> std::io::Result<String> {
         let name = format!("{job}.{merged}.film");
-        // streamed in the payload layout (`tessera_proto::encode_tile_payload`): a 4K film is
-        // 230 MB, which is not worth copying in memory first
+        // streamed: a 4K film is 230 MB or more, not worth copying in memory first
         self.write_atomic_with(&self.root.join("checkpoints").join(&name), |w| {
-            w.write_all(&film.width.to_le_bytes())?;
-            w.write_all(&film.height.to_le_bytes())?;
+            let flags = film.weight.is_some() as u32 | (film.splat.is_some() as u32) << 1;
+            for word in [CHECKPOINT_MAGIC, CHECKPOINT_VERSION, flags, film.width, film.height] {
+                w.write_all(&word.to_le_bytes())?;
+            }
             w.write_all(&film.non_finite.to_le_bytes())?;
-            for s in &film.sum {
-                for c in s {
-                    w.write_all(&c.to_le_bytes())?;
-                }
-            }
-            for c in &film.count {
-                w.write_all(&c.to_le_bytes())?;
-            }
+            tessera_proto::payload::write_channels(
+                w,
+                &film.sum,
+                film.weight.as_deref(),
+                film.splat.as_deref(),
+                &film.count,
+            )?;
             w.write_all(trailer)
         })?;
         Ok(name)
     }
 
-    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`]: the film and the trailer.
+    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`] (or, without the magic
+    /// number, by the box-only format before it): the film and the trailer.
     pub fn get_checkpoint(&self, name: &str) -> std::io::Result<(Film, Vec<u8>)> {
         let bytes = std::fs::read(self.root.join("checkpoints").join(name))?;
-        let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt"));
-        if bytes.len() < 16 {
-            return Err(bad());
-        }
-        let width = u32::from_le_bytes(bytes[0..4].try_into().map_err(|_| bad())?);
-        let height = u32::from_le_bytes(bytes[4..8].try_into().map_err(|_| bad())?);
-        let non_finite = u64::from_le_bytes(bytes[8..16].try_into().map_err(|_| bad())?);
-        let film_bytes = (width as usize * height as usize)
-            .checked_mul(tessera_proto::RESULT_BYTES_PER_PIXEL)
-            .and_then(|n| n.checked_add(16))
-            .filter(|&n| n <= bytes.len())
-            .ok_or_else(bad)?;
-        let (sum, count) = tessera_proto::decode_tile_payload(&bytes[16..film_bytes], width as usize * height as usize)
-            .ok_or_else(bad)?;
-        Ok((Film { width, height, sum, count, non_finite }, bytes[film_bytes..].to_vec()))
+        let bad = |why: &str| {
+            std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt: {why}"))
+        };
+        let word = |at: usize| -> std::io::Result<u32> {
+            Ok(u32::from_le_bytes(
+                bytes.get(at..at + 4).ok_or_else(|| bad("too short"))?.try_into().expect("invariant: 4 bytes"),
+            ))
+        };
+        let (flags, header) = match word(0)? {
+            CHECKPOINT_MAGIC if word(4)? == CHECKPOINT_VERSION => (word(8)?, 12),
+            CHECKPOINT_MAGIC => return Err(bad(&format!("unknown format version {}", word(4)?))),
+            _ => (0, 0),
+        };
+        let (width, height) = (word(header)?, word(header + 4)?);
+        let at = header + 8;
+        let non_finite = u64::from_le_bytes(
+            bytes.get(at..at + 8).ok_or_else(|| bad("too short"))?.try_into().expect("invariant: 8 bytes"),
+        );
+        let (weights, splats) = (flags & 1 != 0, flags & 2 != 0);
+        let pixels = width as usize * height as usize;
+        let per_pixel = 28 + if weights { 8 } else { 0 } + if splats { 24 } else { 0 };
+        let end = pixels.checked_mul(per_pixel).and_then(|n| n.checked_add(at + 8)).filter(|&n| n <= bytes.len());
+        let end = end.ok_or_else(|| bad("too short for its size"))?;
+        let (sum, weight, splat, count) =
+            tessera_proto::payload::decode_channels(&bytes[at + 8..end], pixels, weights, splats)
+                .ok_or_else(|| bad("wrong size"))?;
+        Ok((Film { width, height, sum, weight, splat, count, non_finite }, bytes[end..].to_vec()))
     }
 
     /// Deletes a superseded checkpoint.
@@ -161,13 +181,49 @@ mod tests {
         assert_eq!(d, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");
         assert_eq!(blobs.get(&d).unwrap().unwrap(), b"hello");
         assert!(blobs.get("../../etc/passwd").unwrap().is_none());
-        let mut film = Film::new(2, 1);
-        film.sum[1] = [0.5, 1.5, -0.0];
-        film.count[1] = 3;
-        film.non_finite = 2;
+        let boxed = tessera_common::film::filter::Filter::BOX;
+        let gaussian = tessera_common::film::filter::Filter::new(tessera_common::film::filter::FilterKind::DEFAULT);
+        for (i, filter) in [boxed, gaussian].iter().enumerate() {
+            let mut film = Film::for_filter(2, 1, filter);
+            film.sum[1] = [0.5, 1.5, -0.0];
+            film.count[1] = 3;
+            film.non_finite = 2;
+            if let Some(w) = &mut film.weight {
+                w[1] = 0.75;
+                film.splat = Some(vec![[1.0, 2.0, 3.0], [0.0; 3]]);
+            }
+            let name = blobs.put_checkpoint("job", 2 * i, &film, &[]).unwrap();
+            assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film.clone(), Vec::new()));
+            let name = blobs.put_checkpoint("job", 2 * i + 1, &film, b"emis").unwrap();
+            assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film, b"emis".to_vec()));
+        }
+    }
+
+    #[test]
+    fn checkpoints_of_the_box_only_format_still_load_and_corrupt_ones_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let blobs = BlobStore::open(dir.path()).unwrap();
+        // width 1, height 1, non-finite 4, one pixel's sums and count, a trailer
+        let mut old = Vec::new();
+        old.extend_from_slice(&1u32.to_le_bytes());
+        old.extend_from_slice(&1u32.to_le_bytes());
+        old.extend_from_slice(&4u64.to_le_bytes());
+        for v in [1.0f64, 2.0, 3.0] {
+            old.extend_from_slice(&v.to_le_bytes());
+        }
+        old.extend_from_slice(&7u32.to_le_bytes());
+        old.extend_from_slice(b"tail");
+        std::fs::write(dir.path().join("checkpoints").join("old.film"), &old).unwrap();
+        let (film, trailer) = blobs.get_checkpoint("old.film").unwrap();
+        assert_eq!((film.sum[0], film.count[0], film.non_finite, film.weight.is_none()), ([1.0, 2.0, 3.0], 7, 4, true));
+        assert_eq!(trailer, b"tail");
         let name = blobs.put_checkpoint("job", 1, &film, &[]).unwrap();
-        assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film.clone(), Vec::new()));
-        let name = blobs.put_checkpoint("job", 2, &film, b"emis").unwrap();
-        assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film, b"emis".to_vec()));
+        let path = dir.path().join("checkpoints").join(&name);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[4] = 9;
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(blobs.get_checkpoint(&name).unwrap_err().to_string().contains("version 9"));
+        std::fs::write(&path, &bytes[..20]).unwrap();
+        assert!(blobs.get_checkpoint(&name).is_err());
     }
 }

@@ -460,6 +460,7 @@ mod tests {
             full_frame: false,
             bundle_digest: "d".into(),
             scene_path: "scene.xml".into(),
+            filter: tessera_common::film::filter::FilterKind::Gaussian { stddev: 0.5 },
         };
         let c = m.submit("a", spec, 5).unwrap();
         store.persist(&m, &c, &[]).unwrap();

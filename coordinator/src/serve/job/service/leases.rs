@@ -6,6 +6,8 @@ use super::{Inner, JobService, LeaseGrant, ServiceError};
 use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
+use tessera_common::film::filter::Filter;
+use tessera_common::film::{Layout, Rect};
 
 impl JobService {
     /// Registers a worker; returns its id.
@@ -55,6 +57,18 @@ impl JobService {
         drop(inner);
         self.commits.wait(ticket)?;
         Ok(grants)
+    }
+
+    /// The size of the image sums a result for `lease` carries: the leased tile's layout (its
+    /// rectangle, the filter's border and channels), or, for a lease no longer known, that of
+    /// the `claimed` rectangle with the box filter (the result will be refused anyway).
+    pub fn result_bytes(&self, lease: &LeaseRef, claimed: Rect) -> usize {
+        let inner = self.lock();
+        let layout = match inner.model.jobs.get(&lease.job) {
+            Some(job) => job.spec.layout(job.tiles.get(lease.tile).map_or(claimed, |t| t.spec.rect)),
+            None => Layout::of(claimed, claimed.x1, claimed.y1, &Filter::BOX),
+        };
+        tessera_proto::payload::payload_bytes(&layout).unwrap_or(usize::MAX)
     }
 
     /// The tile a lease refers to.

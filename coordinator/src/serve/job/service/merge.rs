@@ -11,7 +11,8 @@ use crate::serve::job::model::{Changes, JobSpec, TileSpec};
 use crate::serve::job::plan::BarrierAction;
 use crate::serve::job::validate::{ResultClaim, validate_result};
 use crate::serve::storage::Extra;
-use tessera_common::film::{Film, TileAccum};
+use tessera_common::film::Film;
+use tessera_common::film::filter::Filter;
 
 /// A checkpoint writes the whole film while uploads wait, so consecutive checkpoints of a job
 /// are at least this many times the last one's duration apart: writing them takes at most
@@ -47,7 +48,8 @@ impl JobService {
             format!("result claims {} pilot bytes in a payload of {}", claim.pilot_bytes, payload.len())
         })?;
         let (image, pilot) = payload.split_at(payload.len() - pilot_bytes);
-        let accum = validate_result(tile, claim, image)?;
+        let layout = self.lock().model.jobs.get(job).map(|j| j.spec.layout(tile.rect)).ok_or("the job is gone")?;
+        let accum = validate_result(tile, layout, claim, image)?;
         // megabytes of pilot data are decoded without holding the service's lock
         let shape = self.lock().jobs.get(job).and_then(|r| r.emis.as_ref()).map(EmisJob::shape);
         let pilot = match shape {
@@ -63,6 +65,7 @@ impl JobService {
     /// resumes after the update (or, if it stopped before, runs it again identically).
     pub(super) fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let iterations = inner.model.jobs[job].spp_merged();
+        let filter = Filter::new(inner.model.jobs[job].spec.filter);
         let runtime = inner.job(job);
         let (Some(film), Some(emis)) = (runtime.film.as_mut(), runtime.emis.as_mut()) else {
             let changes = inner.model.fail(job, "the EMIS state of this job is missing".into(), now_ms);
@@ -73,7 +76,7 @@ impl JobService {
         if restarted {
             // a path-tracing start ended: its iterations leave the image (the checkpoint
             // below stores the empty film with the new strategy)
-            *film = Film::new(film.width, film.height);
+            *film = Film::for_filter(film.width, film.height, &filter);
         }
         let changes = inner.model.optimized(job, restarted, now_ms)?;
         let upto = inner.model.jobs[job].merged;
@@ -287,15 +290,16 @@ impl JobService {
                 (u64::from_le_bytes(nf), bytes[8..].to_vec())
             }
         };
-        let image_bytes = t.spec.rect.area() * tessera_proto::RESULT_BYTES_PER_PIXEL;
+        let layout = j.spec.layout(t.spec.rect);
+        let image_bytes = tessera_proto::payload::payload_bytes(&layout).ok_or_else(|| corrupt("too large"))?;
         let (image, pilot) = bytes.split_at_checked(image_bytes).ok_or_else(|| corrupt("too short"))?;
-        let (sum, count) =
-            tessera_proto::decode_tile_payload(image, t.spec.rect.area()).ok_or_else(|| corrupt("wrong size"))?;
+        let accum = tessera_proto::payload::decode_tile(image, t.spec.rect, layout, non_finite)
+            .ok_or_else(|| corrupt("wrong size"))?;
         let pilot = match inner.jobs.get(job).and_then(|r| r.emis.as_ref()) {
             Some(e) => e.decode_pilot(&t.spec, j.collects(i), pilot).map_err(|m| corrupt(&m))?,
             None => None,
         };
-        Ok((TileAccum { rect: t.spec.rect, sum, count, non_finite }, pilot))
+        Ok((accum, pilot))
     }
 
     /// Writes the result EXR (with the EMIS layers and decisions) and PNG preview as blobs,

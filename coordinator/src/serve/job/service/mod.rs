@@ -27,6 +27,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tessera_common::film::Film;
+use tessera_common::film::filter::Filter;
 
 pub use super::view::{JobView, StrategyView, WorkerView};
 pub use merge::CHECKPOINT_SPACING;
@@ -248,7 +249,7 @@ fn restore_running(
 ) -> Result<(Film, Option<EmisJob>), ServiceError> {
     let (film, emis_bytes) = match &files.checkpoint {
         Some(name) => blobs.get_checkpoint(name)?,
-        None => (Film::new(spec.width, spec.height), Vec::new()),
+        None => (Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter)), Vec::new()),
     };
     let emis = match emis_bytes.is_empty() {
         true => EmisJob::new(spec),

@@ -8,6 +8,7 @@ use crate::serve::job::model::JobSpec;
 use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::film::Film;
+use tessera_common::film::filter::Filter;
 use tessera_common::scene::Scene;
 use tessera_common::settings::RenderSettings;
 
@@ -35,12 +36,13 @@ impl JobService {
             height: scene.camera.height,
             bundle_digest: digest,
             scene_path: bundle.scene_path.clone(),
+            filter: scene.film.filter.kind,
         };
         let id = uuid::Uuid::new_v4().to_string();
         let mut inner = self.lock();
         let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
         let runtime = inner.job(&id);
-        runtime.film = Some(Film::new(spec.width, spec.height));
+        runtime.film = Some(Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter)));
         runtime.emis = EmisJob::new(&spec);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
