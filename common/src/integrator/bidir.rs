@@ -182,7 +182,10 @@ impl<O: SampleObserver> Bidir<O> {
                 // ---- escaped: infinite lights ----
                 if !(self.settings.hide_emitters && depth == 1) {
                     for &li in &scene.infinite_lights {
-                        let crate::light::Light::Constant { radiance } = scene.lights[li as usize] else { continue };
+                        let radiance = scene.lights[li as usize].eval_infinite(ray.d);
+                        if radiance == Rgb::ZERO {
+                            continue;
+                        }
                         let env = PathVertex {
                             p: ray.o + ray.d * (2.0 * scene.bounds_radius),
                             n_geo: -ray.d,

@@ -120,7 +120,10 @@ impl PathTracer {
         let mut total = Rgb::ZERO;
         for &i in &scene.infinite_lights {
             let light = &scene.lights[i as usize];
-            let Light::Constant { radiance } = light else { continue };
+            let radiance = light.eval_infinite(d);
+            if radiance == Rgb::ZERO {
+                continue;
+            }
             let w = if prev_delta {
                 1.0
             } else {
@@ -128,7 +131,7 @@ impl PathTracer {
                     * light.pdf_direct(&scene.light_context(), prev_p, prev_p + d, -d);
                 power_heuristic(prev_pdf, pdf_light)
             };
-            total += *radiance * w;
+            total += radiance * w;
         }
         total
     }

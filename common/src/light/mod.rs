@@ -1,4 +1,5 @@
-//! Emitters: Mitsuba's `area` (on any shape), `point` and `constant`.
+//! Emitters: Mitsuba's `area` (on any shape), `point`, `spot`, `constant`, `envmap` and
+//! `directional`.
 //!
 //! Each light offers direct-lighting samples towards a reference point (for next-event
 //! estimation) with the matching solid-angle pdf, and emission samples (for light paths) with
@@ -10,7 +11,9 @@ pub mod sampler;
 use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};
 use crate::scene::shape::{Mesh, Shape, ShapeGeometry, SurfacePoint};
 use glam::{Vec2, Vec3};
+use std::sync::Arc;
 
+pub use envmap::Envmap;
 pub use sampler::LightSampler;
 
 /// The closed set of light types.
@@ -35,6 +38,49 @@ pub enum Light {
         /// Radiance.
         radiance: Rgb,
     },
+    /// Radiance from infinity looked up in an image (Mitsuba's `envmap`).
+    Envmap(Arc<Envmap>),
+    /// Parallel light arriving from infinity along one direction (Mitsuba's `directional`).
+    Directional {
+        /// Unit direction the light travels in.
+        direction: Vec3,
+        /// Irradiance on a plane facing the light (W/m²).
+        irradiance: Rgb,
+    },
+    /// A point light emitting into a cone with a smooth edge (Mitsuba's `spot`).
+    Spot(Spot),
+}
+
+/// Mitsuba's `spot`: intensity along its axis, falling off linearly in the angle from the
+/// beam width to the cutoff angle (`src/emitters/spot.cpp`).
+#[derive(Clone, Debug)]
+pub struct Spot {
+    /// Position.
+    pub position: Vec3,
+    /// Frame whose z axis is the spot's axis.
+    pub frame: Frame,
+    /// Radiant intensity on the axis (W/sr).
+    pub intensity: Rgb,
+    /// Cutoff half-angle (radians).
+    pub cutoff: f32,
+    /// Half-angle of the full-intensity beam (radians).
+    pub beam: f32,
+}
+
+impl Spot {
+    /// Intensity emitted in world direction `d` (unit).
+    #[inline]
+    fn emitted(&self, d: Vec3) -> Rgb {
+        let cos = self.frame.to_local(d).z;
+        let falloff = if cos >= self.beam.cos() {
+            1.0
+        } else if cos > self.cutoff.cos() {
+            (self.cutoff - cos.clamp(-1.0, 1.0).acos()) / (self.cutoff - self.beam)
+        } else {
+            0.0
+        };
+        self.intensity * falloff
+    }
 }
 
 /// A direct-lighting sample.
@@ -96,14 +142,37 @@ fn sphere_cone(dist2: f32, radius: f32) -> (f32, f32) {
 }
 
 impl Light {
-    /// Whether the light is a delta light (cannot be hit by rays).
+    /// Whether the light is a delta light (a point or one direction: cannot be hit by rays).
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point { .. })
+        matches!(self, Light::Point { .. } | Light::Spot(_) | Light::Directional { .. })
     }
 
     /// Whether the light is at infinity.
     pub fn is_infinite(&self) -> bool {
-        matches!(self, Light::Constant { .. })
+        matches!(self, Light::Constant { .. } | Light::Envmap(_) | Light::Directional { .. })
+    }
+
+    /// Radiance an escaped ray travelling along `d` sees from this light (zero but for
+    /// infinite lights that rays can hit).
+    #[inline]
+    pub fn eval_infinite(&self, d: Vec3) -> Rgb {
+        match self {
+            Light::Constant { radiance } => *radiance,
+            Light::Envmap(map) => map.eval(d),
+            _ => Rgb::ZERO,
+        }
+    }
+
+    /// Radiance (area lights, times the cosine) or intensity (point and spot lights) leaving a
+    /// light vertex with normal `n` towards direction `d`; zero for lights at infinity.
+    #[inline]
+    pub fn emitted_towards(&self, n: Vec3, d: Vec3) -> Rgb {
+        match self {
+            Light::Area { radiance, .. } => Self::eval_area(*radiance, n, d) * n.dot(d).abs(),
+            Light::Point { intensity, .. } => *intensity,
+            Light::Spot(spot) => spot.emitted(d),
+            Light::Constant { .. } | Light::Envmap(_) | Light::Directional { .. } => Rgb::ZERO,
+        }
     }
 
     /// Radiance leaving an area light at a surface point with normal `n` in direction `w`.
@@ -129,17 +198,30 @@ impl Light {
                     delta: true,
                 })
             }
+            Light::Spot(spot) => {
+                let delta = spot.position - p_ref;
+                let dist2 = delta.length_squared();
+                let dist = dist2.sqrt();
+                (dist > 0.0).then(|| DirectSample {
+                    p: spot.position,
+                    n: Vec3::ZERO,
+                    wi: delta / dist,
+                    dist,
+                    radiance: spot.emitted(-delta / dist) / dist2,
+                    pdf: 1.0,
+                    delta: true,
+                })
+            }
             Light::Constant { radiance } => {
                 let wi = warp::square_to_uniform_sphere(u);
-                Some(DirectSample {
-                    p: p_ref + wi * (2.0 * ctx.radius),
-                    n: -wi,
-                    wi,
-                    dist: f32::INFINITY,
-                    radiance: *radiance,
-                    pdf: warp::uniform_sphere_pdf(),
-                    delta: false,
-                })
+                Some(infinite_sample(ctx, p_ref, wi, *radiance, warp::uniform_sphere_pdf(), false))
+            }
+            Light::Envmap(map) => {
+                let (wi, pdf) = map.sample(u)?;
+                Some(infinite_sample(ctx, p_ref, wi, map.eval(wi), pdf, false))
+            }
+            Light::Directional { direction, irradiance } => {
+                Some(infinite_sample(ctx, p_ref, -*direction, *irradiance, 1.0, true))
             }
             Light::Area { shape, radiance } => {
                 let shape = &ctx.shapes[*shape as usize];
@@ -183,8 +265,9 @@ impl Light {
     /// normal `n` (for infinite lights: the direction `p - p_ref`).
     pub fn pdf_direct(&self, ctx: &LightContext, p_ref: Vec3, p: Vec3, n: Vec3) -> f32 {
         match self {
-            Light::Point { .. } => 0.0,
+            Light::Point { .. } | Light::Spot(_) | Light::Directional { .. } => 0.0,
             Light::Constant { .. } => warp::uniform_sphere_pdf(),
+            Light::Envmap(map) => map.pdf((p - p_ref).normalize_or_zero()),
             Light::Area { shape, .. } => {
                 let shape = &ctx.shapes[*shape as usize];
                 if let ShapeGeometry::Sphere { center, radius } = &shape.geometry {
@@ -216,20 +299,29 @@ impl Light {
                     delta_pos: true,
                 })
             }
+            Light::Spot(spot) => {
+                let local = warp::square_to_uniform_cone(u_dir, spot.cutoff.cos());
+                let d = spot.frame.to_world(local);
+                Some(EmissionSample {
+                    p: spot.position,
+                    n: Vec3::ZERO,
+                    d,
+                    radiance: spot.emitted(d),
+                    pdf_pos: 1.0,
+                    pdf_dir: warp::uniform_cone_pdf(spot.cutoff.cos()),
+                    delta_pos: true,
+                })
+            }
             Light::Constant { radiance } => {
                 let d = -warp::square_to_uniform_sphere(u_dir);
-                let frame = Frame::from_normal(d);
-                let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
-                let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
-                Some(EmissionSample {
-                    p,
-                    n: d,
-                    d,
-                    radiance: *radiance,
-                    pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius),
-                    pdf_dir: warp::uniform_sphere_pdf(),
-                    delta_pos: false,
-                })
+                Some(infinite_emission(ctx, d, *radiance, warp::uniform_sphere_pdf(), u_pos))
+            }
+            Light::Envmap(map) => {
+                let (to_map, pdf) = map.sample(u_dir)?;
+                Some(infinite_emission(ctx, -to_map, map.eval(to_map), pdf, u_pos))
+            }
+            Light::Directional { direction, irradiance } => {
+                Some(infinite_emission(ctx, *direction, *irradiance, 1.0, u_pos))
             }
             Light::Area { shape, radiance } => {
                 let shape = &ctx.shapes[*shape as usize];
@@ -249,15 +341,38 @@ impl Light {
         }
     }
 
-    /// Position (area) and direction (solid angle) pdfs of emitting along `d` from `p` with
-    /// normal `n`.
+    /// Position (area) and direction (solid angle) pdfs of emitting along `d` from a point with
+    /// normal `n`; for lights at infinity `d` is the direction towards the light (the opposite
+    /// of travel) and the position pdf is that of the scene's disk. A delta direction
+    /// (`directional`) has pdf 1, as its emission samples report.
     pub fn pdf_emission(&self, ctx: &LightContext, n: Vec3, d: Vec3) -> (f32, f32) {
+        let disk = 1.0 / (PI * ctx.radius * ctx.radius);
         match self {
             Light::Point { .. } => (0.0, warp::uniform_sphere_pdf()),
-            Light::Constant { .. } => (1.0 / (PI * ctx.radius * ctx.radius), warp::uniform_sphere_pdf()),
+            Light::Spot(spot) => {
+                let inside = spot.frame.to_local(d).z > spot.cutoff.cos();
+                (0.0, if inside { warp::uniform_cone_pdf(spot.cutoff.cos()) } else { 0.0 })
+            }
+            Light::Constant { .. } => (disk, warp::uniform_sphere_pdf()),
+            Light::Envmap(map) => (disk, map.pdf(d)),
+            Light::Directional { .. } => (disk, 1.0),
             Light::Area { shape, .. } => (1.0 / ctx.shapes[*shape as usize].area, n.dot(d).max(0.0) * INV_PI),
         }
     }
+}
+
+/// A direct sample of a light at infinity seen from `p_ref` along `wi`.
+fn infinite_sample(ctx: &LightContext, p_ref: Vec3, wi: Vec3, radiance: Rgb, pdf: f32, delta: bool) -> DirectSample {
+    DirectSample { p: p_ref + wi * (2.0 * ctx.radius), n: -wi, wi, dist: f32::INFINITY, radiance, pdf, delta }
+}
+
+/// An emission sample of a light at infinity travelling along `d`: the origin uniform on the
+/// disk of the scene's bounding sphere facing `d`.
+fn infinite_emission(ctx: &LightContext, d: Vec3, radiance: Rgb, pdf_dir: f32, u_pos: Vec2) -> EmissionSample {
+    let frame = Frame::from_normal(d);
+    let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
+    let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
+    EmissionSample { p, n: d, d, radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir, delta_pos: false }
 }
 
 /// Samples the cone a sphere subtends from `p_ref` uniformly and returns the point where the

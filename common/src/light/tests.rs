@@ -65,6 +65,7 @@ fn direct_sampling_matches_pdf_chi2() {
         .map(|&i| (format!("area on shape {i}"), Light::Area { shape: i as u32, radiance: Rgb::ONE }))
         .collect();
     lights.push(("constant".into(), Light::Constant { radiance: Rgb::ONE }));
+    lights.push(("envmap".into(), test_envmap()));
     let alpha = 1.0 - 0.99f64.powf(1.0 / lights.len() as f64);
     let p_ref = Vec3::new(0.0, 0.0, 0.0);
     for (name, light) in &lights {
@@ -140,6 +141,8 @@ fn emission_direction_sampling_matches_pdf_chi2() {
         Light::Area { shape: 2, radiance: Rgb::ONE },
         Light::Point { position: Vec3::ONE, intensity: Rgb::ONE },
         Light::Constant { radiance: Rgb::ONE },
+        test_envmap(),
+        test_spot(),
     ];
     // Šidák-corrected 1 % for the family
     let alpha = 1.0 - 0.99f64.powf(1.0 / lights.len() as f64);
@@ -155,10 +158,75 @@ fn emission_direction_sampling_matches_pdf_chi2() {
                 let mut s = Sampler::for_pixel(6, i as u32, 0);
                 light.sample_emission(&ctx, u_pos, s.next_2d()).map(|e| e.d)
             },
-            |d| light.pdf_emission(&ctx, e0.n, d).1,
+            // lights at infinity take the direction towards them, the opposite of travel
+            |d| light.pdf_emission(&ctx, e0.n, if light.is_infinite() { -d } else { d }).1,
         );
         assert!(r.passes(alpha), "{light:?}: {r:?}");
     }
+}
+
+/// An environment map with a bright patch, rotated.
+fn test_envmap() -> Light {
+    let (w, h) = (16, 8);
+    let texels: Vec<Rgb> = (0..w * h)
+        .map(
+            |i| if (5..8).contains(&(i % w)) && (2..4).contains(&(i / w)) { Rgb::splat(30.0) } else { Rgb::splat(0.5) },
+        )
+        .collect();
+    let rotation = glam::Mat3::from_axis_angle(Vec3::new(1.0, 0.2, 0.3).normalize(), 0.7);
+    Light::Envmap(Arc::new(Envmap::new(w, h, &texels, 1.0, rotation)))
+}
+
+/// A spot light at (0.2, 0.1, 0.3) aimed along (0.3, -0.2, 1), cutoff 30°, beam 20°.
+fn test_spot() -> Light {
+    Light::Spot(Spot {
+        position: Vec3::new(0.2, 0.1, 0.3),
+        frame: Frame::from_normal(Vec3::new(0.3, -0.2, 1.0).normalize()),
+        intensity: Rgb::splat(5.0),
+        cutoff: 30f32.to_radians(),
+        beam: 20f32.to_radians(),
+    })
+}
+
+#[test]
+fn spot_falloff_is_linear_in_the_angle_as_in_mitsuba() {
+    // Mitsuba 3.9.1, cutoff 20°, default beam 15°: 0.5 at 17.5°, 0.02 at 19.9°
+    let spot = Spot {
+        position: Vec3::ZERO,
+        frame: Frame::from_normal(Vec3::Z),
+        intensity: Rgb::ONE,
+        cutoff: 20f32.to_radians(),
+        beam: 15f32.to_radians(),
+    };
+    let at = |deg: f32| {
+        let r = deg.to_radians();
+        spot.emitted(Vec3::new(r.sin(), 0.0, r.cos())).x
+    };
+    assert_eq!(at(0.0), 1.0);
+    assert_eq!(at(14.9), 1.0);
+    assert!((at(17.5) - 0.5).abs() < 1e-4, "{}", at(17.5));
+    assert!((at(19.9) - 0.02).abs() < 1e-4, "{}", at(19.9));
+    assert_eq!(at(20.1), 0.0);
+    let ctx = LightContext { shapes: &[], meshes: &[], center: Vec3::ZERO, radius: 10.0 };
+    let l = Light::Spot(spot);
+    let s = l.sample_direct(&ctx, Vec3::new(0.0, 0.0, 2.0), Vec2::ZERO).unwrap();
+    assert!(s.delta && (s.radiance.x - 0.25).abs() < 1e-6);
+    assert!(l.sample_direct(&ctx, Vec3::new(2.0, 0.0, 0.0), Vec2::ZERO).unwrap().radiance == Rgb::ZERO);
+}
+
+#[test]
+fn directional_light_arrives_along_its_direction_and_is_delta() {
+    let ctx = LightContext { shapes: &[], meshes: &[], center: Vec3::ZERO, radius: 3.0 };
+    let direction = Vec3::new(0.0, -1.0, 0.0);
+    let l = Light::Directional { direction, irradiance: Rgb::splat(2.0) };
+    let s = l.sample_direct(&ctx, Vec3::new(0.5, 0.0, 0.0), Vec2::new(0.3, 0.8)).unwrap();
+    assert!(s.delta && s.dist.is_infinite() && (s.wi - Vec3::Y).length() < 1e-6 && s.radiance.x == 2.0);
+    assert!(l.is_infinite() && l.is_delta() && l.eval_infinite(Vec3::Y) == Rgb::ZERO);
+    // emission: parallel rays from the scene's disk, carrying E·πR² in total
+    let e = l.sample_emission(&ctx, Vec2::new(0.2, 0.9), Vec2::ZERO).unwrap();
+    assert!((e.d - direction).length() < 1e-6 && e.pdf_dir == 1.0);
+    assert!((e.pdf_pos * PI * 9.0 - 1.0).abs() < 1e-5);
+    assert!((e.p - ctx.center).dot(direction) < -2.9, "the disk lies on the light's side");
 }
 
 #[test]

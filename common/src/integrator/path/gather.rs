@@ -60,10 +60,12 @@ pub fn gather(light: &[PathVertex], camera: &[PathVertex], join: &Join, infinite
         }
     }
     p.next_event0 = join.next_event0;
-    // a point light (no surface) cannot be hit by a camera path
-    p.emitter_hittable = light
-        .first()
-        .is_none_or(|v| !(matches!(v.kind, super::vertex::VertexKind::Light { .. }) && v.n_geo == glam::Vec3::ZERO));
+    // a light vertex's delta flag marks a delta light (a point, a spot, one direction): no
+    // camera path can hit it, while next-event estimation and light tracing reach it as usual
+    if let Some(v) = light.first().filter(|v| matches!(v.kind, super::vertex::VertexKind::Light { .. })) {
+        p.emitter_hittable = !v.delta;
+        p.delta[0] = false;
+    }
     p.emitter_splattable = !infinite_light;
     p
 }

@@ -56,7 +56,8 @@ pub fn trace_light_path(
         pdf_rev: 0.0,
         pdf_next_event: 0.0,
         kind: VertexKind::Light { light: li as u32 },
-        delta: false,
+        // on a light vertex: a delta light, which no camera path can hit
+        delta: light.is_delta(),
         depth: 0,
     });
     if max_edges == 0 {
@@ -147,8 +148,11 @@ pub fn next_event_density(scene: &Scene, light_vertex: &PathVertex, v: &PathVert
     let pmf = scene.light_sampler.pmf(light as usize);
     let ctx = scene.light_context();
     match l {
-        Light::Point { .. } => pmf,
-        Light::Constant { .. } => pmf * l.pdf_direct(&ctx, v.p, v.p - light_vertex.n_geo, light_vertex.n_geo),
+        // a delta light is chosen by its selection probability alone
+        Light::Point { .. } | Light::Spot(_) | Light::Directional { .. } => pmf,
+        Light::Constant { .. } | Light::Envmap(_) => {
+            pmf * l.pdf_direct(&ctx, v.p, v.p - light_vertex.n_geo, light_vertex.n_geo)
+        }
         Light::Area { .. } => {
             let sa = l.pdf_direct(&ctx, v.p, light_vertex.p, light_vertex.n_geo);
             pmf * solid_angle_to_area(sa, v.p, light_vertex.p, light_vertex.n_geo)

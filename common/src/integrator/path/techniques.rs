@@ -178,7 +178,8 @@ pub fn next_event<O: SampleObserver>(
         pdf_rev: 0.0,
         pdf_next_event: 0.0,
         kind: VertexKind::Light { light: li as u32 },
-        delta: false,
+        // on a light vertex: a delta light, which no camera path can hit
+        delta: light.is_delta(),
         depth: 0,
     };
     let unoccluded = if infinite {
@@ -273,13 +274,13 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
     let cam = &scene.camera;
     let cs = cam.sample_direct(v.p)?;
     let value = match v.kind {
-        VertexKind::Light { light } => match &scene.lights[light as usize] {
-            Light::Area { radiance, .. } => {
-                Light::eval_area(*radiance, v.n_geo, cs.wi) * (v.n_geo.dot(cs.wi).abs() * v.beta.x)
+        VertexKind::Light { light } => {
+            let light = &scene.lights[light as usize];
+            if light.is_infinite() {
+                return None;
             }
-            Light::Point { intensity, .. } => *intensity * v.beta.x,
-            Light::Constant { .. } => return None,
-        },
+            light.emitted_towards(v.n_geo, cs.wi) * v.beta.x
+        }
         VertexKind::Camera => return None,
         VertexKind::Surface { material } => {
             let frame = v.frame();
