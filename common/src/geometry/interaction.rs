@@ -21,6 +21,8 @@ pub struct SurfaceInteraction {
     pub shape: u32,
     /// Index of the primitive within the shape (triangle index; 0 for spheres).
     pub prim: u32,
+    /// Barycentric coordinates (b1, b2) on the triangle (zero for analytic shapes).
+    pub bary: glam::Vec2,
 }
 
 impl SurfaceInteraction {

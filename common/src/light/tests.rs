@@ -36,6 +36,7 @@ fn shapes() -> (Vec<Shape>, Vec<Mesh>) {
             area,
             area_sampling: Default::default(),
             id: None,
+            object_rotation: glam::Mat3::IDENTITY,
         };
         s.prepare_area_sampling(mesh);
         s

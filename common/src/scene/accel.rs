@@ -372,6 +372,7 @@ mod tests {
             area: 1.0,
             area_sampling: Default::default(),
             id: None,
+            object_rotation: glam::Mat3::IDENTITY,
         };
         (vec![shape], vec![mesh])
     }

@@ -3,7 +3,7 @@
 
 use super::build_bsdf::{build_emitter, build_material, resolve};
 use super::error::{Location, SceneError};
-use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply};
+use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply, serialized::load_serialized};
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use super::xml::{Element, SceneTree};
 use super::{IntegratorSettings, Scene};
@@ -364,6 +364,17 @@ fn build_rfilter(f: &Element) -> Result<Filter, SceneError> {
     Ok(Filter::new(kind))
 }
 
+/// A `serialized` shape's `shape_index` (default 0).
+fn shape_index(e: &Element) -> Result<u32, SceneError> {
+    match e.integer("shape_index")?.unwrap_or(0) {
+        i if (0..=u32::MAX as i64).contains(&i) => Ok(i as u32),
+        i => Err(SceneError::at(
+            e.location_of("shape_index"),
+            format!("\"shape_index\" must not be negative, found {i}"),
+        )),
+    }
+}
+
 impl Builder<'_> {
     fn material_of(&mut self, e: &Element) -> Result<u32, SceneError> {
         if e.tag == "ref" {
@@ -398,20 +409,30 @@ impl Builder<'_> {
         }
         let to_world = e.transform("to_world")?;
         let flip_normals = e.boolean_or("flip_normals", false)?;
+        let mut object_rotation = glam::Mat3::IDENTITY;
         let geometry = match e.plugin.as_str() {
             "rectangle" | "cube" => {
                 let mut mesh = if e.plugin == "rectangle" { Mesh::rectangle() } else { Mesh::cube() };
                 mesh.transform(&to_world);
                 self.add_mesh(mesh)
             }
-            "obj" | "ply" => {
+            "obj" | "ply" | "serialized" => {
                 let file = e
                     .string("filename")?
                     .ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"filename\"", e.describe())))?;
                 let path = self.dir.join(file);
-                let mut mesh = if e.plugin == "obj" { load_obj(&path)? } else { load_ply(&path)? };
+                let mut mesh = match e.plugin.as_str() {
+                    "obj" => load_obj(&path)?,
+                    "ply" => load_ply(&path)?,
+                    _ => load_serialized(&path, shape_index(e)?)?,
+                };
                 let face_normals = e.boolean_or("face_normals", false)?;
-                e.boolean_or("flip_tex_coords", true)?; // texture coordinates are not used
+                // Mitsuba flips an OBJ's v by default, a PLY's only on request; serialized never
+                let flip_default = e.plugin == "obj";
+                let flip = e.plugin != "serialized" && e.boolean_or("flip_tex_coords", flip_default)?;
+                if let (true, Some(uvs)) = (flip, &mut mesh.uvs) {
+                    uvs.iter_mut().for_each(|uv| uv.y = 1.0 - uv.y);
+                }
                 mesh.transform(&to_world);
                 if face_normals {
                     mesh.normals = None;
@@ -432,13 +453,16 @@ impl Builder<'_> {
                 let scale = to_world.uniform_scale(1e-4).ok_or_else(|| {
                     SceneError::at(e.location_of("to_world"), "a sphere's to_world must not scale non-uniformly")
                 })?;
+                object_rotation = glam::Mat3::from_mat4(to_world.inv_f32()) * scale;
                 ShapeGeometry::Sphere { center: to_world.point(center), radius: radius * scale }
             }
             "disk" => ShapeGeometry::Disk { to_world, normal: to_world.normal(Vec3::Z).normalize() },
             other => {
                 return Err(SceneError::at(
                     &e.location,
-                    format!("unsupported shape \"{other}\" (supported: rectangle, cube, disk, sphere, obj, ply)"),
+                    format!(
+                        "unsupported shape \"{other}\" (supported: rectangle, cube, disk, sphere, obj, ply, serialized)"
+                    ),
                 ));
             }
         };
@@ -483,6 +507,7 @@ impl Builder<'_> {
             area,
             area_sampling: Default::default(),
             id: e.id.clone(),
+            object_rotation,
         };
         if light.is_some() {
             let mesh = match &shape.geometry {

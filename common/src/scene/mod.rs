@@ -234,6 +234,37 @@ impl Scene {
             wo: -ray.d,
             shape: hit.shape,
             prim: hit.index,
+            bary: glam::Vec2::from(hit.bary),
         })
+    }
+
+    /// The texture coordinates of a hit, in Mitsuba's parameterisation of the shape: a mesh's
+    /// interpolated uvs (or its barycentrics when it has none), a sphere's (atan2(y, x)/2π,
+    /// acos(z)/π) and a disk's (r, φ/2π) in object space. Computed on demand, so that scenes
+    /// without textures do not pay for it.
+    pub fn uv_at(&self, si: &SurfaceInteraction) -> glam::Vec2 {
+        use std::f32::consts::PI;
+        let shape = &self.shapes[si.shape as usize];
+        let wrap = |a: f32| {
+            let u = a / (2.0 * PI);
+            if u < 0.0 { u + 1.0 } else { u }
+        };
+        match &shape.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let mesh = &self.meshes[*m as usize];
+                let Some(uvs) = &mesh.uvs else { return si.bary };
+                let [i0, i1, i2] = mesh.triangles[si.prim as usize];
+                let (b1, b2) = (si.bary.x, si.bary.y);
+                uvs[i0 as usize] * (1.0 - b1 - b2) + uvs[i1 as usize] * b1 + uvs[i2 as usize] * b2
+            }
+            ShapeGeometry::Sphere { center, .. } => {
+                let d = (shape.object_rotation * (si.p - *center)).normalize_or_zero();
+                glam::Vec2::new(wrap(d.y.atan2(d.x)), d.z.clamp(-1.0, 1.0).acos() / PI)
+            }
+            ShapeGeometry::Disk { to_world, .. } => {
+                let p = to_world.inv_point(si.p);
+                glam::Vec2::new(glam::Vec2::new(p.x, p.y).length(), wrap(p.y.atan2(p.x)))
+            }
+        }
     }
 }

@@ -11,6 +11,9 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Per-vertex shading normals (unit), when the mesh is smooth-shaded.
     pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex texture coordinates, when the file has them (Mitsuba's `vertex_texcoords`);
+    /// without them a point's uv is its barycentric (b1, b2), as in Mitsuba.
+    pub uvs: Option<Vec<Vec2>>,
     /// Vertex indices, counter-clockwise seen from the side the geometric normal points to.
     pub triangles: Vec<[u32; 3]>,
 }
@@ -67,18 +70,16 @@ impl Mesh {
         }
     }
 
-    /// Mitsuba's `rectangle`: [-1,1]² in z = 0 facing +z, two triangles.
+    /// Mitsuba's `rectangle`: [-1,1]² in z = 0 facing +z, two triangles, uv = ((x+1)/2, (y+1)/2).
     pub fn rectangle() -> Mesh {
-        Mesh {
-            positions: vec![
-                Vec3::new(-1.0, -1.0, 0.0),
-                Vec3::new(1.0, -1.0, 0.0),
-                Vec3::new(-1.0, 1.0, 0.0),
-                Vec3::new(1.0, 1.0, 0.0),
-            ],
-            normals: None,
-            triangles: vec![[1, 2, 0], [1, 3, 2]],
-        }
+        let positions = vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+        ];
+        let uvs = positions.iter().map(|p| Vec2::new((p.x + 1.0) * 0.5, (p.y + 1.0) * 0.5)).collect();
+        Mesh { positions, normals: None, uvs: Some(uvs), triangles: vec![[1, 2, 0], [1, 3, 2]] }
     }
 
     /// Mitsuba's `cube`: [-1,1]³ with outward faces, 24 vertices (flat shading).
@@ -92,7 +93,9 @@ impl Mesh {
                 let v = n.cross(u);
                 let base = m.positions.len() as u32;
                 for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                    m.positions.push(n + u * a + v * b);
+                    let p = n + u * a + v * b;
+                    m.positions.push(p);
+                    m.uvs.get_or_insert_with(Vec::new).push(cube_uv(axis, sign, p));
                 }
                 m.triangles.push([base, base + 1, base + 2]);
                 m.triangles.push([base, base + 2, base + 3]);
@@ -100,6 +103,20 @@ impl Mesh {
         }
         m
     }
+}
+
+/// Mitsuba's `cube` parameterisation (`src/shapes/cube.cpp`): each face onto [0, 1]².
+fn cube_uv(axis: usize, sign: f32, p: Vec3) -> Vec2 {
+    let (x, y, z) = (p.x, p.y, p.z);
+    let uv = match (axis, sign > 0.0) {
+        (0, true) => (y + 1.0, 1.0 - z),
+        (0, false) => (y + 1.0, 1.0 + z),
+        (1, true) => (1.0 - x, 1.0 - z),
+        (1, false) => (1.0 + z, 1.0 + x),
+        (2, true) => (1.0 + y, 1.0 + x),
+        _ => (1.0 - y, 1.0 + x),
+    };
+    Vec2::new(uv.0 * 0.5, uv.1 * 0.5)
 }
 
 /// The geometry of a shape.
@@ -140,6 +157,8 @@ pub struct Shape {
     pub area_sampling: AreaSampling,
     /// The XML `id`, when given (for messages).
     pub id: Option<String>,
+    /// World to the shape's object frame, rotation only: where a sphere's uv is measured.
+    pub object_rotation: glam::Mat3,
 }
 
 /// Area sampling of an emitting mesh.

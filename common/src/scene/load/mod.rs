@@ -1,8 +1,10 @@
-//! Mesh file loaders (Wavefront OBJ through `tobj`, PLY through `ply-rs-bw`) and the smooth
+//! Mesh file loaders (Wavefront OBJ through `tobj`, PLY through `ply-rs-bw`, Mitsuba's
+//! `serialized` format) and the smooth
 //! vertex normals Mitsuba computes when a file has none.
 
 pub mod obj;
 pub mod ply;
+pub mod serialized;
 
 use super::shape::Mesh;
 use glam::Vec3;

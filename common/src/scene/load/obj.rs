@@ -7,8 +7,9 @@ use crate::scene::shape::Mesh;
 use glam::Vec3;
 use std::path::Path;
 
-/// Loads an OBJ file. Normals from `vn` are kept as shading normals; without them the mesh is
-/// flat (the caller decides whether to compute smooth normals).
+/// Loads an OBJ file, every group into one mesh. Normals from `vn` are kept as shading normals;
+/// without them the mesh is flat (the caller decides whether to compute smooth normals).
+/// Texture coordinates from `vt` are kept as stored.
 pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
     validate(&text, path)?;
@@ -25,6 +26,8 @@ pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
     let mut mesh = Mesh::default();
     let mut all_have_normals = true;
     let mut normals = Vec::new();
+    let mut all_have_uvs = true;
+    let mut uvs = Vec::new();
     for model in &models {
         let m = &model.mesh;
         let base = mesh.positions.len() as u32;
@@ -34,6 +37,11 @@ pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
         } else {
             all_have_normals = false;
         }
+        if m.texcoords.len() / 2 == m.positions.len() / 3 && !m.texcoords.is_empty() {
+            uvs.extend(m.texcoords.chunks_exact(2).map(|c| glam::Vec2::new(c[0], c[1])));
+        } else {
+            all_have_uvs = false;
+        }
         mesh.triangles.extend(m.indices.chunks_exact(3).map(|c| [c[0] + base, c[1] + base, c[2] + base]));
     }
     if mesh.triangles.is_empty() {
@@ -41,6 +49,10 @@ pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
     }
     if all_have_normals {
         mesh.normals = Some(normals);
+    }
+    // as stored (v up); the caller applies Mitsuba's flip_tex_coords
+    if all_have_uvs {
+        mesh.uvs = Some(uvs);
     }
     Ok(mesh)
 }

@@ -1,5 +1,6 @@
 //! PLY meshes (ASCII and binary) through `ply-rs-bw`: `vertex` elements with x, y, z and
-//! optional nx, ny, nz; `face` elements with a `vertex_indices` (or `vertex_index`) list,
+//! optional nx, ny, nz and texture coordinates (u, v / texture_u, texture_v / s, t); `face`
+//! elements with a `vertex_indices` (or `vertex_index`) list,
 //! triangulated as fans.
 
 use crate::scene::error::{Location, SceneError};
@@ -69,6 +70,12 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     let has_normals =
         vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
     let mut normals = Vec::with_capacity(if has_normals { vertices.len() } else { 0 });
+    // Mitsuba's names for texture coordinates, in its order of preference
+    let uv_names = ["u", "texture_u", "s"]
+        .iter()
+        .zip(["v", "texture_v", "t"])
+        .find(|(u, v)| vertices.first().is_some_and(|x| x.contains_key(**u) && x.contains_key(*v)));
+    let mut uvs = Vec::new();
     for (k, v) in vertices.iter().enumerate() {
         let get = |name: &str| -> Result<f32, SceneError> {
             let p = v
@@ -85,6 +92,9 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
         mesh.positions.push(Vec3::new(get("x")?, get("y")?, get("z")?));
         if has_normals {
             normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?).normalize_or_zero());
+        }
+        if let Some((u, v)) = uv_names {
+            uvs.push(glam::Vec2::new(get(u)?, get(v)?));
         }
     }
     let n = mesh.positions.len() as i64;
@@ -114,6 +124,9 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     }
     if has_normals {
         mesh.normals = Some(normals);
+    }
+    if uv_names.is_some() {
+        mesh.uvs = Some(uvs);
     }
     Ok(mesh)
 }
