@@ -27,3 +27,4 @@ pub mod scene;
 pub mod settings;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;
+pub mod texture;
