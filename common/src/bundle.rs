@@ -1,6 +1,7 @@
-//! Scene bundles: which files a scene XML references, the bundle a client ships to a render
-//! farm (the scene and everything it needs, with paths relative to the scene's folder), and
-//! the path rules for unpacking such a bundle safely on the other side.
+//! Scene bundles: which files a scene XML reaches (included XML files, spectrum files and every
+//! plugin `filename`, resolved exactly as the loader resolves them), the bundle a client ships to
+//! a render farm (the scene and everything it needs, with paths relative to the scene's folder),
+//! and the path rules for unpacking such a bundle safely on the other side.
 //!
 //! ```no_run
 //! use std::path::Path;
@@ -8,8 +9,8 @@
 //! assert!(files.iter().any(|f| f.ends_with("gem.obj")));
 //! ```
 
-use crate::scene::SceneError;
 use crate::scene::xml::{Element, Value, parse};
+use crate::scene::{FileResolver, SceneError};
 use std::collections::HashMap;
 use std::path::{Component, Path, PathBuf};
 
@@ -56,44 +57,69 @@ pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, B
     let scene_path = scene.file_name().and_then(|n| n.to_str()).ok_or_else(|| outside(scene))?.to_string();
     let mut files = vec![(scene_path.clone(), read(scene)?)];
     for file in referenced_files(scene, defines)? {
-        let relative = file
-            .strip_prefix(folder)
-            .ok()
-            .and_then(|r| r.to_str())
-            .and_then(safe_relative_path)
+        let relative = relative_to(&file, folder)
             .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
+            .filter(|r| safe_relative_path(r).is_some())
             .ok_or_else(|| outside(&file))?;
-        files.push((relative, read(&file)?));
+        if !files.iter().any(|(p, _)| *p == relative) {
+            files.push((relative, read(&file)?));
+        }
     }
     Ok(Bundle { scene_path, files })
 }
 
-/// The files `scene` references (mesh `filename`s), resolved against the scene's folder the
-/// way the loader resolves them, in document order without repeats. `$name` parameters are
-/// substituted with `defines` over the file's `<default>`s.
+/// `file` relative to `folder` if it lies inside: compared lexically first (so `sub/../x` is
+/// `x`), then with both paths canonicalised (so symbolic links and absolute `<path>`s that
+/// point back into the folder count as inside).
+fn relative_to(file: &Path, folder: &Path) -> Option<PathBuf> {
+    if let Ok(r) = normalize(file).strip_prefix(normalize(folder)) {
+        return Some(r.to_path_buf());
+    }
+    let (file, folder) = (file.canonicalize().ok()?, folder.canonicalize().ok()?);
+    file.strip_prefix(folder).ok().map(Path::to_path_buf)
+}
+
+/// `path` with `.` dropped and `name/..` pairs removed, without touching the file system.
+fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
+/// The files `scene` reaches besides itself, in the order the loader meets them without
+/// repeats: included XML files and spectrum files as the parser reads them, then every plugin
+/// `filename`, resolved through the scene's `<path>` list the way the loader resolves it.
+/// `$name` parameters are substituted with `defines` over the file's `<default>`s.
 pub fn referenced_files(scene: &Path, defines: &HashMap<String, String>) -> Result<Vec<PathBuf>, SceneError> {
     let text =
         std::fs::read_to_string(scene).map_err(|e| SceneError::file(scene, format!("cannot read scene: {e}")))?;
     let tree = parse(&text, scene, defines)?;
-    let dir = scene.parent().unwrap_or(Path::new(""));
-    let mut out = Vec::new();
+    let mut out = tree.files.clone();
     for e in &tree.elements {
-        collect(e, dir, &mut out);
+        collect(e, &tree.resolver, &mut out);
     }
     Ok(out)
 }
 
-fn collect(e: &Element, dir: &Path, out: &mut Vec<PathBuf>) {
+fn collect(e: &Element, resolver: &FileResolver, out: &mut Vec<PathBuf>) {
     for p in &e.properties {
         if let (true, Value::String(s)) = (p.name == "filename", &p.value) {
-            let path = dir.join(s);
+            let path = resolver.resolve(Path::new(s));
             if !out.contains(&path) {
                 out.push(path);
             }
         }
     }
     for c in &e.children {
-        collect(c, dir, out);
+        collect(c, resolver, out);
     }
 }
 

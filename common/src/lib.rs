@@ -25,6 +25,7 @@ pub mod render;
 pub mod sampler;
 pub mod scene;
 pub mod settings;
+pub mod spectrum;
 #[cfg(any(test, feature = "test-util"))]
 pub mod testing;
 pub mod texture;

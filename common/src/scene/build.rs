@@ -1,9 +1,14 @@
 //! Interprets the XML tree into a [`Scene`]: the sensor with its film and sampler, the
 //! integrator settings, shapes (with their BSDFs and area emitters) and the other emitters.
+//! Refused plugins ([`super::refused`]) fail first; every relative `filename` resolves through
+//! the tree's [`super::FileResolver`].
 
-use super::build_bsdf::{build_emitter, build_material, resolve};
+use super::build_bsdf::{build_emitter, build_material};
+use super::build_settings::{build_integrator, build_sampler};
 use super::error::{Location, SceneError};
 use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply, serialized::load_serialized};
+use super::refused::check_supported;
+use super::resolver::FileResolver;
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use super::xml::{Element, SceneTree};
 use super::{IntegratorSettings, Scene};
@@ -18,12 +23,11 @@ use std::collections::HashMap;
 use std::path::Path;
 
 struct Builder<'a> {
-    tree: &'a SceneTree,
-    dir: &'a Path,
+    resolver: &'a FileResolver,
     shapes: Vec<Shape>,
     meshes: Vec<Mesh>,
     materials: Vec<Material>,
-    /// Top-level bsdf ids → material index, so shared BSDFs are built once.
+    /// Bsdf ids → material index, so a BSDF shared through `<ref>` is built once.
     material_ids: HashMap<String, u32>,
     lights: Vec<Light>,
     light_weights: Vec<f32>,
@@ -36,11 +40,29 @@ struct SensorSettings {
     seed: u64,
 }
 
+/// Parameters of `<scene>` itself that only tune Mitsuba's acceleration structures.
+const IGNORED_SCENE_PARAMETERS: &[&str] = &[
+    "allow_thread_reordering",
+    "compact_acceleration_structures",
+    "embree_use_robust_intersections",
+    "kd_intersection_cost",
+    "kd_traversal_cost",
+    "kd_empty_space_bonus",
+    "kd_stop_prims",
+    "kd_max_depth",
+    "kd_min_max_bins",
+    "kd_clip",
+    "kd_retract_bad_splits",
+    "kd_exact_primitive_threshold",
+];
+
 pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> {
-    let dir = path.parent().unwrap_or(Path::new("."));
+    check_supported(&tree.elements)?;
+    if let Some(p) = tree.properties.iter().find(|p| !IGNORED_SCENE_PARAMETERS.contains(&p.name.as_str())) {
+        return Err(SceneError::at(&p.location, format!("unknown parameter \"{}\" of the scene", p.name)));
+    }
     let mut b = Builder {
-        tree,
-        dir,
+        resolver: &tree.resolver,
         shapes: vec![],
         meshes: vec![],
         materials: vec![],
@@ -53,11 +75,7 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
     for e in &tree.elements {
         match e.tag.as_str() {
             "bsdf" => {
-                let m = build_material(tree, e)?;
-                b.materials.push(m);
-                if let Some(id) = &e.id {
-                    b.material_ids.insert(id.clone(), b.materials.len() as u32 - 1);
-                }
+                b.material_of(e)?;
             }
             "shape" => b.shape(e)?,
             "emitter" => {
@@ -80,7 +98,8 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
                 }
                 integrator = Some(build_integrator(e)?);
             }
-            "ref" => return Err(SceneError::at(&e.location, "<ref> is only allowed inside an object")),
+            // spectra are read where they are referenced
+            _ if e.is_spectrum() => {}
             other => return Err(SceneError::at(&e.location, format!("<{other}> is not supported"))),
         }
     }
@@ -106,37 +125,6 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
     ))
 }
 
-fn build_integrator(e: &Element) -> Result<IntegratorSettings, SceneError> {
-    if e.plugin != "path" {
-        return Err(SceneError::at(
-            &e.location,
-            format!(
-                "unsupported integrator \"{}\" in the scene file (use type=\"path\"; choose Tessera's integrator with --integrator)",
-                e.plugin
-            ),
-        ));
-    }
-    let max_depth = match e.integer("max_depth")?.unwrap_or(-1) {
-        -1 => None,
-        d if d >= 0 => Some(d.min(u32::MAX as i64) as u32),
-        d => {
-            return Err(SceneError::at(
-                e.location_of("max_depth"),
-                format!("\"max_depth\" must be -1 (unlimited) or non-negative, found {d}"),
-            ));
-        }
-    };
-    let rr_depth = match e.integer("rr_depth")?.unwrap_or(5) {
-        d if d > 0 => d.min(u32::MAX as i64) as u32,
-        d => {
-            return Err(SceneError::at(e.location_of("rr_depth"), format!("\"rr_depth\" must be positive, found {d}")));
-        }
-    };
-    let hide_emitters = e.boolean_or("hide_emitters", false)?;
-    e.check_all_used()?;
-    Ok(IntegratorSettings { kind: e.plugin.clone(), max_depth, rr_depth, hide_emitters })
-}
-
 fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
     if e.plugin != "perspective" {
         return Err(SceneError::at(
@@ -152,25 +140,7 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
             ("film", other) => {
                 return Err(SceneError::at(&c.location, format!("unsupported film \"{other}\" (supported: hdrfilm)")));
             }
-            ("sampler", "independent") => {
-                spp = match c.integer("sample_count")?.unwrap_or(4) {
-                    n if n > 0 && n <= u32::MAX as i64 => n as u32,
-                    n => {
-                        return Err(SceneError::at(
-                            c.location_of("sample_count"),
-                            format!("\"sample_count\" must be positive, found {n}"),
-                        ));
-                    }
-                };
-                seed = c.integer("seed")?.unwrap_or(0) as u64;
-                c.check_all_used()?;
-            }
-            ("sampler", other) => {
-                return Err(SceneError::at(
-                    &c.location,
-                    format!("unsupported sampler \"{other}\" (supported: independent)"),
-                ));
-            }
+            ("sampler", _) => (spp, seed) = build_sampler(c)?,
             (tag, _) => return Err(SceneError::at(&c.location, format!("a sensor cannot contain <{tag}>"))),
         }
     }
@@ -376,35 +346,30 @@ fn shape_index(e: &Element) -> Result<u32, SceneError> {
 }
 
 impl Builder<'_> {
+    /// The material of a `<bsdf>` (or a copy of one placed by `<ref>`), built once per id.
     fn material_of(&mut self, e: &Element) -> Result<u32, SceneError> {
-        if e.tag == "ref" {
-            resolve(self.tree, e, "bsdf")?;
-            return self.material_ids.get(&e.plugin).copied().ok_or_else(|| {
-                SceneError::at(
-                    &e.location,
-                    format!("bsdf \"{}\" must be defined before the shape that uses it", e.plugin),
-                )
-            });
+        if let Some(&m) = e.id.as_ref().and_then(|id| self.material_ids.get(id)) {
+            return Ok(m);
         }
-        self.materials.push(build_material(self.tree, e)?);
-        Ok(self.materials.len() as u32 - 1)
+        self.materials.push(build_material(e)?);
+        let m = self.materials.len() as u32 - 1;
+        if let Some(id) = &e.id {
+            self.material_ids.insert(id.clone(), m);
+        }
+        Ok(m)
     }
 
     fn shape(&mut self, e: &Element) -> Result<(), SceneError> {
         let mut material = None;
         let mut emitter = None;
         for c in &e.children {
-            let tag = if c.tag == "ref" {
-                self.tree.by_id(&c.plugin).map_or("bsdf", |t| t.tag.as_str())
-            } else {
-                c.tag.as_str()
-            };
-            match tag {
+            let at = c.reference.as_ref().unwrap_or(&c.location);
+            match c.tag.as_str() {
                 "bsdf" if material.is_none() => material = Some(self.material_of(c)?),
-                "bsdf" => return Err(SceneError::at(&c.location, "a shape can have only one bsdf")),
-                "emitter" if emitter.is_none() && c.tag == "emitter" => emitter = Some(c),
-                "emitter" => return Err(SceneError::at(&c.location, "a shape can have only one nested emitter")),
-                other => return Err(SceneError::at(&c.location, format!("a shape cannot contain <{other}>"))),
+                "bsdf" => return Err(SceneError::at(at, "a shape can have only one bsdf")),
+                "emitter" if emitter.is_none() => emitter = Some(c),
+                "emitter" => return Err(SceneError::at(at, "a shape can have only one nested emitter")),
+                other => return Err(SceneError::at(at, format!("a shape cannot contain <{other}>"))),
             }
         }
         let to_world = e.transform("to_world")?;
@@ -420,7 +385,7 @@ impl Builder<'_> {
                 let file = e
                     .string("filename")?
                     .ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"filename\"", e.describe())))?;
-                let path = self.dir.join(file);
+                let path = self.resolver.resolve(Path::new(file));
                 let mut mesh = match e.plugin.as_str() {
                     "obj" => load_obj(&path)?,
                     "ply" => load_ply(&path)?,

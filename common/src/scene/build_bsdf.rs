@@ -2,7 +2,7 @@
 //! named materials, with an error for anything Tessera does not support.
 
 use super::error::SceneError;
-use super::xml::{Element, SceneTree};
+use super::xml::{ColorUsage, Element};
 use crate::bsdf::*;
 use crate::light::Light;
 use crate::math::Rgb;
@@ -65,15 +65,15 @@ fn ior(e: &Element, name: &str, default: &str) -> Result<f32, SceneError> {
     })
 }
 
+/// A reflectance or transmittance: `<rgb>` must lie in [0, 1], spectra are clipped, a
+/// `<float>` is taken as given (all as Mitsuba reads a bounded texture).
 fn reflectance(e: &Element, name: &str, default: f32) -> Result<Rgb, SceneError> {
-    let v = e.rgb(name)?.unwrap_or(Rgb::splat(default));
-    if v.min_element() < 0.0 || v.max_element() > 1.0 {
-        return Err(SceneError::at(
-            e.location_of(name),
-            format!("\"{name}\" of {} must lie in [0, 1], found {v}", e.describe()),
-        ));
-    }
-    Ok(v)
+    e.color_or(name, ColorUsage::Bounded, default)
+}
+
+/// A roughness: Mitsuba reads it as an unbounded texture and evaluates its channel mean.
+fn roughness(e: &Element, name: &str) -> Result<Option<f32>, SceneError> {
+    Ok(e.color(name, ColorUsage::Unbounded)?.map(|c| c.element_sum() / 3.0))
 }
 
 fn positive(e: &Element, name: &str, v: f32) -> Result<f32, SceneError> {
@@ -95,8 +95,8 @@ fn microfacet(e: &Element, allow_anisotropic: bool) -> Result<Microfacet, SceneE
             ));
         }
     };
-    let alpha = e.float("alpha")?;
-    let (au, av) = (e.float("alpha_u")?, e.float("alpha_v")?);
+    let alpha = roughness(e, "alpha")?;
+    let (au, av) = (roughness(e, "alpha_u")?, roughness(e, "alpha_v")?);
     let (au, av) = match (alpha, au, av) {
         (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
             return Err(SceneError::at(
@@ -125,7 +125,7 @@ fn microfacet(e: &Element, allow_anisotropic: bool) -> Result<Microfacet, SceneE
 
 fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
     let material = e.string("material")?;
-    let (eta, k) = (e.rgb("eta")?, e.rgb("k")?);
+    let (eta, k) = (e.color("eta", ColorUsage::Unbounded)?, e.color("k", ColorUsage::Unbounded)?);
     match (material, eta, k) {
         (Some(m), None, None) => NAMED_CONDUCTORS
             .iter()
@@ -148,7 +148,8 @@ fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
 
 /// Builds the BSDF of a `<bsdf>` element that is not `twosided`.
 fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
-    if let Some(child) = e.children.first() {
+    expect_bsdf(e)?;
+    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum()) {
         return Err(SceneError::at(
             &child.location,
             format!(
@@ -196,10 +197,7 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
         "plastic" | "roughplastic" => {
             let eta = ior(e, "int_ior", "polypropylene")? / ior(e, "ext_ior", "air")?;
             let diffuse = reflectance(e, "diffuse_reflectance", 0.5)?;
-            let specular = match e.rgb("specular_reflectance")? {
-                Some(_) => Some(reflectance(e, "specular_reflectance", 1.0)?),
-                None => None,
-            };
+            let specular = e.color("specular_reflectance", ColorUsage::Bounded)?;
             let nonlinear = e.boolean_or("nonlinear", false)?;
             if e.plugin == "plastic" {
                 Bxdf::Plastic(Plastic::new(eta, diffuse, specular, nonlinear))
@@ -227,49 +225,45 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
     Ok(bxdf)
 }
 
-/// Resolves a `<ref>` to the top-level element it names, checking its tag.
-pub(super) fn resolve<'a>(tree: &'a SceneTree, e: &'a Element, tag: &str) -> Result<&'a Element, SceneError> {
-    if e.tag != "ref" {
-        return Ok(e);
+/// Fails unless `e` is a `<bsdf>` (it may be an element a `<ref>` placed where a BSDF goes).
+fn expect_bsdf(e: &Element) -> Result<(), SceneError> {
+    if e.tag == "bsdf" {
+        return Ok(());
     }
-    let target = tree
-        .by_id(&e.plugin)
-        .ok_or_else(|| SceneError::at(&e.location, format!("reference to unknown id \"{}\"", e.plugin)))?;
-    if target.tag != tag {
-        return Err(SceneError::at(
-            &e.location,
-            format!("id \"{}\" refers to a <{}>, expected a <{tag}>", e.plugin, target.tag),
-        ));
+    let at = e.reference.as_ref().unwrap_or(&e.location);
+    match &e.id {
+        Some(id) => Err(SceneError::at(at, format!("id \"{id}\" refers to a <{}>, expected a <bsdf>", e.tag))),
+        None => Err(SceneError::at(at, format!("expected a <bsdf>, found <{}>", e.tag))),
     }
-    Ok(target)
 }
 
-/// Builds the material of a `<bsdf>` element (or a `ref` to one), with `twosided` semantics.
-pub(super) fn build_material(tree: &SceneTree, e: &Element) -> Result<Material, SceneError> {
-    let e = resolve(tree, e, "bsdf")?;
+/// Builds the material of a `<bsdf>` element, with `twosided` semantics.
+pub(super) fn build_material(e: &Element) -> Result<Material, SceneError> {
+    expect_bsdf(e)?;
     if e.plugin != "twosided" {
         return Ok(Material::one_sided(build_bxdf(e)?));
     }
-    let inner: Vec<&Element> = e.children.iter().map(|c| resolve(tree, c, "bsdf")).collect::<Result<_, _>>()?;
     e.check_all_used()?;
-    match inner.as_slice() {
+    match e.children.as_slice() {
         [front] => Ok(Material { front: build_bxdf(front)?, back: BackSide::MirrorFront }),
         [front, back] => Ok(Material { front: build_bxdf(front)?, back: BackSide::Other(build_bxdf(back)?) }),
-        _ => Err(SceneError::at(&e.location, format!("twosided needs one or two nested bsdfs, found {}", inner.len()))),
+        inner => {
+            Err(SceneError::at(&e.location, format!("twosided needs one or two nested bsdfs, found {}", inner.len())))
+        }
     }
 }
 
 /// Builds an emitter. `shape` is the index of the enclosing shape for `area` emitters.
 pub(super) fn build_emitter(e: &Element, shape: Option<u32>) -> Result<(Light, f32), SceneError> {
-    if let Some(child) = e.children.first() {
+    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum()) {
         return Err(SceneError::at(
             &child.location,
             format!("{} cannot contain <{}> (textures are not supported)", e.describe(), child.tag),
         ));
     }
-    let required_rgb = |name: &str| -> Result<Rgb, SceneError> {
-        let v =
-            e.rgb(name)?.ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"{name}\"", e.describe())))?;
+    // Mitsuba's emitters default to 1 and read their colour as emissive
+    let emitted = |name: &str| -> Result<Rgb, SceneError> {
+        let v = e.color_or(name, ColorUsage::Emissive, 1.0)?;
         if v.min_element() < 0.0 {
             return Err(SceneError::at(
                 e.location_of(name),
@@ -279,17 +273,17 @@ pub(super) fn build_emitter(e: &Element, shape: Option<u32>) -> Result<(Light, f
         Ok(v)
     };
     let light = match (e.plugin.as_str(), shape) {
-        ("area", Some(shape)) => Light::Area { shape, radiance: required_rgb("radiance")? },
+        ("area", Some(shape)) => Light::Area { shape, radiance: emitted("radiance")? },
         ("area", None) => return Err(SceneError::at(&e.location, "an area emitter must be nested inside a <shape>")),
         ("point", None) => {
-            let intensity = required_rgb("intensity")?;
+            let intensity = emitted("intensity")?;
             let position = match e.vector("position")? {
                 Some(p) => p,
                 None => e.transform("to_world")?.point(glam::Vec3::ZERO),
             };
             Light::Point { position, intensity }
         }
-        ("constant", None) => Light::Constant { radiance: required_rgb("radiance")? },
+        ("constant", None) => Light::Constant { radiance: emitted("radiance")? },
         (kind @ ("point" | "constant"), Some(_)) => {
             return Err(SceneError::at(&e.location, format!("a {kind} emitter cannot be attached to a shape")));
         }

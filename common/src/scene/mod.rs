@@ -8,9 +8,12 @@
 pub mod accel;
 mod build;
 mod build_bsdf;
+mod build_settings;
 pub mod error;
 pub mod load;
 mod primitive;
+pub mod refused;
+pub mod resolver;
 mod sah;
 pub mod shape;
 pub mod xml;
@@ -24,6 +27,7 @@ use crate::math::Frame;
 use accel::Accel;
 pub use error::{Location, SceneError};
 use glam::Vec3;
+pub use resolver::FileResolver;
 use shape::{Mesh, Shape, ShapeGeometry};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -78,7 +82,8 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Loads a Mitsuba 3 XML scene; mesh paths are relative to the file's folder.
+    /// Loads a Mitsuba 3 XML scene; relative filenames resolve from the file's folder (and the
+    /// folders its `<path>` elements add).
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         Self::load_with(path, &HashMap::new())
     }
@@ -90,7 +95,8 @@ impl Scene {
         Self::from_xml(&text, path, defines)
     }
 
-    /// Builds a scene from XML text; `path` names it in messages and anchors relative paths.
+    /// Builds a scene from XML text; `path` names it in messages and anchors relative paths
+    /// (includes, `<path>`, filenames).
     pub fn from_xml(text: &str, path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
         let tree = xml::parse(text, path, defines)?;
         build::build(&tree, path)
