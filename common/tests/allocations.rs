@@ -57,12 +57,13 @@ fn connections_and_merges_do_not_allocate() {
         p: hit.p,
         n_geo: hit.n_geo,
         n_shading: hit.frame.n,
+        tangent: scene.vertex_tangent(&hit),
         wo: hit.wo,
         beta: glam::Vec3::ONE,
         pdf_fwd: solid_angle_to_area(1.0, cam.p, hit.p, hit.n_geo),
         pdf_rev: 0.0,
         pdf_next_event: 0.0,
-        kind: VertexKind::Surface { material },
+        kind: VertexKind::Surface { material, at: hit.surface() },
         delta: false,
         depth: 1,
     };
@@ -76,10 +77,11 @@ fn connections_and_merges_do_not_allocate() {
         p: hit2.p,
         n_geo: hit2.n_geo,
         n_shading: hit2.frame.n,
+        tangent: scene.vertex_tangent(&hit2),
         wo: hit2.wo,
         pdf_fwd: solid_angle_to_area(1.0 / std::f32::consts::PI, hit.p, hit2.p, hit2.n_geo),
         depth: 2,
-        kind: VertexKind::Surface { material: scene.shapes[hit2.shape as usize].material },
+        kind: VertexKind::Surface { material: scene.shapes[hit2.shape as usize].material, at: hit2.surface() },
         ..z1
     };
     let camera = [cam, z1, z2];

@@ -173,10 +173,10 @@ fn refused_plugins_name_file_line_and_column() {
             r#"integrator "stokes" is not supported"#,
         ),
         (r#"<sensor type="thinlens"/>"#, r#"sensor "thinlens" is not supported"#),
-        // pending: enabled by deleting a line of the table once the builder exists
+        // nested, where a supported texture would go
         (
-            r#"<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"/></bsdf></shape>"#,
-            r#"texture "bitmap" is not supported"#,
+            r#"<shape type="sphere"><bsdf type="diffuse"><texture type="volume" name="reflectance"/></bsdf></shape>"#,
+            r#"texture "volume" is not supported"#,
         ),
     ] {
         // the refused element starts on line 5, two spaces in (a nested one further right)

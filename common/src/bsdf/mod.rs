@@ -6,7 +6,8 @@
 //! `pdf(wi, wo)`. Delta lobes return zero from `eval`/`pdf` and are reached only by sampling,
 //! where `pdf` is the discrete probability of the chosen lobe and `delta` is set.
 //!
-//! [`Material`] wraps a [`Bxdf`] with Mitsuba's `twosided` semantics.
+//! [`Material`] wraps a [`Bxdf`] with Mitsuba's `twosided` and `mask` semantics;
+//! [`textured`] resolves materials whose parameters come from textures.
 
 pub mod conductor;
 pub mod dielectric;
@@ -14,6 +15,7 @@ pub mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 pub mod plastic;
+pub mod textured;
 
 use crate::math::Rgb;
 use glam::{Vec2, Vec3};
@@ -132,6 +134,15 @@ impl Bxdf {
     pub fn has_smooth_lobe(&self) -> bool {
         !matches!(self, Bxdf::Conductor(_) | Bxdf::Dielectric(_) | Bxdf::ThinDielectric(_))
     }
+
+    /// Whether the model depends on the tangent direction (different `alpha_u` and `alpha_v`).
+    pub fn is_anisotropic(&self) -> bool {
+        match self {
+            Bxdf::RoughConductor(b) => b.distribution.alpha_u != b.distribution.alpha_v,
+            Bxdf::RoughDielectric(b) => b.distribution.alpha_u != b.distribution.alpha_v,
+            _ => false,
+        }
+    }
 }
 
 /// How the back side of a surface scatters.
@@ -145,19 +156,29 @@ pub enum BackSide {
     Other(Bxdf),
 }
 
-/// What a surface is made of: a BSDF plus `twosided` handling.
+/// What a surface is made of: a BSDF plus `twosided` and `mask` handling.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
     /// The BSDF of the front side (the side the shading normal points to).
     pub front: Bxdf,
     /// What happens on the back side.
     pub back: BackSide,
+    /// Mitsuba's `mask` opacity in [0, 1]: with probability 1 − opacity a ray passes straight
+    /// through (a delta "null" lobe), otherwise the BSDF scatters with its value scaled by
+    /// the opacity. 1 for surfaces without a mask.
+    pub opacity: f32,
 }
 
 impl Material {
     /// A one-sided material.
     pub fn one_sided(bxdf: Bxdf) -> Self {
-        Material { front: bxdf, back: BackSide::AsIs }
+        Material { front: bxdf, back: BackSide::AsIs, opacity: 1.0 }
+    }
+
+    /// A `twosided` material: `back` is `None` when the back mirrors the front.
+    pub fn two_sided(front: Bxdf, back: Option<Bxdf>) -> Self {
+        let back = back.map_or(BackSide::MirrorFront, BackSide::Other);
+        Material { front, back, opacity: 1.0 }
     }
 
     /// The BSDF that applies for `wo`, and the sign to apply to local z (−1 when a two-sided
@@ -174,30 +195,44 @@ impl Material {
         }
     }
 
-    /// See [`Bxdf::sample`].
+    /// See [`Bxdf::sample`]. A mask's pass-through is a delta transmission with `wi = -wo`,
+    /// weight 1 and probability 1 − opacity, as Mitsuba's `mask` samples it.
     #[inline]
-    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, mut uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        let alpha = self.opacity;
+        if alpha < 1.0 {
+            if uc >= alpha {
+                return Some(BsdfSample::delta(-wo, Rgb::ONE, 1.0 - alpha, 1.0, true));
+            }
+            uc /= alpha;
+        }
         let (b, s) = self.side(wo);
         let flip = Vec3::new(1.0, 1.0, s);
         let mut bs = b.sample(wo * flip, uc, u, mode)?;
         bs.wi *= flip;
+        if alpha < 1.0 {
+            // f and pdf both scale by the opacity, so the weight is the nested one
+            bs.f = bs.f * alpha;
+            bs.pdf *= alpha;
+        }
         Some(bs)
     }
 
-    /// See [`Bxdf::eval`].
+    /// See [`Bxdf::eval`]; scaled by the opacity (the pass-through lobe is delta).
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
         let (b, s) = self.side(wo);
         let flip = Vec3::new(1.0, 1.0, s);
-        b.eval(wo * flip, wi * flip, mode)
+        let f = b.eval(wo * flip, wi * flip, mode);
+        if self.opacity < 1.0 { f * self.opacity } else { f }
     }
 
-    /// See [`Bxdf::pdf`].
+    /// See [`Bxdf::pdf`]; scaled by the opacity.
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let (b, s) = self.side(wo);
         let flip = Vec3::new(1.0, 1.0, s);
-        b.pdf(wo * flip, wi * flip)
+        b.pdf(wo * flip, wi * flip) * self.opacity
     }
 
     /// `f`, forward pdf (of `wi` given `wo`) and reverse pdf (of `wo` given `wi`) in one call, as
@@ -207,11 +242,18 @@ impl Material {
         (self.eval(wo, wi, mode), self.pdf(wo, wi), self.pdf(wi, wo))
     }
 
+    /// Whether either side depends on the tangent direction.
+    pub fn is_anisotropic(&self) -> bool {
+        self.front.is_anisotropic() || matches!(&self.back, BackSide::Other(b) if b.is_anisotropic())
+    }
+
     /// Whether any lobe on either side is non-delta.
     pub fn has_smooth_lobe(&self) -> bool {
         self.front.has_smooth_lobe() || matches!(&self.back, BackSide::Other(b) if b.has_smooth_lobe())
     }
 }
 
+#[cfg(test)]
+mod goldens;
 #[cfg(test)]
 mod tests;

@@ -3,7 +3,6 @@
 //! for the coating's transmittance on the way in and out and for internal reflection
 //! (`nonlinear` = false: the internal-reflection sum uses the average internal reflectance).
 
-use super::dielectric::RoughDielectric;
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_z, refract};
 use super::microfacet::Microfacet;
 use super::{BsdfSample, TransportMode};
@@ -108,7 +107,9 @@ pub struct RoughPlastic {
     pub nonlinear: bool,
     specular_sampling_weight: f32,
     internal_reflectance: f32,
-    external_transmittance: Vec<f32>,
+    /// Inline rather than shared, so that resolving a textured material per surface point
+    /// neither allocates nor contends on a reference count.
+    external_transmittance: [f32; TRANSMITTANCE_RES],
 }
 
 impl RoughPlastic {
@@ -121,20 +122,13 @@ impl RoughPlastic {
         nonlinear: bool,
     ) -> Self {
         let s_mean = specular_reflectance.map_or(1.0, mean);
-        let outside =
-            RoughDielectric { distribution, eta, specular_reflectance: Rgb::ONE, specular_transmittance: Rgb::ONE };
-        let inside = RoughDielectric { distribution, eta: 1.0 / eta, ..outside.clone() };
-        let external_transmittance = (0..TRANSMITTANCE_RES)
-            .map(|i| coating_albedo(&outside, (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6), true))
-            .collect();
-        // 2 ∫ R(μ) μ dμ from inside, by the midpoint rule
-        let n = TRANSMITTANCE_RES;
-        let internal_reflectance = (0..n)
-            .map(|i| {
-                let mu = (i as f32 + 0.5) / n as f32;
-                2.0 * coating_albedo(&inside, mu, false) * mu / n as f32
-            })
-            .sum();
+        // Mitsuba's tables: μ on a uniform grid over [0, 1] (the first at 1e-6), the internal
+        // reflectance as 2 × the grid mean of R(μ) μ seen from inside
+        let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
+        let external_transmittance = std::array::from_fn(|i| coating_albedo(&distribution, mu(i), eta, true));
+        let internal_reflectance = 2.0
+            * (0..TRANSMITTANCE_RES).map(|i| coating_albedo(&distribution, mu(i), 1.0 / eta, false) * mu(i)).sum::<f32>()
+            / TRANSMITTANCE_RES as f32;
         RoughPlastic {
             distribution,
             eta,
@@ -209,34 +203,65 @@ impl RoughPlastic {
     }
 }
 
-/// Fraction of light arriving at `cos_theta` that a rough interface transmits (`transmitted`)
-/// or reflects, by deterministic quadrature over the microfacet sampler's unit square.
-fn coating_albedo(interface: &RoughDielectric, cos_theta: f32, transmitted: bool) -> f32 {
-    let wo = Vec3::new((1.0 - cos_theta * cos_theta).max(0.0).sqrt(), 0.0, cos_theta);
-    let n = 48;
+/// What a rough interface with relative index `eta` does to light arriving at `cos_theta`:
+/// the fraction it transmits (`transmitted`) or reflects, counting single scattering off the
+/// microfacets as Mitsuba's `eval_transmittance`/`eval_reflectance` do (`microfacet.h`):
+/// ∫ D_wi(m) G1(wo, m) F dm over visible normals, by Gauss–Legendre quadrature of the
+/// sampler's unit square with Mitsuba's resolutions (32² outside, 128² inside).
+fn coating_albedo(distribution: &Microfacet, cos_theta: f32, eta: f32, transmitted: bool) -> f32 {
+    let wi = Vec3::new((1.0 - cos_theta * cos_theta).max(0.0).sqrt(), 0.0, cos_theta);
+    let (nodes, weights) = gauss_legendre(if eta > 1.0 { 32 } else { 128 });
     let mut sum = 0.0f64;
-    for i in 0..n {
-        for j in 0..n {
-            let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-            let m = interface.distribution.sample(wo, u);
-            let pdf_m = interface.distribution.pdf(wo, m);
-            if pdf_m <= 0.0 {
+    for (x, wx) in nodes.iter().zip(&weights) {
+        for (y, wy) in nodes.iter().zip(&weights) {
+            let u = Vec2::new((x * 0.5 + 0.5) as f32, (y * 0.5 + 0.5) as f32);
+            let m = distribution.sample(wi, u);
+            // visible-normal density over the sampler's: 1 for GGX, whose visible normals
+            // are sampled; the full-distribution ratio otherwise (Beckmann)
+            let d_vis = distribution.g1(wi, m) * wi.dot(m).max(0.0) * distribution.d(m) / wi.z;
+            let pdf = distribution.pdf(wi, m);
+            if !(pdf > 0.0) || !(d_vis > 0.0) {
                 continue;
             }
-            let f = fresnel_dielectric(wo.dot(m), interface.eta).0;
-            let wi = if transmitted { refract(wo, m, interface.eta).map(|(w, _)| w) } else { Some(reflect(wo, m)) };
-            let Some(wi) = wi else { continue };
-            if (wi.z * wo.z < 0.0) != transmitted || wi.z == 0.0 {
-                continue;
-            }
-            let pdf = interface.pdf(wo, wi);
-            let lobe_prob = if transmitted { 1.0 - f } else { f };
-            if pdf > 0.0 && lobe_prob > 0.0 {
-                // E[f |cos| / pdf_lobe] where pdf_lobe excludes the lobe-choice probability
-                let value = interface.eval(wo, wi, TransportMode::Importance).x * wi.z.abs() / (pdf / lobe_prob);
-                sum += (value * lobe_prob) as f64;
-            }
+            let (f, _, _) = fresnel_dielectric(wi.dot(m), eta);
+            let value = if transmitted {
+                match refract(wi, m, eta) {
+                    Some((wo, _)) if wo.z * wi.z < 0.0 => distribution.g1(wo, m) * (1.0 - f),
+                    _ => 0.0,
+                }
+            } else {
+                let wo = reflect(wi, m);
+                if wo.z > 0.0 { distribution.g1(wo, m) * f } else { 0.0 }
+            };
+            sum += (value * d_vis / pdf) as f64 * wx * wy * 0.25;
         }
     }
-    (sum / (n * n) as f64).clamp(0.0, 1.0) as f32
+    sum as f32
+}
+
+/// Nodes and weights of the `n`-point Gauss–Legendre rule on [−1, 1] (Newton on P_n).
+fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let (mut nodes, mut weights) = (vec![0.0; n], vec![0.0; n]);
+    for i in 0..n {
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 0.0;
+        for _ in 0..100 {
+            // P_n(x) and its derivative by the three-term recurrence
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            let dx = p1 / dp;
+            x -= dx;
+            if dx.abs() < 1e-15 {
+                break;
+            }
+        }
+        nodes[i] = x;
+        weights[i] = 2.0 / ((1.0 - x * x) * dp * dp);
+    }
+    (nodes, weights)
 }

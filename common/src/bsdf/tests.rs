@@ -286,7 +286,7 @@ fn albedo_by_quadrature(m: &Material, wo: Vec3) -> f32 {
 fn twosided_mirrors_the_front() {
     let front = Bxdf::Diffuse(Diffuse { reflectance: Rgb::splat(0.5) });
     let one = Material::one_sided(front.clone());
-    let two = Material { front, back: BackSide::MirrorFront };
+    let two = Material::two_sided(front, None);
     let (wo, wi) = (Vec3::new(0.1, 0.2, -0.9).normalize(), Vec3::new(-0.3, 0.1, -0.8).normalize());
     assert_eq!(one.eval(wo, wi, TransportMode::Radiance), Rgb::ZERO);
     assert!((two.eval(wo, wi, TransportMode::Radiance) - Rgb::splat(0.5 / PI)).abs().max_element() < 1e-6);
@@ -312,4 +312,32 @@ fn smooth_dielectric_conserves_energy_and_scales_radiance() {
     assert!((t.weight.x - 1.0 / 2.25).abs() < 1e-5, "radiance is compressed entering glass");
     let ti = m.sample(wo, 0.99, Vec2::ZERO, TransportMode::Importance).unwrap();
     assert!((ti.weight.x - 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn mask_passes_light_through_with_probability_one_minus_opacity() {
+    let mut m = Material::one_sided(Bxdf::Diffuse(Diffuse { reflectance: Rgb::splat(0.5) }));
+    m.opacity = 0.3;
+    let wo = Vec3::new(0.3, -0.2, 0.9).normalize();
+    let wi = Vec3::new(-0.1, 0.4, 0.8).normalize();
+    assert!((m.eval(wo, wi, TransportMode::Radiance) - Rgb::splat(0.3 * 0.5 / PI)).abs().max_element() < 1e-6);
+    assert!((m.pdf(wo, wi) - 0.3 * wi.z / PI).abs() < 1e-6);
+    let (n, mut through, mut weight) = (100_000, 0, Rgb::ZERO);
+    for i in 0..n {
+        let mut s = Sampler::for_pixel(5, i, 3);
+        let bs = m.sample(wo, s.next_1d(), s.next_2d(), TransportMode::Importance).expect("a sample");
+        weight += bs.weight;
+        if bs.delta {
+            through += 1;
+            assert_eq!((bs.wi, bs.weight, bs.pdf, bs.transmission), (-wo, Rgb::ONE, 0.7, true));
+        } else {
+            // the scattered lobe keeps its weight; its value and density carry the opacity
+            assert!((bs.pdf - m.pdf(wo, bs.wi)).abs() < 1e-5);
+            assert!((bs.f - m.eval(wo, bs.wi, TransportMode::Importance)).abs().max_element() < 1e-5);
+        }
+    }
+    let through = through as f32 / n as f32;
+    assert!((through - 0.7).abs() < 0.01, "{through}");
+    // albedo: 0.7 passed on unchanged plus 0.3 × the diffuse albedo 0.5
+    assert!((weight / n as f32 - Rgb::splat(0.85)).abs().max_element() < 0.01, "{weight:?}");
 }

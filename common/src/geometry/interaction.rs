@@ -4,6 +4,18 @@ use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::math::{Frame, SHADOW_EPSILON};
 use glam::Vec3;
 
+/// Which point of which shape: enough to evaluate textures there later (path vertices keep it
+/// so that a textured material can be resolved again at connection time).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SurfaceRef {
+    /// Index of the shape.
+    pub shape: u32,
+    /// Index of the primitive within the shape (triangle index; 0 for analytic shapes).
+    pub prim: u32,
+    /// Barycentric coordinates (b1, b2) on the triangle (zero for analytic shapes).
+    pub bary: glam::Vec2,
+}
+
 /// A point on a surface as seen by an incoming ray.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceInteraction {
@@ -26,6 +38,12 @@ pub struct SurfaceInteraction {
 }
 
 impl SurfaceInteraction {
+    /// Which point of which shape was hit.
+    #[inline]
+    pub fn surface(&self) -> SurfaceRef {
+        SurfaceRef { shape: self.shape, prim: self.prim, bary: self.bary }
+    }
+
     /// A ray leaving this point in direction `d`, offset off the surface.
     #[inline]
     pub fn spawn_ray(&self, d: Vec3) -> Ray {

@@ -4,6 +4,6 @@ pub mod interaction;
 pub mod ray;
 pub mod transform;
 
-pub use interaction::SurfaceInteraction;
+pub use interaction::{SurfaceInteraction, SurfaceRef};
 pub use ray::{Ray, offset_ray_origin};
 pub use transform::Transform;

@@ -34,7 +34,7 @@ use crate::film::TileAccum;
 use crate::math::{Rgb, max_component};
 use crate::sampler::Sampler;
 use crate::scene::Scene;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// The bidirectional path tracer, with optional merging, reporting samples to `O`.
@@ -190,6 +190,7 @@ impl<O: SampleObserver> Bidir<O> {
                             p: ray.o + ray.d * (2.0 * scene.bounds_radius),
                             n_geo: -ray.d,
                             n_shading: -ray.d,
+                            tangent: Vec3::ZERO,
                             wo: -ray.d,
                             beta,
                             pdf_fwd: pdf_dir,
@@ -211,12 +212,13 @@ impl<O: SampleObserver> Bidir<O> {
                 p: hit.p,
                 n_geo: hit.n_geo,
                 n_shading: hit.frame.n,
+                tangent: scene.vertex_tangent(&hit),
                 wo: hit.wo,
                 beta,
                 pdf_fwd: solid_angle_to_area(pdf_dir, prev.p, hit.p, hit.n_geo),
                 pdf_rev: 0.0,
                 pdf_next_event: 0.0,
-                kind: VertexKind::Surface { material: shape.material },
+                kind: VertexKind::Surface { material: shape.material, at: hit.surface() },
                 delta: false,
                 depth,
             };
@@ -244,7 +246,7 @@ impl<O: SampleObserver> Bidir<O> {
                 }
                 break;
             }
-            let material = &scene.materials[shape.material as usize];
+            let material = scene.material_at(shape.material, hit.surface(), hit.p);
             // ---- next-event estimation ----
             let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
             if material.has_smooth_lobe() {

@@ -75,14 +75,14 @@ impl PathTracer {
             if depth + 1 >= s.max_depth {
                 break;
             }
-            let material = &scene.materials[scene.shapes[hit.shape as usize].material as usize];
+            let material = scene.material_of_hit(&hit);
             let wo = hit.frame.to_local(hit.wo);
 
             // ---- next-event estimation ----
             if material.has_smooth_lobe() {
                 let u_light = sampler.next_1d();
                 let u_pos = sampler.next_2d();
-                if let Some(contrib) = self.next_event(scene, &ctx, &hit, material, wo, u_light, u_pos) {
+                if let Some(contrib) = self.next_event(scene, &ctx, &hit, &material, wo, u_light, u_pos) {
                     result += throughput * contrib;
                 }
             }

@@ -25,6 +25,16 @@ impl Frame {
         Frame { s, t, n }
     }
 
+    /// The frame Mitsuba builds from a normal and the surface's ∂p/∂u (`initialize_sh_frame`):
+    /// `s` is ∂p/∂u made orthogonal to `n`, `t = n × s`; [`Frame::from_normal`] when ∂p/∂u
+    /// has no component off the normal. Anisotropic BSDFs depend on `s`.
+    pub fn from_normal_tangent(n: Vec3, dp_du: Vec3) -> Self {
+        match (dp_du - n * n.dot(dp_du)).try_normalize() {
+            Some(s) => Frame { s, t: n.cross(s), n },
+            None => Frame::from_normal(n),
+        }
+    }
+
     /// World direction → local coordinates.
     #[inline]
     pub fn to_local(&self, v: Vec3) -> Vec3 {

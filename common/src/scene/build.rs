@@ -3,7 +3,9 @@
 //! Refused plugins ([`super::refused`]) fail first; every relative `filename` resolves through
 //! the tree's [`super::FileResolver`].
 
-use super::build_bsdf::{build_emitter, build_material};
+use super::build_bsdf::build_material;
+use super::build_emitter::build_emitter;
+use super::build_texture::Textures;
 use super::build_settings::{build_integrator, build_sampler};
 use super::error::{Location, SceneError};
 use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply, serialized::load_serialized};
@@ -11,22 +13,26 @@ use super::refused::check_supported;
 use super::resolver::FileResolver;
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use super::xml::{Element, SceneTree};
-use super::{IntegratorSettings, Scene};
+use super::{IntegratorSettings, Parts, Scene};
+use crate::bsdf::textured::MaterialTextures;
 use crate::bsdf::{Bxdf, Diffuse, Material};
 use crate::camera::PerspectiveCamera;
 use crate::film::FilmSpec;
 use crate::film::filter::{Filter, FilterKind, MAX_RADIUS};
 use crate::light::Light;
 use crate::math::{PI, Rgb};
+use crate::texture::TextureLimits;
 use glam::Vec3;
 use std::collections::HashMap;
 use std::path::Path;
 
 struct Builder<'a> {
     resolver: &'a FileResolver,
+    textures: Textures<'a>,
     shapes: Vec<Shape>,
     meshes: Vec<Mesh>,
     materials: Vec<Material>,
+    material_textures: Vec<Option<MaterialTextures>>,
     /// Bsdf ids → material index, so a BSDF shared through `<ref>` is built once.
     material_ids: HashMap<String, u32>,
     lights: Vec<Light>,
@@ -56,16 +62,18 @@ const IGNORED_SCENE_PARAMETERS: &[&str] = &[
     "kd_exact_primitive_threshold",
 ];
 
-pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> {
+pub(super) fn build(tree: &SceneTree, path: &Path, limits: TextureLimits) -> Result<Scene, SceneError> {
     check_supported(&tree.elements)?;
     if let Some(p) = tree.properties.iter().find(|p| !IGNORED_SCENE_PARAMETERS.contains(&p.name.as_str())) {
         return Err(SceneError::at(&p.location, format!("unknown parameter \"{}\" of the scene", p.name)));
     }
     let mut b = Builder {
         resolver: &tree.resolver,
+        textures: Textures::new(&tree.resolver, limits),
         shapes: vec![],
         meshes: vec![],
         materials: vec![],
+        material_textures: vec![],
         material_ids: HashMap::new(),
         lights: vec![],
         light_weights: vec![],
@@ -78,8 +86,12 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
                 b.material_of(e)?;
             }
             "shape" => b.shape(e)?,
+            "texture" => {
+                // built (and its file read) even when unused, as Mitsuba does
+                b.textures.texture(e)?;
+            }
             "emitter" => {
-                let (light, w) = build_emitter(e, None)?;
+                let (light, w) = build_emitter(e, None, &mut b.textures)?;
                 b.lights.push(light);
                 b.light_weights.push(w);
             }
@@ -112,16 +124,20 @@ pub(super) fn build(tree: &SceneTree, path: &Path) -> Result<Scene, SceneError> 
     });
     Ok(Scene::assemble(
         path,
-        b.shapes,
-        b.meshes,
-        b.materials,
-        b.lights,
-        b.light_weights,
-        sensor.camera,
-        sensor.film,
-        sensor.spp,
-        sensor.seed,
-        integrator,
+        Parts {
+            shapes: b.shapes,
+            meshes: b.meshes,
+            materials: b.materials,
+            material_textures: b.material_textures,
+            texture_bytes: b.textures.decoded_bytes(),
+            lights: b.lights,
+            light_weights: b.light_weights,
+            camera: sensor.camera,
+            film: sensor.film,
+            spp: sensor.spp,
+            seed: sensor.seed,
+            integrator,
+        },
     ))
 }
 
@@ -351,7 +367,9 @@ impl Builder<'_> {
         if let Some(&m) = e.id.as_ref().and_then(|id| self.material_ids.get(id)) {
             return Ok(m);
         }
-        self.materials.push(build_material(e)?);
+        let (material, textures) = build_material(e, &mut self.textures)?;
+        self.materials.push(material);
+        self.material_textures.push(textures);
         let m = self.materials.len() as u32 - 1;
         if let Some(id) = &e.id {
             self.material_ids.insert(id.clone(), m);
@@ -451,13 +469,23 @@ impl Builder<'_> {
                 // Mitsuba: a shape without a bsdf is diffuse 0.5, an emitting one is black
                 let r = if emitter.is_some() { Rgb::ZERO } else { Rgb::splat(0.5) };
                 self.materials.push(Material::one_sided(Bxdf::Diffuse(Diffuse { reflectance: r })));
+                self.material_textures.push(None);
                 self.materials.len() as u32 - 1
             }
         };
+        if let Some(textures) = &self.material_textures[material as usize] {
+            let attributes = match &geometry {
+                ShapeGeometry::Mesh(m) => self.meshes[*m as usize].attributes.as_slice(),
+                _ => &[],
+            };
+            textures.check_attributes(attributes).map_err(|err| {
+                SceneError::at(&e.location, format!("{} cannot use its bsdf: {err}", e.describe()))
+            })?;
+        }
         let index = self.shapes.len() as u32;
         let light = match emitter {
             Some(em) => {
-                let (light, w) = build_emitter(em, Some(index))?;
+                let (light, w) = build_emitter(em, Some(index), &mut self.textures)?;
                 self.lights.push(light);
                 self.light_weights.push(w);
                 Some(self.lights.len() as u32 - 1)

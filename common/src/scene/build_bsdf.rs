@@ -1,10 +1,12 @@
-//! Interprets `<bsdf>` and `<emitter>` elements: Mitsuba's parameter names, defaults and
-//! named materials, with an error for anything Tessera does not support.
+//! Interprets `<bsdf>` elements: Mitsuba's parameter names, defaults and named materials,
+//! `twosided` and `mask`, and parameters given as textures, with an error for anything
+//! Tessera does not support.
 
+use super::build_texture::{Param, Textures};
 use super::error::SceneError;
 use super::xml::{ColorUsage, Element};
+use crate::bsdf::textured::{MaterialTextures, Side, Slot, TexturedParam};
 use crate::bsdf::*;
-use crate::light::Light;
 use crate::math::Rgb;
 
 /// Named indices of refraction (Mitsuba's `ior.h` table).
@@ -65,15 +67,67 @@ fn ior(e: &Element, name: &str, default: &str) -> Result<f32, SceneError> {
     })
 }
 
-/// A reflectance or transmittance: `<rgb>` must lie in [0, 1], spectra are clipped, a
-/// `<float>` is taken as given (all as Mitsuba reads a bounded texture).
-fn reflectance(e: &Element, name: &str, default: f32) -> Result<Rgb, SceneError> {
-    e.color_or(name, ColorUsage::Bounded, default)
+/// Collects the textured parameters of one material while its BSDFs are built.
+struct Ctx<'t, 'a> {
+    textures: &'t mut Textures<'a>,
+    side: Side,
+    out: MaterialTextures,
 }
 
-/// A roughness: Mitsuba reads it as an unbounded texture and evaluates its channel mean.
-fn roughness(e: &Element, name: &str) -> Result<Option<f32>, SceneError> {
-    Ok(e.color(name, ColorUsage::Unbounded)?.map(|c| c.element_sum() / 3.0))
+impl Ctx<'_, '_> {
+    /// A bounded colour parameter (reflectances, transmittances): a constant (`<rgb>` within
+    /// [0, 1], spectra clipped, `<float>` as given) or a texture filling `slot`. A textured
+    /// slot's template value is the texture's mean, which is what Mitsuba's sampling weights
+    /// read.
+    fn color(&mut self, e: &Element, name: &str, default: f32, slot: Slot) -> Result<Rgb, SceneError> {
+        Ok(self.optional_color(e, name, slot)?.unwrap_or(Rgb::splat(default)))
+    }
+
+    fn optional_color(&mut self, e: &Element, name: &str, slot: Slot) -> Result<Option<Rgb>, SceneError> {
+        match self.textures.param(e, name, ColorUsage::Bounded)? {
+            None => Ok(None),
+            Some(Param::Constant(c)) => Ok(Some(c)),
+            Some(Param::Texture(texture)) => {
+                let mean = texture.mean();
+                self.out.params.push(TexturedParam { side: self.side, slot, texture });
+                Ok(Some(Rgb::splat(mean.unwrap_or(0.5))))
+            }
+        }
+    }
+
+    /// A colour whose mean Mitsuba needs at load time (plastic's sampling weight).
+    fn color_with_mean(&mut self, e: &Element, name: &str, slot: Slot) -> Result<Option<Rgb>, SceneError> {
+        let before = self.out.params.len();
+        let c = self.optional_color(e, name, slot)?;
+        if self.out.params.len() > before && self.out.params[before].texture.mean().is_none() {
+            return Err(SceneError::at(
+                &e.object(name).map_or(&e.location, |c| &c.location).clone(),
+                format!(
+                    "\"{name}\" of {} cannot be a mesh_attribute texture: its sampling weight needs the texture's mean, which mesh_attribute lacks (Mitsuba fails the same way)",
+                    e.describe()
+                ),
+            ));
+        }
+        Ok(c)
+    }
+
+    /// A roughness: an unbounded constant (its channel mean, as Mitsuba's `eval_1`) or, when
+    /// `slot` is given, a texture.
+    fn roughness(&mut self, e: &Element, name: &str, slot: Option<Slot>) -> Result<Option<f32>, SceneError> {
+        match (self.textures.param(e, name, ColorUsage::Unbounded)?, slot) {
+            (None, _) => Ok(None),
+            (Some(Param::Constant(c)), _) => Ok(Some(c.element_sum() / 3.0)),
+            (Some(Param::Texture(texture)), Some(slot)) => {
+                let mean = texture.mean();
+                self.out.params.push(TexturedParam { side: self.side, slot, texture });
+                Ok(Some(mean.unwrap_or(0.1)))
+            }
+            (Some(Param::Texture(_)), None) => Err(SceneError::at(
+                &e.object(name).map_or(&e.location, |c| &c.location).clone(),
+                format!("\"{name}\" of {} must be a number (Mitsuba does not texture it)", e.describe()),
+            )),
+        }
+    }
 }
 
 fn positive(e: &Element, name: &str, v: f32) -> Result<f32, SceneError> {
@@ -84,7 +138,9 @@ fn positive(e: &Element, name: &str, v: f32) -> Result<f32, SceneError> {
     }
 }
 
-fn microfacet(e: &Element, allow_anisotropic: bool) -> Result<Microfacet, SceneError> {
+/// The microfacet distribution of a rough model; `textured` says whether its roughness may
+/// be a texture (rough conductors and dielectrics) or only a number (rough plastic).
+fn microfacet(e: &Element, ctx: &mut Ctx, allow_anisotropic: bool, textured: bool) -> Result<Microfacet, SceneError> {
     let kind = match e.string("distribution")?.unwrap_or("beckmann") {
         "beckmann" => MicrofacetKind::Beckmann,
         "ggx" => MicrofacetKind::Ggx,
@@ -95,8 +151,9 @@ fn microfacet(e: &Element, allow_anisotropic: bool) -> Result<Microfacet, SceneE
             ));
         }
     };
-    let alpha = roughness(e, "alpha")?;
-    let (au, av) = (roughness(e, "alpha_u")?, roughness(e, "alpha_v")?);
+    let slot = |s: Slot| textured.then_some(s);
+    let alpha = ctx.roughness(e, "alpha", slot(Slot::Alpha))?;
+    let (au, av) = (ctx.roughness(e, "alpha_u", slot(Slot::AlphaU))?, ctx.roughness(e, "alpha_v", slot(Slot::AlphaV))?);
     let (au, av) = match (alpha, au, av) {
         (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
             return Err(SceneError::at(
@@ -146,39 +203,49 @@ fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
     }
 }
 
-/// Builds the BSDF of a `<bsdf>` element that is not `twosided`.
-fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
+/// Fails on a nested texture for a parameter Tessera takes only as a constant.
+fn constant_only(e: &Element, names: &[&str]) -> Result<(), SceneError> {
+    for name in names {
+        if let Some(c) = e.object(name).filter(|c| c.tag == "texture" && !c.is_spectrum()) {
+            return Err(SceneError::at(
+                c.reference.as_ref().unwrap_or(&c.location),
+                format!("a textured \"{name}\" of {} is not supported; give a constant", e.describe()),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Builds the BSDF of a `<bsdf>` element that is neither `twosided` nor `mask`.
+fn build_bxdf(e: &Element, ctx: &mut Ctx) -> Result<Bxdf, SceneError> {
     expect_bsdf(e)?;
-    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum()) {
+    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum() && c.tag != "texture") {
         return Err(SceneError::at(
             &child.location,
             format!(
-                "{} cannot contain <{}> (textures and nested bsdfs other than in twosided are not supported)",
+                "{} cannot contain <{}> (nested bsdfs belong in twosided or mask)",
                 e.describe(),
                 child.tag
             ),
         ));
     }
     let bxdf = match e.plugin.as_str() {
-        "diffuse" => Bxdf::Diffuse(Diffuse { reflectance: reflectance(e, "reflectance", 0.5)? }),
-        "conductor" => {
+        "diffuse" => Bxdf::Diffuse(Diffuse { reflectance: ctx.color(e, "reflectance", 0.5, Slot::Reflectance)? }),
+        "conductor" | "roughconductor" => {
+            constant_only(e, &["eta", "k"])?;
             let (eta, k) = conductor_ior(e)?;
-            Bxdf::Conductor(Conductor { eta, k, specular_reflectance: reflectance(e, "specular_reflectance", 1.0)? })
-        }
-        "roughconductor" => {
-            let distribution = microfacet(e, true)?;
-            let (eta, k) = conductor_ior(e)?;
-            Bxdf::RoughConductor(RoughConductor {
-                distribution,
-                eta,
-                k,
-                specular_reflectance: reflectance(e, "specular_reflectance", 1.0)?,
-            })
+            let specular_reflectance = ctx.color(e, "specular_reflectance", 1.0, Slot::SpecularReflectance)?;
+            if e.plugin == "conductor" {
+                Bxdf::Conductor(Conductor { eta, k, specular_reflectance })
+            } else {
+                let distribution = microfacet(e, ctx, true, true)?;
+                Bxdf::RoughConductor(RoughConductor { distribution, eta, k, specular_reflectance })
+            }
         }
         "dielectric" | "thindielectric" | "roughdielectric" => {
             let eta = ior(e, "int_ior", "bk7")? / ior(e, "ext_ior", "air")?;
-            let (sr, st) =
-                (reflectance(e, "specular_reflectance", 1.0)?, reflectance(e, "specular_transmittance", 1.0)?);
+            let sr = ctx.color(e, "specular_reflectance", 1.0, Slot::SpecularReflectance)?;
+            let st = ctx.color(e, "specular_transmittance", 1.0, Slot::SpecularTransmittance)?;
             match e.plugin.as_str() {
                 "dielectric" => {
                     Bxdf::Dielectric(Dielectric { eta, specular_reflectance: sr, specular_transmittance: st })
@@ -187,7 +254,7 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
                     Bxdf::ThinDielectric(ThinDielectric { eta, specular_reflectance: sr, specular_transmittance: st })
                 }
                 _ => Bxdf::RoughDielectric(RoughDielectric {
-                    distribution: microfacet(e, true)?,
+                    distribution: microfacet(e, ctx, true, true)?,
                     eta,
                     specular_reflectance: sr,
                     specular_transmittance: st,
@@ -196,8 +263,9 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
         }
         "plastic" | "roughplastic" => {
             let eta = ior(e, "int_ior", "polypropylene")? / ior(e, "ext_ior", "air")?;
-            let diffuse = reflectance(e, "diffuse_reflectance", 0.5)?;
-            let specular = e.color("specular_reflectance", ColorUsage::Bounded)?;
+            let diffuse = ctx.color_with_mean(e, "diffuse_reflectance", Slot::DiffuseReflectance)?;
+            let diffuse = diffuse.unwrap_or(Rgb::splat(0.5));
+            let specular = ctx.color_with_mean(e, "specular_reflectance", Slot::SpecularReflectance)?;
             let nonlinear = e.boolean_or("nonlinear", false)?;
             if e.plugin == "plastic" {
                 Bxdf::Plastic(Plastic::new(eta, diffuse, specular, nonlinear))
@@ -208,15 +276,21 @@ fn build_bxdf(e: &Element) -> Result<Bxdf, SceneError> {
                         "roughplastic needs different interior and exterior indices",
                     ));
                 }
-                Bxdf::RoughPlastic(RoughPlastic::new(microfacet(e, false)?, eta, diffuse, specular, nonlinear))
+                let distribution = microfacet(e, ctx, false, false)?;
+                Bxdf::RoughPlastic(RoughPlastic::new(distribution, eta, diffuse, specular, nonlinear))
             }
         }
-        "twosided" => return Err(SceneError::at(&e.location, "twosided cannot be nested inside another bsdf")),
+        "twosided" | "mask" => {
+            return Err(SceneError::at(
+                &e.location,
+                format!("{} cannot be nested here (use mask(twosided(bsdf)))", e.describe()),
+            ));
+        }
         other => {
             return Err(SceneError::at(
                 &e.location,
                 format!(
-                    "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided)"
+                    "unsupported bsdf \"{other}\" (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, mask)"
                 ),
             ));
         }
@@ -237,67 +311,98 @@ fn expect_bsdf(e: &Element) -> Result<(), SceneError> {
     }
 }
 
-/// Builds the material of a `<bsdf>` element, with `twosided` semantics.
-pub(super) fn build_material(e: &Element) -> Result<Material, SceneError> {
+/// Builds the material of a `<bsdf>` element, with `twosided` and `mask` semantics, and the
+/// textures it needs resolved per point (`None` when it has none).
+pub(super) fn build_material(
+    e: &Element,
+    textures: &mut Textures,
+) -> Result<(Material, Option<MaterialTextures>), SceneError> {
     expect_bsdf(e)?;
-    if e.plugin != "twosided" {
-        return Ok(Material::one_sided(build_bxdf(e)?));
+    let mut ctx = Ctx { textures, side: Side::Front, out: MaterialTextures::default() };
+    let material = match e.plugin.as_str() {
+        "mask" => mask(e, &mut ctx)?,
+        "twosided" => twosided(e, &mut ctx)?,
+        _ => Material::one_sided(build_bxdf(e, &mut ctx)?),
+    };
+    Ok((material, (!ctx.out.is_empty()).then_some(ctx.out)))
+}
+
+/// The nested `<bsdf>` elements of `e`.
+fn nested_bsdfs(e: &Element) -> Vec<&Element> {
+    e.children.iter().filter(|c| c.tag == "bsdf").collect()
+}
+
+/// `twosided` with one or two nested BSDFs. As in Mitsuba, nested models that transmit
+/// (dielectrics, masks) need `allow_transmission`.
+fn twosided(e: &Element, ctx: &mut Ctx) -> Result<Material, SceneError> {
+    let allow_transmission = e.boolean_or("allow_transmission", false)?;
+    if let Some(c) = e.children.iter().find(|c| c.tag != "bsdf") {
+        return Err(SceneError::at(&c.location, format!("twosided cannot contain <{}>", c.tag)));
     }
     e.check_all_used()?;
-    match e.children.as_slice() {
-        [front] => Ok(Material { front: build_bxdf(front)?, back: BackSide::MirrorFront }),
-        [front, back] => Ok(Material { front: build_bxdf(front)?, back: BackSide::Other(build_bxdf(back)?) }),
+    let inner = nested_bsdfs(e);
+    for c in &inner {
+        let transmits = matches!(c.plugin.as_str(), "dielectric" | "thindielectric" | "roughdielectric" | "mask");
+        if transmits && !allow_transmission {
+            return Err(SceneError::at(
+                c.reference.as_ref().unwrap_or(&c.location),
+                format!(
+                    "twosided cannot nest {}, which transmits light (Mitsuba refuses it too; set allow_transmission to true)",
+                    c.describe()
+                ),
+            ));
+        }
+    }
+    match inner.as_slice() {
+        // twosided(mask(x)) is mask(twosided(x)): the pass-through is the same from both sides
+        [m] if m.plugin == "mask" => {
+            let mut material = mask(m, ctx)?;
+            if material.back == BackSide::AsIs {
+                material.back = BackSide::MirrorFront;
+            }
+            Ok(material)
+        }
+        [front] => Ok(Material::two_sided(build_bxdf(front, ctx)?, None)),
+        [front, back] if front.plugin == "mask" || back.plugin == "mask" => Err(SceneError::at(
+            &e.location,
+            "twosided with two nested bsdfs of which one is a mask is not supported (use mask(twosided(a, b)))",
+        )),
+        [front, back] => {
+            let front = build_bxdf(front, ctx)?;
+            ctx.side = Side::Back;
+            let back = build_bxdf(back, ctx)?;
+            ctx.side = Side::Front;
+            Ok(Material::two_sided(front, Some(back)))
+        }
         inner => {
             Err(SceneError::at(&e.location, format!("twosided needs one or two nested bsdfs, found {}", inner.len())))
         }
     }
 }
 
-/// Builds an emitter. `shape` is the index of the enclosing shape for `area` emitters.
-pub(super) fn build_emitter(e: &Element, shape: Option<u32>) -> Result<(Light, f32), SceneError> {
-    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum()) {
-        return Err(SceneError::at(
-            &child.location,
-            format!("{} cannot contain <{}> (textures are not supported)", e.describe(), child.tag),
-        ));
-    }
-    // Mitsuba's emitters default to 1 and read their colour as emissive
-    let emitted = |name: &str| -> Result<Rgb, SceneError> {
-        let v = e.color_or(name, ColorUsage::Emissive, 1.0)?;
-        if v.min_element() < 0.0 {
-            return Err(SceneError::at(
-                e.location_of(name),
-                format!("\"{name}\" of {} must not be negative", e.describe()),
-            ));
-        }
-        Ok(v)
-    };
-    let light = match (e.plugin.as_str(), shape) {
-        ("area", Some(shape)) => Light::Area { shape, radiance: emitted("radiance")? },
-        ("area", None) => return Err(SceneError::at(&e.location, "an area emitter must be nested inside a <shape>")),
-        ("point", None) => {
-            let intensity = emitted("intensity")?;
-            let position = match e.vector("position")? {
-                Some(p) => p,
-                None => e.transform("to_world")?.point(glam::Vec3::ZERO),
-            };
-            Light::Point { position, intensity }
-        }
-        ("constant", None) => Light::Constant { radiance: emitted("radiance")? },
-        (kind @ ("point" | "constant"), Some(_)) => {
-            return Err(SceneError::at(&e.location, format!("a {kind} emitter cannot be attached to a shape")));
-        }
-        (other, _) => {
-            return Err(SceneError::at(
-                &e.location,
-                format!("unsupported emitter \"{other}\" (supported: area, point, constant)"),
-            ));
+/// `mask`: a nested BSDF seen with probability `opacity` (Mitsuba's default 0.5), passed
+/// straight through otherwise.
+fn mask(e: &Element, ctx: &mut Ctx) -> Result<Material, SceneError> {
+    let opacity = match ctx.textures.param(e, "opacity", ColorUsage::Bounded)? {
+        None => 0.5,
+        Some(Param::Constant(c)) => (c.element_sum() / 3.0).clamp(0.0, 1.0),
+        Some(Param::Texture(t)) => {
+            ctx.out.opacity = Some(t);
+            1.0
         }
     };
-    let weight = e.float_or("sampling_weight", 1.0)?;
-    if weight < 0.0 {
-        return Err(SceneError::at(e.location_of("sampling_weight"), "\"sampling_weight\" must not be negative"));
+    if let Some(c) = e.children.iter().find(|c| c.tag != "bsdf" && c.name.as_deref() != Some("opacity")) {
+        return Err(SceneError::at(&c.location, format!("mask cannot contain <{}> besides its bsdf and opacity", c.tag)));
     }
     e.check_all_used()?;
-    Ok((light, weight))
+    let mut material = match nested_bsdfs(e).as_slice() {
+        [inner] if inner.plugin == "twosided" => twosided(inner, ctx)?,
+        [inner] if inner.plugin == "mask" => {
+            return Err(SceneError::at(&inner.location, "a mask inside a mask is not supported"));
+        }
+        [inner] => Material::one_sided(build_bxdf(inner, ctx)?),
+        inner => return Err(SceneError::at(&e.location, format!("mask needs one nested bsdf, found {}", inner.len()))),
+    };
+    material.opacity = opacity;
+    Ok(material)
 }

@@ -8,7 +8,9 @@
 pub mod accel;
 mod build;
 mod build_bsdf;
+mod build_emitter;
 mod build_settings;
+mod build_texture;
 pub mod error;
 pub mod load;
 mod primitive;
@@ -19,9 +21,12 @@ pub mod shape;
 pub mod xml;
 
 use crate::bsdf::Material;
+use crate::bsdf::textured::MaterialTextures;
 use crate::camera::PerspectiveCamera;
 use crate::film::FilmSpec;
-use crate::geometry::{Ray, SurfaceInteraction};
+use crate::geometry::{Ray, SurfaceInteraction, SurfaceRef};
+use crate::texture::{MeshPoint, TextureLimits, TexturePoint};
+use std::borrow::Cow;
 use crate::light::{Light, LightContext, LightSampler};
 use crate::math::Frame;
 use accel::Accel;
@@ -45,6 +50,31 @@ pub struct IntegratorSettings {
     pub hide_emitters: bool,
 }
 
+/// How to load a scene.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// `$name` values overriding the file's `<default>`s (Mitsuba's `-D name=value`).
+    pub defines: HashMap<String, String>,
+    /// The memory one image may take once decoded.
+    pub texture_limits: TextureLimits,
+}
+
+/// What the builder hands to [`Scene::assemble`].
+pub(crate) struct Parts {
+    pub shapes: Vec<Shape>,
+    pub meshes: Vec<Mesh>,
+    pub materials: Vec<Material>,
+    pub material_textures: Vec<Option<MaterialTextures>>,
+    pub texture_bytes: usize,
+    pub lights: Vec<Light>,
+    pub light_weights: Vec<f32>,
+    pub camera: PerspectiveCamera,
+    pub film: FilmSpec,
+    pub spp: u32,
+    pub seed: u64,
+    pub integrator: IntegratorSettings,
+}
+
 /// An immutable, render-ready scene.
 pub struct Scene {
     /// The file it came from.
@@ -53,8 +83,13 @@ pub struct Scene {
     pub shapes: Vec<Shape>,
     /// Triangle meshes referenced by shapes.
     pub meshes: Vec<Mesh>,
-    /// Materials referenced by shapes.
+    /// Materials referenced by shapes; a textured one holds its constant parameters, and
+    /// [`Scene::material_at`] resolves its textures at a point.
     pub materials: Vec<Material>,
+    /// The textures of each material (`None` for untextured materials, most of them).
+    pub material_textures: Vec<Option<MaterialTextures>>,
+    /// Bytes of decoded image data the scene's textures hold (environment maps included).
+    pub texture_bytes: usize,
     /// Lights.
     pub lights: Vec<Light>,
     /// Indices of the infinite lights (seen by escaping rays).
@@ -76,6 +111,9 @@ pub struct Scene {
     /// Radius of the bounding sphere of all geometry.
     pub bounds_radius: f32,
     accel: Accel,
+    /// Per material: whether it is anisotropic, so that hits on it get Mitsuba's shading frame
+    /// from ∂p/∂u rather than one built from the normal alone.
+    needs_tangent: Vec<bool>,
     /// Unit geometric normal of every triangle, per mesh (zero for degenerate triangles),
     /// computed once rather than at every hit.
     face_normals: Vec<Vec<Vec3>>,
@@ -90,33 +128,40 @@ impl Scene {
 
     /// Loads a scene with `$name` parameters overriding the file's `<default>`s.
     pub fn load_with(path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
+        Self::load_options(path, &LoadOptions { defines: defines.clone(), ..LoadOptions::default() })
+    }
+
+    /// Loads a scene with `$name` parameters and a texture memory budget.
+    pub fn load_options(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         let text =
             std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read scene: {e}")))?;
-        Self::from_xml(&text, path, defines)
+        let tree = xml::parse(&text, path, &options.defines)?;
+        build::build(&tree, path, options.texture_limits)
     }
 
     /// Builds a scene from XML text; `path` names it in messages and anchors relative paths
     /// (includes, `<path>`, filenames).
     pub fn from_xml(text: &str, path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
         let tree = xml::parse(text, path, defines)?;
-        build::build(&tree, path)
+        build::build(&tree, path, TextureLimits::default())
     }
 
     /// Finishes a scene from its parts: builds the BVH, the light distribution and bounds.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn assemble(
-        path: &Path,
-        shapes: Vec<Shape>,
-        meshes: Vec<Mesh>,
-        materials: Vec<Material>,
-        lights: Vec<Light>,
-        light_weights: Vec<f32>,
-        camera: PerspectiveCamera,
-        film: FilmSpec,
-        spp: u32,
-        seed: u64,
-        integrator: IntegratorSettings,
-    ) -> Scene {
+    pub(crate) fn assemble(path: &Path, parts: Parts) -> Scene {
+        let Parts {
+            shapes,
+            meshes,
+            materials,
+            material_textures,
+            texture_bytes,
+            lights,
+            light_weights,
+            camera,
+            film,
+            spp,
+            seed,
+            integrator,
+        } = parts;
         let accel = Accel::build(&shapes, &meshes);
         let face_normals = meshes
             .iter()
@@ -154,6 +199,11 @@ impl Scene {
         hi = hi.max(camera.origin);
         let bounds_center = 0.5 * (lo + hi);
         let bounds_radius = (0.5 * (hi - lo).length()).max(1e-3) * 1.01;
+        let needs_tangent = materials
+            .iter()
+            .zip(&material_textures)
+            .map(|(m, t)| m.is_anisotropic() || t.as_ref().is_some_and(|t| t.is_anisotropic()))
+            .collect();
         let infinite_lights =
             lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
         Scene {
@@ -161,6 +211,8 @@ impl Scene {
             shapes,
             meshes,
             materials,
+            material_textures,
+            texture_bytes,
             lights,
             infinite_lights,
             light_sampler: LightSampler::new(&light_weights),
@@ -172,6 +224,7 @@ impl Scene {
             bounds_center,
             bounds_radius,
             accel,
+            needs_tangent,
             face_normals,
         }
     }
@@ -232,11 +285,17 @@ impl Scene {
         if n_geo == Vec3::ZERO {
             return None;
         }
+        let n = n_shading * flip;
+        let frame = if self.needs_tangent[shape.material as usize] {
+            Frame::from_normal_tangent(n, self.dp_du(hit.shape, hit.index, p, n_geo))
+        } else {
+            Frame::from_normal(n)
+        };
         Some(SurfaceInteraction {
             p,
             t: hit.t,
             n_geo: n_geo * flip,
-            frame: Frame::from_normal(n_shading * flip),
+            frame,
             wo: -ray.d,
             shape: hit.shape,
             prim: hit.index,
@@ -244,13 +303,90 @@ impl Scene {
         })
     }
 
+    /// Mitsuba's ∂p/∂u at a hit (`compute_surface_interaction` of each shape): from the
+    /// triangle's uvs (its first edge without uvs, a basis of the normal when the uvs are
+    /// degenerate), around a sphere's object z axis, radially outward on a disk.
+    fn dp_du(&self, shape: u32, prim: u32, p: Vec3, n_geo: Vec3) -> Vec3 {
+        let shape = &self.shapes[shape as usize];
+        match &shape.geometry {
+            ShapeGeometry::Mesh(m) => {
+                let mesh = &self.meshes[*m as usize];
+                let [a, b, c] = mesh.corners(prim as usize);
+                let (dp0, dp1) = (b - a, c - a);
+                let Some(uvs) = &mesh.uvs else { return dp0 };
+                let [i0, i1, i2] = mesh.triangles[prim as usize].map(|i| uvs[i as usize]);
+                let (duv0, duv1) = (i1 - i0, i2 - i0);
+                let det = duv0.x * duv1.y - duv0.y * duv1.x;
+                if det == 0.0 {
+                    return Frame::from_normal(n_geo).s;
+                }
+                (dp0 * duv1.y - dp1 * duv0.y) / det
+            }
+            ShapeGeometry::Sphere { center, .. } => {
+                let d = shape.object_rotation * (p - *center);
+                shape.object_rotation.transpose() * Vec3::new(-d.y, d.x, 0.0)
+            }
+            ShapeGeometry::Disk { to_world, .. } => {
+                let q = to_world.inv_point(p);
+                let phi = q.y.atan2(q.x);
+                to_world.vector(Vec3::new(phi.cos(), phi.sin(), 0.0))
+            }
+        }
+    }
+
+    /// The tangent a path vertex keeps for the hit's shading frame (zero when the frame
+    /// follows from the normal, see [`crate::integrator::path::vertex::PathVertex::tangent`]).
+    #[inline]
+    pub fn vertex_tangent(&self, si: &SurfaceInteraction) -> Vec3 {
+        if self.needs_tangent[self.shapes[si.shape as usize].material as usize] { si.frame.s } else { Vec3::ZERO }
+    }
+
+    /// Material `index` at a surface point: the material itself when it has no textures
+    /// (no copy), otherwise a copy with its textured parameters evaluated at the point.
+    #[inline]
+    pub fn material_at(&self, index: u32, at: SurfaceRef, p: Vec3) -> Cow<'_, Material> {
+        let base = &self.materials[index as usize];
+        match &self.material_textures[index as usize] {
+            None => Cow::Borrowed(base),
+            Some(t) => {
+                let mesh = if t.uses_mesh_attributes() { self.mesh_point(at) } else { None };
+                let point = TexturePoint { uv: self.uv_of(at, p), mesh };
+                Cow::Owned(t.resolve(base, &point))
+            }
+        }
+    }
+
+    /// The material of the shape a ray hit, at the hit.
+    #[inline]
+    pub fn material_of_hit(&self, si: &SurfaceInteraction) -> Cow<'_, Material> {
+        self.material_at(self.shapes[si.shape as usize].material, si.surface(), si.p)
+    }
+
+    /// The mesh triangle under a surface point, for `mesh_attribute` textures.
+    fn mesh_point(&self, at: SurfaceRef) -> Option<MeshPoint<'_>> {
+        let ShapeGeometry::Mesh(m) = &self.shapes[at.shape as usize].geometry else { return None };
+        let mesh = &self.meshes[*m as usize];
+        let (b1, b2) = (at.bary.x, at.bary.y);
+        Some(MeshPoint {
+            attributes: &mesh.attributes,
+            face: at.prim,
+            vertices: mesh.triangles[at.prim as usize],
+            barycentric: Vec3::new(1.0 - b1 - b2, b1, b2),
+        })
+    }
+
+    /// The texture coordinates of a hit; see [`Scene::uv_of`].
+    pub fn uv_at(&self, si: &SurfaceInteraction) -> glam::Vec2 {
+        self.uv_of(si.surface(), si.p)
+    }
+
     /// The texture coordinates of a hit, in Mitsuba's parameterisation of the shape: a mesh's
     /// interpolated uvs (or its barycentrics when it has none), a sphere's (atan2(y, x)/2π,
     /// acos(z)/π) and a disk's (r, φ/2π) in object space. Computed on demand, so that scenes
     /// without textures do not pay for it.
-    pub fn uv_at(&self, si: &SurfaceInteraction) -> glam::Vec2 {
+    pub fn uv_of(&self, at: SurfaceRef, p: Vec3) -> glam::Vec2 {
         use std::f32::consts::PI;
-        let shape = &self.shapes[si.shape as usize];
+        let shape = &self.shapes[at.shape as usize];
         let wrap = |a: f32| {
             let u = a / (2.0 * PI);
             if u < 0.0 { u + 1.0 } else { u }
@@ -258,18 +394,18 @@ impl Scene {
         match &shape.geometry {
             ShapeGeometry::Mesh(m) => {
                 let mesh = &self.meshes[*m as usize];
-                let Some(uvs) = &mesh.uvs else { return si.bary };
-                let [i0, i1, i2] = mesh.triangles[si.prim as usize];
-                let (b1, b2) = (si.bary.x, si.bary.y);
+                let Some(uvs) = &mesh.uvs else { return at.bary };
+                let [i0, i1, i2] = mesh.triangles[at.prim as usize];
+                let (b1, b2) = (at.bary.x, at.bary.y);
                 uvs[i0 as usize] * (1.0 - b1 - b2) + uvs[i1 as usize] * b1 + uvs[i2 as usize] * b2
             }
             ShapeGeometry::Sphere { center, .. } => {
-                let d = (shape.object_rotation * (si.p - *center)).normalize_or_zero();
+                let d = (shape.object_rotation * (p - *center)).normalize_or_zero();
                 glam::Vec2::new(wrap(d.y.atan2(d.x)), d.z.clamp(-1.0, 1.0).acos() / PI)
             }
             ShapeGeometry::Disk { to_world, .. } => {
-                let p = to_world.inv_point(si.p);
-                glam::Vec2::new(glam::Vec2::new(p.x, p.y).length(), wrap(p.y.atan2(p.x)))
+                let q = to_world.inv_point(p);
+                glam::Vec2::new(glam::Vec2::new(q.x, q.y).length(), wrap(q.y.atan2(q.x)))
             }
         }
     }

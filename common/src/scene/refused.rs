@@ -3,8 +3,6 @@
 //! rendering something else. Plugins neither here nor in Tessera's set get the builders' own
 //! "unsupported …" errors, which list what is supported.
 //!
-//! To enable a plugin once its builder exists, delete its line from [`PENDING`].
-//!
 //! ```
 //! use tessera_common::scene::refused::is_refused;
 //! assert!(is_refused("shape", "cylinder"));
@@ -90,20 +88,9 @@ pub const REFUSED: &[(&str, &str)] = &[
     ("integrator", "volpath_simple"),
 ];
 
-/// Refused until their builders land (work in progress elsewhere). Delete a line to enable it.
-pub const PENDING: &[(&str, &str)] = &[
-    ("texture", "bitmap"),
-    ("texture", "checkerboard"),
-    ("texture", "mesh_attribute"),
-    ("bsdf", "mask"),
-    ("emitter", "envmap"),
-    ("emitter", "directional"),
-    ("emitter", "spot"),
-];
-
 /// Whether `<tag type="plugin">` is refused.
 pub fn is_refused(tag: &str, plugin: &str) -> bool {
-    REFUSED.iter().chain(PENDING).any(|(t, p)| *t == tag && (*p == ANY || *p == plugin))
+    REFUSED.iter().any(|(t, p)| *t == tag && (*p == ANY || *p == plugin))
 }
 
 /// Fails on the first refused element in document order, at any depth.

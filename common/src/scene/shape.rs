@@ -16,6 +16,9 @@ pub struct Mesh {
     pub uvs: Option<Vec<Vec2>>,
     /// Vertex indices, counter-clockwise seen from the side the geometric normal points to.
     pub triangles: Vec<[u32; 3]>,
+    /// Named per-vertex or per-triangle data (PLY colours and custom properties, serialized
+    /// vertex colours) for `mesh_attribute` textures.
+    pub attributes: Vec<crate::texture::MeshAttribute>,
 }
 
 impl Mesh {
@@ -79,7 +82,7 @@ impl Mesh {
             Vec3::new(1.0, 1.0, 0.0),
         ];
         let uvs = positions.iter().map(|p| Vec2::new((p.x + 1.0) * 0.5, (p.y + 1.0) * 0.5)).collect();
-        Mesh { positions, normals: None, uvs: Some(uvs), triangles: vec![[1, 2, 0], [1, 3, 2]] }
+        Mesh { positions, normals: None, uvs: Some(uvs), triangles: vec![[1, 2, 0], [1, 3, 2]], attributes: vec![] }
     }
 
     /// Mitsuba's `cube`: [-1,1]³ with outward faces, 24 vertices (flat shading).

@@ -207,6 +207,12 @@ impl Bitmap {
         if self.channels == 1 { Rgb::splat(get(0)) } else { Rgb::new(get(0), get(1), get(2)) }
     }
 
+    /// Every texel's decoded linear colour, row-major from the top (environment maps read
+    /// them all once).
+    pub fn linear_rgb(&self) -> Vec<Rgb> {
+        (0..self.width as usize * self.height as usize).map(|i| self.texel(i)).collect()
+    }
+
     /// The colour at `uv` (a single-channel image gives its value in all three channels).
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Rgb {

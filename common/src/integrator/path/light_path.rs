@@ -50,6 +50,7 @@ pub fn trace_light_path(
         p: e.p,
         n_geo: e.n,
         n_shading: e.n,
+        tangent: Vec3::ZERO,
         wo: Vec3::ZERO,
         beta: Rgb::splat(1.0 / (pmf * e.pdf_pos)),
         pdf_fwd: pdf_origin,
@@ -89,12 +90,13 @@ pub fn trace_light_path(
             p: hit.p,
             n_geo: hit.n_geo,
             n_shading: hit.frame.n,
+            tangent: scene.vertex_tangent(&hit),
             wo: hit.wo,
             beta,
             pdf_fwd,
             pdf_rev: 0.0,
             pdf_next_event: 0.0,
-            kind: VertexKind::Surface { material: shape.material },
+            kind: VertexKind::Surface { material: shape.material, at: hit.surface() },
             delta: false,
             depth,
         };
@@ -106,7 +108,7 @@ pub fn trace_light_path(
             break;
         }
         // ---- continue: sample the BSDF in importance mode ----
-        let material = &scene.materials[shape.material as usize];
+        let material = scene.material_at(shape.material, hit.surface(), hit.p);
         let frame = hit.frame;
         let wo_local = frame.to_local(hit.wo);
         let (uc, u) = (sampler.next_1d(), sampler.next_2d());

@@ -98,8 +98,8 @@ pub fn merge<O: SampleObserver>(
         return (Rgb::ZERO, 0);
     }
     let Some(z) = camera.last() else { return (Rgb::ZERO, 0) };
-    let VertexKind::Surface { material } = z.kind else { return (Rgb::ZERO, 0) };
-    let mz = &scene.materials[material as usize];
+    let VertexKind::Surface { material, at } = z.kind else { return (Rgb::ZERO, 0) };
+    let mz = scene.material_at(material, at, z.p);
     let frame = z.frame();
     let z_wo = frame.to_local(z.wo);
     let t = camera.len();

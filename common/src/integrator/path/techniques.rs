@@ -18,6 +18,7 @@ use crate::light::Light;
 use crate::math::{Rgb, SHADOW_EPSILON};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use std::borrow::Cow;
 
 /// Where a sample lands and who watches: the pixel and the observer.
 #[derive(Clone, Copy)]
@@ -65,9 +66,9 @@ pub struct Weighted {
 }
 
 #[inline]
-fn material_of<'a>(scene: &'a Scene, v: &PathVertex) -> Option<&'a Material> {
+fn material_of<'a>(scene: &'a Scene, v: &PathVertex) -> Option<Cow<'a, Material>> {
     match v.kind {
-        VertexKind::Surface { material } => Some(&scene.materials[material as usize]),
+        VertexKind::Surface { material, at } => Some(scene.material_at(material, at, v.p)),
         _ => None,
     }
 }
@@ -172,6 +173,7 @@ pub fn next_event<O: SampleObserver>(
         p: if infinite { z.p + ds.wi * (2.0 * scene.bounds_radius) } else { ds.p },
         n_geo: if infinite { -ds.wi } else { ds.n },
         n_shading: if infinite { -ds.wi } else { ds.n },
+        tangent: Vec3::ZERO,
         wo: Vec3::ZERO,
         beta: Rgb::ONE,
         pdf_fwd: 0.0,
@@ -282,9 +284,9 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
             light.emitted_towards(v.n_geo, cs.wi) * v.beta.x
         }
         VertexKind::Camera => return None,
-        VertexKind::Surface { material } => {
+        VertexKind::Surface { material, at } => {
             let frame = v.frame();
-            let f = scene.materials[material as usize].eval(
+            let f = scene.material_at(material, at, v.p).eval(
                 frame.to_local(v.wo),
                 frame.to_local(cs.wi),
                 TransportMode::Importance,
@@ -350,6 +352,7 @@ pub fn camera_vertex(scene: &Scene) -> PathVertex {
         p: cam.origin,
         n_geo: cam.forward,
         n_shading: cam.forward,
+        tangent: Vec3::ZERO,
         wo: Vec3::ZERO,
         beta: Rgb::ONE,
         pdf_fwd: 1.0,

@@ -1,6 +1,7 @@
 //! Path vertices as the bidirectional integrators store them: position, normals, throughput
 //! and the densities the MIS weights need, in both directions.
 
+use crate::geometry::SurfaceRef;
 use crate::math::{Frame, Rgb};
 use glam::Vec3;
 
@@ -18,6 +19,8 @@ pub enum VertexKind {
     Surface {
         /// Index into `Scene::materials`.
         material: u32,
+        /// Where on which shape, to resolve a textured material (see `Scene::material_at`).
+        at: SurfaceRef,
     },
 }
 
@@ -30,6 +33,9 @@ pub struct PathVertex {
     pub n_geo: Vec3,
     /// Shading normal.
     pub n_shading: Vec3,
+    /// First tangent of the shading frame where an anisotropic material needs Mitsuba's (see
+    /// `Scene::intersect`); zero where the frame follows from the normal alone.
+    pub tangent: Vec3,
     /// Unit direction towards the previous vertex (zero on the first vertex).
     pub wo: Vec3,
     /// Throughput of the subpath up to this vertex (importance for light paths, weighted by the
@@ -58,12 +64,13 @@ impl PathVertex {
             p,
             n_geo: Vec3::Z,
             n_shading: Vec3::Z,
+            tangent: Vec3::ZERO,
             wo: Vec3::Z,
             beta: Rgb::ONE,
             pdf_fwd: 1.0,
             pdf_rev: 0.0,
             pdf_next_event: 0.0,
-            kind: VertexKind::Surface { material: 0 },
+            kind: VertexKind::Surface { material: 0, at: SurfaceRef::default() },
             delta: false,
             depth: 1,
         }
@@ -72,7 +79,11 @@ impl PathVertex {
     /// The shading frame.
     #[inline]
     pub fn frame(&self) -> Frame {
-        Frame::from_normal(self.n_shading)
+        if self.tangent == Vec3::ZERO {
+            Frame::from_normal(self.n_shading)
+        } else {
+            Frame { s: self.tangent, t: self.n_shading.cross(self.tangent), n: self.n_shading }
+        }
     }
 
     /// Shading-normal correction of importance transport (Veach 1997, §5.3): the factor that

@@ -111,6 +111,7 @@ fn read_mesh(r: &mut impl Read, version: u16) -> Result<Mesh, String> {
     let normals = (flags & HAS_NORMALS != 0).then(|| reals(r, vertices, 3, double, "vertex normals")).transpose()?;
     let uvs = (flags & HAS_TEXCOORDS != 0).then(|| reals(r, vertices, 2, double, "texture coordinates")).transpose()?;
     if flags & HAS_COLORS != 0 {
+        // Mitsuba 3.9.1 skips them too (`advance_helper`, marked TODO): no vertex_color
         reals(r, vertices, 3, double, "vertex colours")?;
     }
     let index_bytes = faces.checked_mul(12).ok_or("face count too large")?;
@@ -133,6 +134,7 @@ fn read_mesh(r: &mut impl Read, version: u16) -> Result<Mesh, String> {
         normals: normals.map(|n| v3(&n).into_iter().map(|n| n.normalize_or_zero()).collect()),
         uvs: uvs.map(|uv| uv.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])).collect()),
         triangles,
+        attributes: vec![],
     })
 }
 

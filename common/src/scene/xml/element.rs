@@ -237,8 +237,16 @@ impl Element {
         Ok(self.color(name, usage)?.unwrap_or(Rgb::splat(default)))
     }
 
+    /// The nested object passed as parameter `name` (`<texture name=..>`, or what a named
+    /// `<ref>` placed), marked as read.
+    pub fn object(&self, name: &str) -> Option<&Element> {
+        let c = self.children.iter().find(|c| c.name.as_deref() == Some(name))?;
+        c.used.set(true);
+        Some(c)
+    }
+
     /// The constant colour of a spectrum object, as Mitsuba's RGB variants evaluate it.
-    fn constant_color(&self) -> Result<Rgb, SceneError> {
+    pub fn constant_color(&self) -> Result<Rgb, SceneError> {
         let rgb = match self.plugin.as_str() {
             "d65" => {
                 let scale = self.float_or("scale", 1.0)?;
@@ -298,8 +306,8 @@ impl Element {
         self.properties.iter().find(|p| p.name == name).map(|p| &p.location).unwrap_or(&self.location)
     }
 
-    /// Fails on the first property (or nested spectrum object) no plugin code asked for:
-    /// unknown parameters are errors.
+    /// Fails on the first property (or nested spectrum or texture object) no plugin code asked
+    /// for: unknown parameters are errors.
     pub fn check_all_used(&self) -> Result<(), SceneError> {
         if let Some(p) = self.properties.iter().find(|p| !p.used.get()) {
             return Err(SceneError::at(
@@ -307,7 +315,7 @@ impl Element {
                 format!("unknown parameter \"{}\" of {}", p.name, self.describe()),
             ));
         }
-        match self.children.iter().find(|c| c.is_spectrum() && !c.used.get()) {
+        match self.children.iter().find(|c| (c.is_spectrum() || c.tag == "texture") && !c.used.get()) {
             Some(c) => Err(SceneError::at(
                 &c.location,
                 format!("unknown parameter \"{}\" of {}", c.name.as_deref().unwrap_or("(unnamed)"), self.describe()),
