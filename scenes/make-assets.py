@@ -604,6 +604,22 @@ def envmap_glossy():
     write_float(out(d, "studio.exr"), env)
 
 
+def textured_emitters():
+    d = "textured-emitters"
+    # "stained glass" window: linear float EXR, 64x48 cells of saturated colour up to 3, with
+    # dark leading between them; radiance of a rectangle light (texture v = 0 at the top)
+    h, w = 48, 64
+    y, x = np.mgrid[0:h, 0:w]
+    rng = np.random.default_rng(23)
+    palette = np.array([[3.0, 0.5, 0.3], [0.4, 2.4, 0.6], [0.45, 0.7, 3.0], [2.5, 2.1, 0.4], [2.0, 0.4, 2.3]])
+    cells = palette[rng.integers(0, len(palette), (h // 8, w // 8))]
+    img = cells[y // 8, x // 8]
+    lead = ((x % 8) == 0) | ((y % 8) == 0)
+    img = np.where(lead[..., None], np.array([0.02, 0.02, 0.02]), img)
+    write_float(out(d, "window.exr"), img.astype(np.float32))
+
+
+
 if __name__ == "__main__":
     textured_room()
     spectral_cornell()
@@ -616,4 +632,5 @@ if __name__ == "__main__":
     mesh_colors()
     lanczos_crop()
     envmap_glossy()
+    textured_emitters()
     print("assets written under", ROOT)

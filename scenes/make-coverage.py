@@ -30,7 +30,7 @@ import zlib
 ROOT = os.path.dirname(os.path.abspath(__file__))
 NEW_SCENES = ["textured-room", "spectral-cornell", "spectral-emitters", "included-scene", "legacy-v06",
               "spot-directional", "serialized-uv", "checker-conductor", "masked-leaves", "mesh-colors",
-              "lanczos-crop", "envmap-glossy"]
+              "lanczos-crop", "envmap-glossy", "textured-emitters"]
 OBJECT_TAGS = {"scene", "bsdf", "shape", "emitter", "texture", "sensor", "film", "rfilter", "sampler",
                "integrator", "medium", "phase", "volume"}
 PROP_TAGS = {"boolean", "integer", "float", "string", "point", "vector", "rgb", "spectrum", "transform"}
@@ -342,6 +342,8 @@ REQUIRED = [
     # 11 envmap-glossy
     "emitter/envmap:file<-asset/openexr", "bsdf/roughconductor:alpha_u[float]", "bsdf/roughconductor:alpha_v[float]",
     "bsdf/dielectric", "bsdf/roughplastic", "rfilter/gaussian:stddev[float]",
+    # 13 textured-emitters
+    "emitter/area:radiance<-texture/bitmap", "emitter/area:radiance<-texture/checkerboard",
     # 12 samplers and integrators
     "sampler/stratified:sample_count[integer]", "sampler/stratified:seed[integer]",
     "sampler/multijitter:sample_count[integer]", "sampler/multijitter:seed[integer]",
@@ -355,7 +357,7 @@ REQUIRED = [
 FORBIDDEN = ["spectrum/blackbody", "bsdf/principled", "bsdf/normalmap", "bsdf/bumpmap", "bsdf/blendbsdf",
              "shape/instance", "shape/shapegroup", "shape/cylinder", "sensor/thinlens", "sensor/orthographic",
              "medium/", "phase/", "integrator/ptracer", "bsdf/polarizer", "bsdf/retarder", "emitter/spot:texture",
-             "emitter/area:radiance<-texture", "bsdf/dielectric:int_ior<-", "bsdf/dielectric:ext_ior<-"]
+             "bsdf/dielectric:int_ior<-", "bsdf/dielectric:ext_ior<-"]
 
 
 def main():

@@ -261,14 +261,14 @@ fn bitmap_over_budget_is_refused_from_the_header() {
     assert!(matches!(expect_err(&hdr, &TextureLimits::default()), TextureError::OverBudget { .. }));
 
     // a real file just over a small budget: the message names the file and both sizes
-    let tight = TextureLimits { max_decoded_bytes: 35 };
+    let tight = TextureLimits::total(35);
     let e = expect_err(&data("rgb8.png"), &tight);
     let msg = e.to_string();
     assert!(msg.contains("rgb8.png") && msg.contains("36 bytes") && msg.contains("35 bytes"), "{msg}");
     assert!(
-        Bitmap::load(&data("rgb8.png"), BitmapOptions::default(), &TextureLimits { max_decoded_bytes: 36 }).is_ok()
+        Bitmap::load(&data("rgb8.png"), BitmapOptions::default(), &TextureLimits::total(36)).is_ok()
     );
-    let exr = expect_err(&data("rgb32.exr"), &TextureLimits { max_decoded_bytes: 100 });
+    let exr = expect_err(&data("rgb32.exr"), &TextureLimits::total(100));
     assert!(matches!(exr, TextureError::OverBudget { needed: 144, .. }), "{exr}");
 }
 

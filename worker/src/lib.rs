@@ -38,6 +38,10 @@ pub struct Args {
     /// Image tiles leased at once [default: the thread count].
     #[arg(long)]
     pub max_tiles: Option<u32>,
+    /// Memory a scene's decoded textures and environment maps may take, in MiB [default: 1024
+    /// per image, 4096 in all]; a job whose scene needs more fails on this worker.
+    #[arg(long, value_name = "MIB")]
+    pub texture_budget: Option<u64>,
 }
 
 /// Installs the `tracing` subscriber (`RUST_LOG`, default `tessera_worker=info`).

@@ -7,7 +7,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tessera_common::bundle::{Bundle, safe_relative_path};
-use tessera_common::scene::Scene;
+use tessera_common::scene::{LoadOptions, Scene};
+use tessera_common::texture::TextureLimits;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
 
@@ -23,12 +24,14 @@ pub struct SceneCache {
     loaded: Vec<(SceneKey, Arc<Scene>)>,
     /// The current EMIS merge mask.
     pub masks: MaskCache,
+    texture_limits: TextureLimits,
 }
 
 impl SceneCache {
     /// A cache under `dir`.
-    pub fn new(dir: PathBuf) -> Self {
-        SceneCache { dir, loaded: Vec::new(), masks: MaskCache::default() }
+    pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>) -> Self {
+        let texture_limits = texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+        SceneCache { dir, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
     }
 
     /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
@@ -45,8 +48,8 @@ impl SceneCache {
             return Ok(scene.clone());
         }
         let scene_file = self.unpack(client, digest).await?;
-        let defines = defines.clone();
-        let scene = tokio::task::spawn_blocking(move || Scene::load_with(&scene_file, &defines)).await??;
+        let options = LoadOptions { defines: defines.clone(), texture_limits: self.texture_limits };
+        let scene = tokio::task::spawn_blocking(move || Scene::load_options(&scene_file, &options)).await??;
         let scene = Arc::new(scene);
         self.loaded.push((key, scene.clone()));
         if self.loaded.len() > KEEP_LOADED {

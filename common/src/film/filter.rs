@@ -94,6 +94,12 @@ impl Filter {
         Filter { kind, radius, gaussian }
     }
 
+    /// Whether the filter can be negative, so that non-negative samples can still give
+    /// negative pixels: Mitchell–Netravali (for most B, C), Catmull–Rom and Lanczos.
+    pub fn has_negative_lobes(&self) -> bool {
+        matches!(self.kind, FilterKind::Mitchell { .. } | FilterKind::CatmullRom | FilterKind::Lanczos { .. })
+    }
+
     /// Whether this is the box filter (each sample lands in its own pixel with weight 1).
     #[inline]
     pub fn is_box(&self) -> bool {

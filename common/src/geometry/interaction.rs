@@ -50,15 +50,16 @@ impl SurfaceInteraction {
         Ray::new(offset_ray_origin(self.p, self.n_geo, d), d)
     }
 
-    /// A shadow ray towards `target`, shortened so that it stops just before it. Returns the ray
-    /// and the unshortened distance.
+    /// A shadow ray towards point `target` on a surface with normal `target_n` (zero for points
+    /// off surfaces), both ends offset off their surfaces and shortened so that it stops just
+    /// before the target.
     #[inline]
-    pub fn spawn_ray_to(&self, target: Vec3) -> (Ray, f32) {
-        let delta = target - self.p;
-        let dist = delta.length();
-        let d = delta / dist;
+    pub fn shadow_ray_to(&self, target: Vec3, target_n: Vec3) -> Ray {
+        let d = target - self.p;
         let o = offset_ray_origin(self.p, self.n_geo, d);
-        let len = (target - o).length();
-        (Ray { o, d, tmax: len * (1.0 - SHADOW_EPSILON) }, dist)
+        let end = if target_n == Vec3::ZERO { target } else { offset_ray_origin(target, target_n, -d) };
+        let delta = end - o;
+        let len = delta.length();
+        Ray { o, d: delta / len.max(f32::MIN_POSITIVE), tmax: len * (1.0 - SHADOW_EPSILON) }
     }
 }

@@ -29,6 +29,7 @@ use super::path::photon_map::PhotonMap;
 use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
 use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use super::{Integrator, PathSettings, TileRequest};
+use crate::geometry::SurfaceRef;
 use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
 use crate::math::{Rgb, max_component};
@@ -196,7 +197,7 @@ impl<O: SampleObserver> Bidir<O> {
                             pdf_fwd: pdf_dir,
                             pdf_rev: 0.0,
                             pdf_next_event: 0.0,
-                            kind: VertexKind::Light { light: li },
+                            kind: VertexKind::Light { light: li, at: SurfaceRef::default() },
                             delta: false,
                             depth,
                         };

@@ -147,8 +147,7 @@ impl PathTracer {
     ) -> Rgb {
         let Some(li) = scene.shapes[hit.shape as usize].light else { return Rgb::ZERO };
         let light = &scene.lights[li as usize];
-        let Light::Area { radiance, .. } = light else { return Rgb::ZERO };
-        let le = Light::eval_area(*radiance, hit.frame.n, hit.wo);
+        let le = Light::eval_area(light.area_radiance(&scene.light_context(), hit.surface(), hit.p), hit.frame.n, hit.wo);
         if le == Rgb::ZERO {
             return le;
         }
@@ -183,7 +182,7 @@ impl PathTracer {
         if f == Rgb::ZERO {
             return None;
         }
-        let shadow = if ds.dist.is_finite() { hit.spawn_ray_to(ds.p).0 } else { hit.spawn_ray(ds.wi) };
+        let shadow = if ds.dist.is_finite() { hit.shadow_ray_to(ds.p, ds.n) } else { hit.spawn_ray(ds.wi) };
         if scene.occluded(&shadow) {
             return None;
         }

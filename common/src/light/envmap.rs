@@ -168,6 +168,11 @@ impl Envmap {
         (sum / (4.0 * std::f64::consts::PI)) as f32
     }
 
+    /// Bytes a map built from a `width × height` image will use (before padding small ones).
+    pub fn bytes_for(width: usize, height: usize) -> usize {
+        width.max(2) * height.max(3) * (std::mem::size_of::<Rgb>() + 8 + 4)
+    }
+
     /// Bytes the map's texels and tables use.
     pub fn bytes(&self) -> usize {
         self.texels.len() * std::mem::size_of::<Rgb>() + self.cdf.len() * 8 + self.density.len() * 4

@@ -9,7 +9,9 @@ pub mod envmap;
 pub mod sampler;
 
 use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};
-use crate::scene::shape::{Mesh, Shape, ShapeGeometry, SurfacePoint};
+use crate::geometry::SurfaceRef;
+use crate::scene::shape::{Mesh, Shape, ShapeGeometry, SurfacePoint, texture_point};
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
 
@@ -23,8 +25,10 @@ pub enum Light {
     Area {
         /// Index of the shape.
         shape: u32,
-        /// Emitted radiance.
+        /// Emitted radiance (when textured: the texture's mean, for reports only).
         radiance: Rgb,
+        /// Radiance varying over the surface (Mitsuba's textured `radiance`).
+        texture: Option<Arc<Texture>>,
     },
     /// Isotropic point light.
     Point {
@@ -109,6 +113,8 @@ pub struct EmissionSample {
     pub p: Vec3,
     /// Surface normal at the origin (zero for point lights; the direction for infinite lights).
     pub n: Vec3,
+    /// Where on its shape an area light's origin lies (zero for other lights).
+    pub at: SurfaceRef,
     /// Direction of travel.
     pub d: Vec3,
     /// Emitted radiance along `d`.
@@ -163,12 +169,26 @@ impl Light {
         }
     }
 
-    /// Radiance (area lights, times the cosine) or intensity (point and spot lights) leaving a
-    /// light vertex with normal `n` towards direction `d`; zero for lights at infinity.
+    /// Radiance an area light emits at point `p` (at `at` on its shape), either side; zero
+    /// for other lights.
     #[inline]
-    pub fn emitted_towards(&self, n: Vec3, d: Vec3) -> Rgb {
+    pub fn area_radiance(&self, ctx: &LightContext, at: SurfaceRef, p: Vec3) -> Rgb {
         match self {
-            Light::Area { radiance, .. } => Self::eval_area(*radiance, n, d) * n.dot(d).abs(),
+            Light::Area { radiance, texture: None, .. } => *radiance,
+            Light::Area { texture: Some(t), .. } => {
+                t.eval(&texture_point(ctx.shapes, ctx.meshes, at, p, t.uses_mesh_attributes()))
+            }
+            _ => Rgb::ZERO,
+        }
+    }
+
+    /// Radiance (area lights, times the cosine) or intensity (point and spot lights) leaving a
+    /// light vertex at `p` (at `at`) with normal `n` towards direction `d`; zero for lights at
+    /// infinity.
+    #[inline]
+    pub fn emitted_towards(&self, ctx: &LightContext, at: SurfaceRef, p: Vec3, n: Vec3, d: Vec3) -> Rgb {
+        match self {
+            Light::Area { .. } => Self::eval_area(self.area_radiance(ctx, at, p), n, d) * n.dot(d).abs(),
             Light::Point { intensity, .. } => *intensity,
             Light::Spot(spot) => spot.emitted(d),
             Light::Constant { .. } | Light::Envmap(_) | Light::Directional { .. } => Rgb::ZERO,
@@ -223,8 +243,8 @@ impl Light {
             Light::Directional { direction, irradiance } => {
                 Some(infinite_sample(ctx, p_ref, -*direction, *irradiance, 1.0, true))
             }
-            Light::Area { shape, radiance } => {
-                let shape = &ctx.shapes[*shape as usize];
+            Light::Area { shape: index, .. } => {
+                let shape = &ctx.shapes[*index as usize];
                 let (sp, pdf) = match &shape.geometry {
                     ShapeGeometry::Sphere { center, radius }
                         if (p_ref - *center).length_squared() > radius * radius * 1.0001 =>
@@ -248,12 +268,13 @@ impl Light {
                     return None;
                 }
                 let wi = delta / dist;
+                let at = SurfaceRef { shape: *index, prim: sp.prim, bary: sp.bary };
                 Some(DirectSample {
                     p: sp.p,
                     n: sp.n,
                     wi,
                     dist,
-                    radiance: Self::eval_area(*radiance, sp.n, -wi),
+                    radiance: Self::eval_area(self.area_radiance(ctx, at, sp.p), sp.n, -wi),
                     pdf,
                     delta: false,
                 })
@@ -292,6 +313,7 @@ impl Light {
                 Some(EmissionSample {
                     p: *position,
                     n: Vec3::ZERO,
+                    at: SurfaceRef::default(),
                     d,
                     radiance: *intensity,
                     pdf_pos: 1.0,
@@ -305,6 +327,7 @@ impl Light {
                 Some(EmissionSample {
                     p: spot.position,
                     n: Vec3::ZERO,
+                    at: SurfaceRef::default(),
                     d,
                     radiance: spot.emitted(d),
                     pdf_pos: 1.0,
@@ -323,16 +346,18 @@ impl Light {
             Light::Directional { direction, irradiance } => {
                 Some(infinite_emission(ctx, *direction, *irradiance, 1.0, u_pos))
             }
-            Light::Area { shape, radiance } => {
-                let shape = &ctx.shapes[*shape as usize];
+            Light::Area { shape: index, .. } => {
+                let shape = &ctx.shapes[*index as usize];
                 let sp = shape.sample_area(ctx.meshes, u_pos);
                 let local = warp::square_to_cosine_hemisphere(u_dir);
                 let d = Frame::from_normal(sp.n).to_world(local);
+                let at = SurfaceRef { shape: *index, prim: sp.prim, bary: sp.bary };
                 Some(EmissionSample {
                     p: sp.p,
                     n: sp.n,
+                    at,
                     d,
-                    radiance: *radiance,
+                    radiance: self.area_radiance(ctx, at, sp.p),
                     pdf_pos: 1.0 / shape.area,
                     pdf_dir: local.z * INV_PI,
                     delta_pos: false,
@@ -372,7 +397,7 @@ fn infinite_emission(ctx: &LightContext, d: Vec3, radiance: Rgb, pdf_dir: f32, u
     let frame = Frame::from_normal(d);
     let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
     let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
-    EmissionSample { p, n: d, d, radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir, delta_pos: false }
+    EmissionSample { p, n: d, at: SurfaceRef::default(), d, radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir, delta_pos: false }
 }
 
 /// Samples the cone a sphere subtends from `p_ref` uniformly and returns the point where the
@@ -398,7 +423,7 @@ fn sample_sphere_cone(p_ref: Vec3, center: Vec3, radius: f32, flip: bool, u: Vec
     let n = frame.to_world(Vec3::new(sin_alpha * phi.cos(), sin_alpha * phi.sin(), cos_alpha));
     let p = center + n * radius;
     let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
-    Some((SurfacePoint { p, n: if flip { -n } else { n } }, pdf))
+    Some((SurfacePoint::analytic(p, if flip { -n } else { n }), pdf))
 }
 
 #[cfg(test)]

@@ -63,7 +63,7 @@ fn direct_sampling_matches_pdf_chi2() {
     // shape 3 is a tiny sphere tested by `tiny_sphere_cone_is_uniform` instead
     let mut lights: Vec<(String, Light)> = [0usize, 1, 2, 4]
         .iter()
-        .map(|&i| (format!("area on shape {i}"), Light::Area { shape: i as u32, radiance: Rgb::ONE }))
+        .map(|&i| (format!("area on shape {i}"), Light::Area { shape: i as u32, radiance: Rgb::ONE, texture: None }))
         .collect();
     lights.push(("constant".into(), Light::Constant { radiance: Rgb::ONE }));
     lights.push(("envmap".into(), test_envmap()));
@@ -113,7 +113,7 @@ fn direct_sampling_matches_pdf_chi2() {
 fn tiny_sphere_cone_is_uniform() {
     let (shapes, meshes) = shapes();
     let ctx = LightContext { shapes: &shapes, meshes: &meshes, center: Vec3::ZERO, radius: 10.0 };
-    let light = Light::Area { shape: 3, radiance: Rgb::ONE };
+    let light = Light::Area { shape: 3, radiance: Rgb::ONE, texture: None };
     let ShapeGeometry::Sphere { center, radius } = shapes[3].geometry else { unreachable!() };
     let axis = center.normalize();
     let (one_minus_cos_max, _) = sphere_cone(center.length_squared(), radius);
@@ -138,8 +138,8 @@ fn emission_direction_sampling_matches_pdf_chi2() {
     let (shapes, meshes) = shapes();
     let ctx = LightContext { shapes: &shapes, meshes: &meshes, center: Vec3::ZERO, radius: 10.0 };
     let lights = [
-        Light::Area { shape: 0, radiance: Rgb::ONE },
-        Light::Area { shape: 2, radiance: Rgb::ONE },
+        Light::Area { shape: 0, radiance: Rgb::ONE, texture: None },
+        Light::Area { shape: 2, radiance: Rgb::ONE, texture: None },
         Light::Point { position: Vec3::ONE, intensity: Rgb::ONE },
         Light::Constant { radiance: Rgb::ONE },
         test_envmap(),

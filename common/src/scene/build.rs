@@ -173,6 +173,10 @@ fn build_sensor(e: &Element) -> Result<SensorSettings, SceneError> {
             "the sensor's to_world must be a rigid transform (no scale or shear)",
         ));
     }
+    // a pinhole has no focus, and a static scene no motion: these do not change the image
+    e.float("focus_distance")?;
+    e.float("shutter_open")?;
+    e.float("shutter_close")?;
     let near_clip = e.float_or("near_clip", 1e-2)?;
     let far_clip = e.float_or("far_clip", 1e4)?;
     if !(near_clip > 0.0 && far_clip > near_clip) {
@@ -284,6 +288,13 @@ fn build_film(c: &Element) -> Result<FilmSettings, SceneError> {
                 format!("unsupported component_format \"{f}\" (float16 or float32; Tessera writes float32)"),
             ));
         }
+    }
+    match c.string("file_format")?.unwrap_or("openexr") {
+        "openexr" | "exr" => {}
+        other => tracing::warn!(file = %c.location_of("file_format"), "file_format \"{other}\" ignored: Tessera writes OpenEXR and a PNG preview"),
+    }
+    if c.boolean_or("sample_border", false)? {
+        return Err(SceneError::at(c.location_of("sample_border"), "sample_border = true is not supported"));
     }
     let crop = crop_window(c, w, h)?;
     let filter = match c.children.as_slice() {

@@ -1,7 +1,7 @@
 //! Interprets `<emitter>` elements: `area`, `point`, `spot`, `constant`, `envmap` and
 //! `directional`, with Mitsuba's parameter names and defaults.
 
-use super::build_texture::Textures;
+use super::build_texture::{Param, Textures};
 use super::error::SceneError;
 use super::xml::{ColorUsage, Element};
 use crate::light::{Envmap, Light, Spot};
@@ -20,14 +20,16 @@ pub(super) fn build_emitter(
     shape: Option<u32>,
     textures: &mut Textures,
 ) -> Result<(Light, f32), SceneError> {
-    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum()) {
+    // only an area light's radiance may be a texture, as in Mitsuba
+    let textured = |c: &Element| e.plugin == "area" && c.tag == "texture" && c.name.as_deref() == Some("radiance");
+    if let Some(child) = e.children.iter().find(|c| !c.is_spectrum() && !textured(c)) {
         return Err(SceneError::at(
             &child.location,
-            format!("{} cannot contain <{}> (textured emission is not supported)", e.describe(), child.tag),
+            format!("{} cannot contain <{}> (only an area light's radiance can be textured)", e.describe(), child.tag),
         ));
     }
     let light = match (e.plugin.as_str(), shape) {
-        ("area", Some(shape)) => Light::Area { shape, radiance: emitted(e, "radiance")? },
+        ("area", Some(shape)) => area(e, shape, textures)?,
         ("area", None) => return Err(SceneError::at(&e.location, "an area emitter must be nested inside a <shape>")),
         ("point", None) => {
             let intensity = emitted(e, "intensity")?;
@@ -81,6 +83,18 @@ fn emitted(e: &Element, name: &str) -> Result<Rgb, SceneError> {
         ));
     }
     Ok(v)
+}
+
+/// Mitsuba's `area`: `radiance` a colour or a texture (looked up at the emitting point).
+fn area(e: &Element, shape: u32, textures: &mut Textures) -> Result<Light, SceneError> {
+    match textures.param(e, "radiance", ColorUsage::Emissive)? {
+        Some(Param::Texture(t)) => {
+            let radiance = Rgb::splat(t.mean().unwrap_or(0.0));
+            Ok(Light::Area { shape, radiance, texture: Some(t) })
+        }
+        // constants are read (and checked) by `emitted`
+        _ => Ok(Light::Area { shape, radiance: emitted(e, "radiance")?, texture: None }),
+    }
 }
 
 /// The rotation part of a rigid `to_world`, or an error naming `what`.
@@ -139,9 +153,21 @@ fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
     }
     let (m, _) = rotation(e, "envmap")?;
     let path = textures.resolver().resolve(Path::new(file));
-    let bitmap = Bitmap::load(&path, BitmapOptions::default(), textures.limits())
-        .map_err(|err| SceneError::at(e.location_of("filename"), err.to_string()))?;
+    let bitmap =
+        Bitmap::load(&path, BitmapOptions::default(), &textures.limits()).map_err(|err| textures.load_error(e, err))?;
     let (width, height) = (bitmap.width() as usize, bitmap.height() as usize);
+    // the map's texels and tables count against the texture budget too
+    let needed = (Envmap::bytes_for(width, height) + width * height * std::mem::size_of::<Rgb>()) as u64;
+    let left = textures.limits().max_decoded_bytes.saturating_sub(bitmap.decoded_bytes() as u64);
+    if needed > left {
+        return Err(SceneError::at(
+            e.location_of("filename"),
+            format!(
+                "{}: this {width}x{height} environment map needs {needed} bytes for its texels and sampling tables, over the {left} bytes left of the texture budget",
+                path.display()
+            ),
+        ));
+    }
     let texels = bitmap.linear_rgb();
     drop(bitmap);
     if texels.iter().any(|t| !t.is_finite()) {

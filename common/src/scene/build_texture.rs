@@ -11,8 +11,8 @@ use super::resolver::FileResolver;
 use super::xml::{ColorUsage, Element};
 use crate::math::Rgb;
 use crate::texture::{
-    Bitmap, BitmapOptions, Checkerboard, FilterType, MeshAttributeTexture, Texture, TextureLimits, UvTransform,
-    WrapMode,
+    Bitmap, BitmapOptions, Checkerboard, FilterType, MeshAttributeTexture, Texture, TextureError, TextureLimits,
+    UvTransform, WrapMode,
 };
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -38,16 +38,31 @@ pub(super) struct Textures<'a> {
 }
 
 /// The texture plugins Tessera reads (spectrum plugins besides).
-const SUPPORTED: &str = "bitmap, checkerboard, mesh_attribute, and the constant spectra srgb, d65, uniform";
+const SUPPORTED: &str = "bitmap, checkerboard, mesh_attribute, rawconstant, and the constant spectra srgb, d65, uniform";
 
 impl<'a> Textures<'a> {
     pub(super) fn new(resolver: &'a FileResolver, limits: TextureLimits) -> Self {
         Textures { resolver, limits, by_id: HashMap::new(), by_file: HashMap::new(), bytes: 0 }
     }
 
-    /// The budget images are decoded within.
-    pub(super) fn limits(&self) -> &TextureLimits {
-        &self.limits
+    /// The budget the next image is decoded within: the per-image limit, or what is left of
+    /// the scene's total if that is less.
+    pub(super) fn limits(&self) -> TextureLimits {
+        let left = self.limits.max_total_bytes.saturating_sub(self.bytes as u64);
+        TextureLimits { max_decoded_bytes: self.limits.max_decoded_bytes.min(left), ..self.limits }
+    }
+
+    /// A load error, saying so when the scene's total budget rather than the image's own
+    /// size was exceeded.
+    pub(super) fn load_error(&self, e: &Element, err: TextureError) -> SceneError {
+        let message = match &err {
+            TextureError::OverBudget { needed, .. } if *needed <= self.limits.max_decoded_bytes => format!(
+                "{err} (the scene's textures may take {} bytes in all; {} are used)",
+                self.limits.max_total_bytes, self.bytes
+            ),
+            _ => err.to_string(),
+        };
+        SceneError::at(e.location_of("filename"), message)
     }
 
     /// The file resolver, for plugins that read images themselves (`envmap`).
@@ -94,6 +109,17 @@ impl<'a> Textures<'a> {
                 let to_uv = to_uv(e)?;
                 Texture::from(Checkerboard::new(color0, color1, to_uv))
             }
+            // a constant used as given, without the checks and conversions of `srgb`
+            "rawconstant" => match (e.float("value"), e.vector("value")) {
+                (Ok(Some(v)), _) => Texture::uniform(v),
+                (_, Ok(Some(v))) => Texture::rgb(v),
+                _ => {
+                    return Err(SceneError::at(
+                        e.location_of("value"),
+                        "rawconstant needs \"value\": a float or a vector of three",
+                    ));
+                }
+            },
             "mesh_attribute" => {
                 let name = e
                     .string("name")?
@@ -148,8 +174,7 @@ impl<'a> Textures<'a> {
         if let Some(t) = self.by_file.get(&key) {
             return Ok(t.clone());
         }
-        let bitmap = Bitmap::load(&path, options, &self.limits)
-            .map_err(|err| SceneError::at(e.location_of("filename"), err.to_string()))?;
+        let bitmap = Bitmap::load(&path, options, &self.limits()).map_err(|err| self.load_error(e, err))?;
         self.bytes += bitmap.decoded_bytes();
         let t = Arc::new(Texture::from(bitmap));
         self.by_file.insert(key, t.clone());

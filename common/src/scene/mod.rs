@@ -25,7 +25,7 @@ use crate::bsdf::textured::MaterialTextures;
 use crate::camera::PerspectiveCamera;
 use crate::film::FilmSpec;
 use crate::geometry::{Ray, SurfaceInteraction, SurfaceRef};
-use crate::texture::{MeshPoint, TextureLimits, TexturePoint};
+use crate::texture::TextureLimits;
 use std::borrow::Cow;
 use crate::light::{Light, LightContext, LightSampler};
 use crate::math::Frame;
@@ -349,8 +349,7 @@ impl Scene {
         match &self.material_textures[index as usize] {
             None => Cow::Borrowed(base),
             Some(t) => {
-                let mesh = if t.uses_mesh_attributes() { self.mesh_point(at) } else { None };
-                let point = TexturePoint { uv: self.uv_of(at, p), mesh };
+                let point = shape::texture_point(&self.shapes, &self.meshes, at, p, t.uses_mesh_attributes());
                 Cow::Owned(t.resolve(base, &point))
             }
         }
@@ -362,51 +361,13 @@ impl Scene {
         self.material_at(self.shapes[si.shape as usize].material, si.surface(), si.p)
     }
 
-    /// The mesh triangle under a surface point, for `mesh_attribute` textures.
-    fn mesh_point(&self, at: SurfaceRef) -> Option<MeshPoint<'_>> {
-        let ShapeGeometry::Mesh(m) = &self.shapes[at.shape as usize].geometry else { return None };
-        let mesh = &self.meshes[*m as usize];
-        let (b1, b2) = (at.bary.x, at.bary.y);
-        Some(MeshPoint {
-            attributes: &mesh.attributes,
-            face: at.prim,
-            vertices: mesh.triangles[at.prim as usize],
-            barycentric: Vec3::new(1.0 - b1 - b2, b1, b2),
-        })
-    }
-
     /// The texture coordinates of a hit; see [`Scene::uv_of`].
     pub fn uv_at(&self, si: &SurfaceInteraction) -> glam::Vec2 {
         self.uv_of(si.surface(), si.p)
     }
 
-    /// The texture coordinates of a hit, in Mitsuba's parameterisation of the shape: a mesh's
-    /// interpolated uvs (or its barycentrics when it has none), a sphere's (atan2(y, x)/2π,
-    /// acos(z)/π) and a disk's (r, φ/2π) in object space. Computed on demand, so that scenes
-    /// without textures do not pay for it.
+    /// The texture coordinates of a point on a shape; see [`shape::surface_uv`].
     pub fn uv_of(&self, at: SurfaceRef, p: Vec3) -> glam::Vec2 {
-        use std::f32::consts::PI;
-        let shape = &self.shapes[at.shape as usize];
-        let wrap = |a: f32| {
-            let u = a / (2.0 * PI);
-            if u < 0.0 { u + 1.0 } else { u }
-        };
-        match &shape.geometry {
-            ShapeGeometry::Mesh(m) => {
-                let mesh = &self.meshes[*m as usize];
-                let Some(uvs) = &mesh.uvs else { return at.bary };
-                let [i0, i1, i2] = mesh.triangles[at.prim as usize];
-                let (b1, b2) = (at.bary.x, at.bary.y);
-                uvs[i0 as usize] * (1.0 - b1 - b2) + uvs[i1 as usize] * b1 + uvs[i2 as usize] * b2
-            }
-            ShapeGeometry::Sphere { center, .. } => {
-                let d = (shape.object_rotation * (p - *center)).normalize_or_zero();
-                glam::Vec2::new(wrap(d.y.atan2(d.x)), d.z.clamp(-1.0, 1.0).acos() / PI)
-            }
-            ShapeGeometry::Disk { to_world, .. } => {
-                let q = to_world.inv_point(p);
-                glam::Vec2::new(glam::Vec2::new(q.x, q.y).length(), wrap(q.y.atan2(q.x)))
-            }
-        }
+        shape::surface_uv(&self.shapes, &self.meshes, at, p)
     }
 }

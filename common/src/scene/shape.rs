@@ -1,7 +1,8 @@
 //! Shapes as the renderer sees them after loading: world-space triangle meshes and analytic
 //! spheres and disks, each with a material, an optional area light and `flip_normals`.
 
-use crate::geometry::Transform;
+use crate::geometry::{SurfaceRef, Transform};
+use crate::texture::{MeshPoint, TexturePoint};
 use glam::{Vec2, Vec3};
 
 /// A world-space triangle mesh.
@@ -180,6 +181,11 @@ pub enum AreaSampling {
         e2: Vec3,
         /// Unit geometric normal of the triangles (before `flip_normals`).
         normal: Vec3,
+        /// Vertex indices of corners A (the origin), B, C, D (B = A + e1, D = A + e2), and
+        /// the two triangles, to report which triangle a point lies in.
+        corners: [u32; 4],
+        /// The mesh's triangles: the first holds A, B, D; the second B, C, D.
+        triangles: [[u32; 3]; 2],
     },
     /// Any triangle mesh: a triangle by area, then a point in it.
     Triangles {
@@ -195,6 +201,87 @@ pub struct SurfacePoint {
     pub p: Vec3,
     /// Geometric normal (after `flip_normals`), which decides which side an area light faces.
     pub n: Vec3,
+    /// Triangle and barycentrics (zero on analytic shapes), for textured emission.
+    pub prim: u32,
+    /// Barycentric coordinates (b1, b2).
+    pub bary: Vec2,
+}
+
+impl SurfacePoint {
+    /// A point of an analytic shape (no triangle).
+    pub fn analytic(p: Vec3, n: Vec3) -> Self {
+        SurfacePoint { p, n, prim: 0, bary: Vec2::ZERO }
+    }
+}
+
+/// The texture coordinates of point `p` at `at`, in Mitsuba's parameterisation of the shape:
+/// a mesh's interpolated uvs (or its barycentrics when it has none), a sphere's
+/// (atan2(y, x)/2π, acos(z)/π) and a disk's (r, φ/2π) in object space. Computed on demand, so
+/// that scenes without textures do not pay for it.
+pub fn surface_uv(shapes: &[Shape], meshes: &[Mesh], at: SurfaceRef, p: Vec3) -> Vec2 {
+    use std::f32::consts::PI;
+    let shape = &shapes[at.shape as usize];
+    let wrap = |a: f32| {
+        let u = a / (2.0 * PI);
+        if u < 0.0 { u + 1.0 } else { u }
+    };
+    match &shape.geometry {
+        ShapeGeometry::Mesh(m) => {
+            let mesh = &meshes[*m as usize];
+            let Some(uvs) = &mesh.uvs else { return at.bary };
+            let [i0, i1, i2] = mesh.triangles[at.prim as usize];
+            let (b1, b2) = (at.bary.x, at.bary.y);
+            uvs[i0 as usize] * (1.0 - b1 - b2) + uvs[i1 as usize] * b1 + uvs[i2 as usize] * b2
+        }
+        ShapeGeometry::Sphere { center, .. } => {
+            let d = (shape.object_rotation * (p - *center)).normalize_or_zero();
+            Vec2::new(wrap(d.y.atan2(d.x)), d.z.clamp(-1.0, 1.0).acos() / PI)
+        }
+        ShapeGeometry::Disk { to_world, .. } => {
+            let q = to_world.inv_point(p);
+            Vec2::new(Vec2::new(q.x, q.y).length(), wrap(q.y.atan2(q.x)))
+        }
+    }
+}
+
+/// What a texture lookup at `p` (at `at`) needs; the mesh triangle only when `with_mesh`
+/// (`mesh_attribute` textures).
+pub fn texture_point<'a>(
+    shapes: &[Shape],
+    meshes: &'a [Mesh],
+    at: SurfaceRef,
+    p: Vec3,
+    with_mesh: bool,
+) -> TexturePoint<'a> {
+    let uv = surface_uv(shapes, meshes, at, p);
+    let mesh = match (&shapes[at.shape as usize].geometry, with_mesh) {
+        (ShapeGeometry::Mesh(m), true) => {
+            let mesh = &meshes[*m as usize];
+            let (b1, b2) = (at.bary.x, at.bary.y);
+            Some(MeshPoint {
+                attributes: &mesh.attributes,
+                face: at.prim,
+                vertices: mesh.triangles[at.prim as usize],
+                barycentric: Vec3::new(1.0 - b1 - b2, b1, b2),
+            })
+        }
+        _ => None,
+    };
+    TexturePoint { uv, mesh }
+}
+
+/// The triangle and its (b1, b2) of the parallelogram point `A + u·e1 + v·e2`: the first
+/// triangle (A, B, D) when u + v ≤ 1, else the second (B, C, D).
+fn parallelogram_barycentrics(corners: &[u32; 4], triangles: &[[u32; 3]; 2], u: Vec2) -> (u32, Vec2) {
+    let [a, b, c, d] = *corners;
+    let (prim, weights) = if u.x + u.y <= 1.0 {
+        (0, [(a, 1.0 - u.x - u.y), (b, u.x), (d, u.y)])
+    } else {
+        (1, [(c, u.x + u.y - 1.0), (b, 1.0 - u.y), (d, 1.0 - u.x)])
+    };
+    let weight = |v: u32| weights.iter().find(|(i, _)| *i == v).map_or(0.0, |(_, w)| *w);
+    let t = triangles[prim];
+    (prim as u32, Vec2::new(weight(t[1]), weight(t[2])))
 }
 
 impl Shape {
@@ -208,7 +295,8 @@ impl Shape {
             // both triangles share this normal; orient it like triangle 0's winding
             let [p0, p1, p2] = mesh.corners(0);
             let normal = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-            self.area_sampling = AreaSampling::Parallelogram { origin, e1, e2, normal };
+            let triangles = [mesh.triangles[0], mesh.triangles[1]];
+            self.area_sampling = AreaSampling::Parallelogram { origin, e1, e2, normal, corners, triangles };
             return;
         }
         let mut acc = 0.0f64;
@@ -230,8 +318,10 @@ impl Shape {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => {
                 let cdf = match &self.area_sampling {
-                    AreaSampling::Parallelogram { origin, e1, e2, normal } => {
-                        return SurfacePoint { p: *origin + *e1 * u.x + *e2 * u.y, n: *normal * flip };
+                    AreaSampling::Parallelogram { origin, e1, e2, normal, corners, triangles } => {
+                        let p = *origin + *e1 * u.x + *e2 * u.y;
+                        let (prim, bary) = parallelogram_barycentrics(corners, triangles, u);
+                        return SurfacePoint { p, n: *normal * flip, prim, bary };
                     }
                     AreaSampling::Triangles { cdf } => cdf,
                     AreaSampling::None => unreachable!("invariant: emitting meshes are prepared for sampling"),
@@ -244,15 +334,55 @@ impl Shape {
                 let b = crate::math::warp::square_to_uniform_triangle(Vec2::new(ux, u.y));
                 let [a, bb, c] = mesh.corners(i);
                 let p = a * (1.0 - b.x - b.y) + bb * b.x + c * b.y;
-                SurfacePoint { p, n: (bb - a).cross(c - a).normalize_or_zero() * flip }
+                SurfacePoint { p, n: (bb - a).cross(c - a).normalize_or_zero() * flip, prim: i as u32, bary: b }
             }
             ShapeGeometry::Sphere { center, radius } => {
                 let n = crate::math::warp::square_to_uniform_sphere(u);
-                SurfacePoint { p: *center + n * *radius, n: n * flip }
+                SurfacePoint::analytic(*center + n * *radius, n * flip)
             }
             ShapeGeometry::Disk { to_world, normal } => {
                 let d = crate::math::warp::square_to_disk_concentric(u);
-                SurfacePoint { p: to_world.point(Vec3::new(d.x, d.y, 0.0)), n: *normal * flip }
+                SurfacePoint::analytic(to_world.point(Vec3::new(d.x, d.y, 0.0)), *normal * flip)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sampled point reports the triangle and barycentrics it lies at, on parallelograms
+    /// (both triangles, either winding) and on meshes sampled by triangle area.
+    #[test]
+    fn area_samples_report_their_triangle_and_barycentrics() {
+        let t = Transform::rotate(glam::DVec3::new(1.0, 2.0, 0.5), 37.0).expect("rotation");
+        let mut rect = Mesh::rectangle();
+        rect.transform(&t);
+        let mut flipped = rect.clone();
+        flipped.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+        let mut cube = Mesh::cube();
+        cube.transform(&t);
+        for mesh in [rect, flipped, cube] {
+            let mut shape = Shape {
+                geometry: ShapeGeometry::Mesh(0),
+                material: 0,
+                light: None,
+                flip_normals: false,
+                area: 1.0,
+                area_sampling: Default::default(),
+                id: None,
+                object_rotation: glam::Mat3::IDENTITY,
+            };
+            shape.prepare_area_sampling(Some(&mesh));
+            let meshes = [mesh];
+            for i in 0..64 {
+                let u = Vec2::new((i % 8) as f32 / 8.0 + 0.03, (i / 8) as f32 / 8.0 + 0.05);
+                let sp = shape.sample_area(&meshes, u);
+                let [a, b, c] = meshes[0].corners(sp.prim as usize);
+                let p = a * (1.0 - sp.bary.x - sp.bary.y) + b * sp.bary.x + c * sp.bary.y;
+                assert!((p - sp.p).length() < 1e-5, "{u}: {p} vs {}", sp.p);
+                assert!(sp.bary.min_element() >= -1e-6 && sp.bary.element_sum() <= 1.0 + 1e-6);
             }
         }
     }

@@ -47,12 +47,22 @@ pub struct TextureLimits {
     /// Largest decoded size of one image, in bytes (width × height × channels × bytes per
     /// sample as the file decodes, alpha included). Larger files are refused from their header.
     pub max_decoded_bytes: u64,
+    /// Largest decoded size of all of a scene's images together (the scene builder enforces
+    /// it by lowering the per-image limit to what is left).
+    pub max_total_bytes: u64,
 }
 
 impl Default for TextureLimits {
-    /// 1 GiB per image.
+    /// 1 GiB per image, 4 GiB per scene.
     fn default() -> Self {
-        TextureLimits { max_decoded_bytes: 1 << 30 }
+        TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 }
+    }
+}
+
+impl TextureLimits {
+    /// A budget of `bytes` for the whole scene, which any one image may use up.
+    pub fn total(bytes: u64) -> Self {
+        TextureLimits { max_decoded_bytes: bytes, max_total_bytes: bytes }
     }
 }
 

@@ -4,6 +4,7 @@
 
 pub mod calibrate;
 pub mod chart;
+pub mod envmap;
 pub mod equal_time;
 pub mod farm;
 pub mod ground_truth;
@@ -32,6 +33,8 @@ pub enum BenchCommand {
     CalibrateCosts(calibrate::CalibrateArgs),
     /// Photon-map build and query rates.
     PhotonMap(photon_map::PhotonMapArgs),
+    /// Time and memory to make an environment map render-ready (8k x 4k by default).
+    Envmap(envmap::EnvmapArgs),
     /// The farm coordinator: result ingest, scaling with real workers, bytes on the wire.
     Farm(farm::FarmArgs),
 }
@@ -45,6 +48,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<()> {
         BenchCommand::GroundTruth(args) => ground_truth::run(args),
         BenchCommand::CalibrateCosts(args) => calibrate::run(args),
         BenchCommand::PhotonMap(args) => photon_map::run(args),
+        BenchCommand::Envmap(args) => envmap::run(args),
         BenchCommand::Farm(args) => farm::run(args),
     }
 }

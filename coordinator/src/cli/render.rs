@@ -8,7 +8,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
 use tessera_common::render::{Budget, RenderOptions};
-use tessera_common::scene::Scene;
+use tessera_common::scene::{LoadOptions, Scene};
+use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera render`.
 #[derive(clap::Args, Debug, Clone)]
@@ -24,6 +25,11 @@ pub struct RenderArgs {
     /// Render threads [default: all cores].
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Memory the scene's decoded textures and environment maps may take, in MiB; a scene
+    /// needing more fails to load with an error naming the image [default: 1024 per image,
+    /// 4096 in all].
+    #[arg(long, value_name = "MIB")]
+    pub texture_budget: Option<u64>,
 }
 
 /// Runs `tessera render`.
@@ -32,7 +38,8 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     if args.threads == Some(0) {
         bail!("--threads must be at least 1");
     }
-    let scene = Scene::load_with(&args.scene, &settings.define_map())?;
+    let texture_limits = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+    let scene = Scene::load_options(&args.scene, &LoadOptions { defines: settings.define_map(), texture_limits })?;
     let renderer = make_renderer(&settings, &scene)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match settings.time_s {
@@ -69,13 +76,14 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         tracing::warn!(count = out.film.non_finite, "non-finite samples were zeroed");
     }
     println!(
-        "{}: {} spp ({} samples) in {:.2} s, {:.0} samples/s, peak memory {:.0} MB -> {}",
+        "{}: {} spp ({} samples) in {:.2} s, {:.0} samples/s, peak memory {:.0} MB (decoded textures {:.1} MB) -> {}",
         renderer.name(),
         out.spp,
         samples,
         secs,
         samples as f64 / secs.max(1e-9),
         peak_rss_bytes() as f64 / 1e6,
+        scene.texture_bytes as f64 / 1e6,
         output.display()
     );
     Ok(())

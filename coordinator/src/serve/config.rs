@@ -7,6 +7,7 @@ use super::job::service::ServiceConfig;
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera serve`.
 #[derive(clap::Args, Debug, Clone)]
@@ -42,6 +43,10 @@ pub struct ServeArgs {
     /// Largest accepted upload (scene bundle) in MiB.
     #[arg(long, default_value_t = 1024)]
     pub max_upload_mb: usize,
+    /// Memory a submitted scene's decoded textures and environment maps may take while the
+    /// coordinator validates it, in MiB [default: 1024 per image, 4096 in all].
+    #[arg(long, value_name = "MIB")]
+    pub texture_budget: Option<u64>,
 }
 
 impl ServeArgs {
@@ -63,6 +68,7 @@ impl ServeArgs {
         let cfg = ServiceConfig {
             lease_timeout_ms: (self.lease_timeout * 1000.0) as u64,
             checkpoint_interval_ms: (self.checkpoint_interval.max(0.0) * 1000.0) as u64,
+            texture_limits: self.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
         };
         Ok((tokens, cfg))
     }

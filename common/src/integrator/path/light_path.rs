@@ -56,7 +56,7 @@ pub fn trace_light_path(
         pdf_fwd: pdf_origin,
         pdf_rev: 0.0,
         pdf_next_event: 0.0,
-        kind: VertexKind::Light { light: li as u32 },
+        kind: VertexKind::Light { light: li as u32, at: e.at },
         // on a light vertex: a delta light, which no camera path can hit
         delta: light.is_delta(),
         depth: 0,
@@ -145,7 +145,7 @@ pub fn trace_light_path(
 /// vertex `light_vertex`, in the light vertex's measure (area, or solid angle for infinite
 /// lights), including the light selection probability.
 pub fn next_event_density(scene: &Scene, light_vertex: &PathVertex, v: &PathVertex) -> f32 {
-    let VertexKind::Light { light } = light_vertex.kind else { return 0.0 };
+    let VertexKind::Light { light, .. } = light_vertex.kind else { return 0.0 };
     let l = &scene.lights[light as usize];
     let pmf = scene.light_sampler.pmf(light as usize);
     let ctx = scene.light_context();

@@ -121,7 +121,7 @@ pub fn merge<O: SampleObserver>(
         let light = cache.subpath(index as usize);
         let s = light.len() - 1; // the photon itself is replaced by z
         let infinite =
-            matches!(light[0].kind, VertexKind::Light { light } if scene.lights[light as usize].is_infinite());
+            matches!(light[0].kind, VertexKind::Light { light, .. } if scene.lights[light as usize].is_infinite());
         let join = Join {
             camera_end_from_light: y.pdf_fwd,
             camera_next_from_light: density_at_vertex(mz.pdf(wi, z_wo), z.p, &camera[t - 2], false),

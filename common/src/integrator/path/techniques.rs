@@ -12,7 +12,7 @@ use super::light_path::next_event_density;
 use super::mis::{self, SampleCounts, Technique};
 use super::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use crate::bsdf::{Material, TransportMode};
-use crate::geometry::{Ray, offset_ray_origin};
+use crate::geometry::{Ray, SurfaceRef, offset_ray_origin};
 use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::light::Light;
 use crate::math::{Rgb, SHADOW_EPSILON};
@@ -92,7 +92,7 @@ pub fn visible(scene: &Scene, a: &PathVertex, b: &PathVertex) -> bool {
 /// Whether a light subpath starts on an infinite light.
 #[inline]
 fn path_on_infinite_light(scene: &Scene, light: &[PathVertex]) -> bool {
-    matches!(light.first().map(|v| v.kind), Some(VertexKind::Light { light }) if is_infinite(scene, light))
+    matches!(light.first().map(|v| v.kind), Some(VertexKind::Light { light, .. }) if is_infinite(scene, light))
 }
 
 /// Whether light `li` is infinite.
@@ -133,7 +133,11 @@ pub fn emitter_hit<O: SampleObserver>(
     let end = &camera[t - 1];
     let prev = &camera[t - 2];
     let (pos, next) = emission_densities(scene, li, end, prev);
-    let light_vertex = PathVertex { kind: VertexKind::Light { light: li }, ..*end };
+    let at = match end.kind {
+        VertexKind::Surface { at, .. } => at,
+        _ => SurfaceRef::default(),
+    };
+    let light_vertex = PathVertex { kind: VertexKind::Light { light: li, at }, ..*end };
     let next_event0 =
         if prev.kind == VertexKind::Camera { 0.0 } else { next_event_density(scene, &light_vertex, prev) };
     let join = Join { camera_end_from_light: pos, camera_next_from_light: next, next_event0, ..Join::default() };
@@ -179,7 +183,8 @@ pub fn next_event<O: SampleObserver>(
         pdf_fwd: 0.0,
         pdf_rev: 0.0,
         pdf_next_event: 0.0,
-        kind: VertexKind::Light { light: li as u32 },
+        // only densities are read off this vertex, never its (possibly textured) radiance
+        kind: VertexKind::Light { light: li as u32, at: SurfaceRef::default() },
         // on a light vertex: a delta light, which no camera path can hit
         delta: light.is_delta(),
         depth: 0,
@@ -276,12 +281,12 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
     let cam = &scene.camera;
     let cs = cam.sample_direct(v.p)?;
     let value = match v.kind {
-        VertexKind::Light { light } => {
+        VertexKind::Light { light, at } => {
             let light = &scene.lights[light as usize];
             if light.is_infinite() {
                 return None;
             }
-            light.emitted_towards(v.n_geo, cs.wi) * v.beta.x
+            light.emitted_towards(&scene.light_context(), at, v.p, v.n_geo, cs.wi) * v.beta.x
         }
         VertexKind::Camera => return None,
         VertexKind::Surface { material, at } => {
@@ -367,7 +372,12 @@ pub fn camera_vertex(scene: &Scene) -> PathVertex {
 /// Radiance of an area light seen at surface vertex `v` of shape light `li`.
 pub fn area_emission(scene: &Scene, li: u32, v: &PathVertex) -> Rgb {
     match &scene.lights[li as usize] {
-        Light::Area { radiance, .. } => Light::eval_area(*radiance, v.n_shading, v.wo),
+        l @ Light::Area { .. } => match v.kind {
+            VertexKind::Surface { at, .. } => {
+                Light::eval_area(l.area_radiance(&scene.light_context(), at, v.p), v.n_shading, v.wo)
+            }
+            _ => Rgb::ZERO,
+        },
         _ => Rgb::ZERO,
     }
 }

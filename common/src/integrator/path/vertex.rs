@@ -12,6 +12,8 @@ pub enum VertexKind {
     Light {
         /// Index into `Scene::lights`.
         light: u32,
+        /// Where on its shape, for an area light (textured radiance).
+        at: SurfaceRef,
     },
     /// The camera (pinhole) at the start of a camera path.
     Camera,

@@ -442,7 +442,7 @@ mod tests {
     /// accepted and the job must finish.
     fn drain_with_generated_results(integrator: IntegratorName, width: u32, height: u32, spp: u32) -> usize {
         let dir = tempfile::tempdir().unwrap();
-        let cfg = ServiceConfig { lease_timeout_ms: 60_000, checkpoint_interval_ms: 0 };
+        let cfg = ServiceConfig { lease_timeout_ms: 60_000, checkpoint_interval_ms: 0, texture_limits: Default::default() };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();
         let req = generated_job(integrator, width, height, spp, "t");
         let b = req.bundle.unwrap();

@@ -10,7 +10,11 @@ use tessera_common::integrator::TileRequest;
 use tessera_common::scene::Scene;
 use tessera_common::settings::{RenderSettings, Renderer};
 
-const CFG: ServiceConfig = ServiceConfig { lease_timeout_ms: 10_000, checkpoint_interval_ms: 3_600_000 };
+const CFG: ServiceConfig = ServiceConfig {
+    lease_timeout_ms: 10_000,
+    checkpoint_interval_ms: 3_600_000,
+    texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
+};
 
 fn cornell() -> (Bundle, Scene) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");

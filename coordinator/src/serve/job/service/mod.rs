@@ -43,6 +43,8 @@ pub struct ServiceConfig {
     /// checkpoint's cost (see [`CHECKPOINT_SPACING`]); a finished job's outputs replace its last
     /// checkpoint.
     pub checkpoint_interval_ms: u64,
+    /// What a submitted scene's decoded textures may take when the coordinator loads it.
+    pub texture_limits: tessera_common::texture::TextureLimits,
 }
 
 /// Why a call failed; the API layer maps each variant onto its error table.

@@ -9,7 +9,7 @@ use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::film::Film;
 use tessera_common::film::filter::Filter;
-use tessera_common::scene::Scene;
+use tessera_common::scene::{LoadOptions, Scene};
 use tessera_common::settings::RenderSettings;
 
 impl JobService {
@@ -80,7 +80,8 @@ impl JobService {
                 let _ = std::fs::remove_dir_all(&tmp);
             }
         }
-        let scene = Scene::load_with(&dir.join(&bundle.scene_path), &settings.define_map()).map_err(|e| {
+        let options = LoadOptions { defines: settings.define_map(), texture_limits: self.cfg.texture_limits };
+        let scene = Scene::load_options(&dir.join(&bundle.scene_path), &options).map_err(|e| {
             let prefix = format!("{}/", dir.display());
             invalid(e.to_string().replace(&prefix, ""))
         })?;
