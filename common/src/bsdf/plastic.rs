@@ -106,10 +106,48 @@ pub struct RoughPlastic {
     /// Use nonlinear internal scattering.
     pub nonlinear: bool,
     specular_sampling_weight: f32,
-    internal_reflectance: f32,
-    /// Inline rather than shared, so that resolving a textured material per surface point
-    /// neither allocates nor contends on a reference count.
+    /// Shared by every rough plastic with this coating: a reference keeps the model (and every
+    /// `Material`) small, and resolving a textured material copies it without a reference count.
+    coating: &'static CoatingTables,
+}
+
+/// What a rough dielectric coating does to light, tabulated once per (distribution, η).
+#[derive(Debug, PartialEq)]
+struct CoatingTables {
+    /// Transmittance into the coating by cos θ, on Mitsuba's μ grid.
     external_transmittance: [f32; TRANSMITTANCE_RES],
+    /// Hemispherical reflectance of the coating seen from inside.
+    internal_reflectance: f32,
+}
+
+impl CoatingTables {
+    /// The tables of a coating, computed on first use and kept for the life of the process (a
+    /// process sees few distinct coatings; each costs 260 bytes and about a million quadrature
+    /// evaluations, which repeated scene loads then skip).
+    fn of(distribution: &Microfacet, eta: f32) -> &'static CoatingTables {
+        type Key = (bool, u32, u32, bool);
+        static CACHE: std::sync::LazyLock<std::sync::Mutex<std::collections::HashMap<Key, &'static CoatingTables>>> =
+            std::sync::LazyLock::new(Default::default);
+        let key = (
+            distribution.kind == super::MicrofacetKind::Ggx,
+            distribution.alpha_u.to_bits(),
+            eta.to_bits(),
+            distribution.sample_visible,
+        );
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        cache.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(distribution, eta))))
+    }
+
+    /// Mitsuba's tables: μ on a uniform grid over [0, 1] (the first at 1e-6), the internal
+    /// reflectance as 2 × the grid mean of R(μ) μ seen from inside.
+    fn compute(distribution: &Microfacet, eta: f32) -> CoatingTables {
+        let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
+        let external_transmittance = std::array::from_fn(|i| coating_albedo(distribution, mu(i), eta, true));
+        let internal_reflectance = 2.0
+            * (0..TRANSMITTANCE_RES).map(|i| coating_albedo(distribution, mu(i), 1.0 / eta, false) * mu(i)).sum::<f32>()
+            / TRANSMITTANCE_RES as f32;
+        CoatingTables { external_transmittance, internal_reflectance }
+    }
 }
 
 impl RoughPlastic {
@@ -122,13 +160,6 @@ impl RoughPlastic {
         nonlinear: bool,
     ) -> Self {
         let s_mean = specular_reflectance.map_or(1.0, mean);
-        // Mitsuba's tables: μ on a uniform grid over [0, 1] (the first at 1e-6), the internal
-        // reflectance as 2 × the grid mean of R(μ) μ seen from inside
-        let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
-        let external_transmittance = std::array::from_fn(|i| coating_albedo(&distribution, mu(i), eta, true));
-        let internal_reflectance = 2.0
-            * (0..TRANSMITTANCE_RES).map(|i| coating_albedo(&distribution, mu(i), 1.0 / eta, false) * mu(i)).sum::<f32>()
-            / TRANSMITTANCE_RES as f32;
         RoughPlastic {
             distribution,
             eta,
@@ -136,8 +167,7 @@ impl RoughPlastic {
             specular_reflectance: specular_reflectance.unwrap_or(Rgb::ONE),
             nonlinear,
             specular_sampling_weight: s_mean / (mean(diffuse_reflectance) + s_mean),
-            internal_reflectance,
-            external_transmittance,
+            coating: CoatingTables::of(&distribution, eta),
         }
     }
 
@@ -145,7 +175,8 @@ impl RoughPlastic {
         let x = cos_theta.clamp(0.0, 1.0) * (TRANSMITTANCE_RES - 1) as f32;
         let i = (x as usize).min(TRANSMITTANCE_RES - 2);
         let t = x - i as f32;
-        self.external_transmittance[i] * (1.0 - t) + self.external_transmittance[i + 1] * t
+        let table = &self.coating.external_transmittance;
+        table[i] * (1.0 - t) + table[i + 1] * t
     }
 
     fn prob_specular(&self, cos_o: f32) -> f32 {
@@ -183,9 +214,9 @@ impl RoughPlastic {
         }
         let r = self.diffuse_reflectance;
         let denom = if self.nonlinear {
-            Rgb::ONE - r * self.internal_reflectance
+            Rgb::ONE - r * self.coating.internal_reflectance
         } else {
-            Rgb::splat(1.0 - self.internal_reflectance)
+            Rgb::splat(1.0 - self.coating.internal_reflectance)
         };
         value + r / denom * (INV_PI / (self.eta * self.eta) * self.transmittance(wo.z) * self.transmittance(wi.z))
     }

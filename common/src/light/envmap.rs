@@ -10,6 +10,9 @@
 //! expectation): the sphere is cut into cells between neighbouring texel centres; a cell is
 //! chosen with probability ∝ its solid angle × the largest luminance of its four texels (so
 //! every direction with radiance has density), and a direction uniformly in its solid angle.
+//! The choice is two-level, a row band by an f64 marginal and a cell within it by an f32
+//! conditional table, so the tables add 4 bytes per texel to the texels' 12; densities are
+//! read back from the same tables, so sampling and density agree exactly.
 
 use crate::math::{PI, Rgb, luminance};
 use glam::{Mat3, Vec2, Vec3};
@@ -24,10 +27,11 @@ pub struct Envmap {
     /// Map frame to world (a rotation), and back.
     to_world: Mat3,
     to_local: Mat3,
-    /// Per cell (row-major, W × (H − 1)): the cumulative sampling weight, for binary search.
-    cdf: Vec<f64>,
-    /// Per cell: its probability over its solid angle (the solid-angle density inside it).
-    density: Vec<f32>,
+    /// Per row band (H − 1): the cumulative probability of choosing it, ending at 1.
+    marginal: Vec<f64>,
+    /// Per cell (row-major, W × (H − 1)): the cumulative probability of the cell within its
+    /// band, ending at 1 in every band with weight.
+    conditional: Vec<f32>,
 }
 
 /// The map's (u, v) of a direction in its own frame.
@@ -50,55 +54,85 @@ impl Envmap {
     /// and rotated by `to_world` (which must be a rotation). Images smaller than 2×3 are
     /// padded as Mitsuba pads them (edge texels repeated).
     pub fn new(width: usize, height: usize, texels: &[Rgb], scale: f32, to_world: Mat3) -> Envmap {
+        Self::from_texels(width, height, texels.to_vec(), scale, to_world)
+    }
+
+    /// [`Envmap::new`] taking the texels over, so that a big map is not copied.
+    pub fn from_texels(width: usize, height: usize, texels: Vec<Rgb>, scale: f32, to_world: Mat3) -> Envmap {
         assert_eq!(texels.len(), width * height, "invariant: texel count matches the size");
         let (w, h) = (width.max(2), height.max(3));
-        let texels: Vec<Rgb> = (0..w * h)
-            .map(|i| {
-                let (x, y) = ((i % w).min(width - 1), (i / w).min(height - 1));
-                texels[y * width + x] * scale
-            })
-            .collect();
+        let texels: Vec<Rgb> = if (w, h) == (width, height) {
+            let mut texels = texels;
+            texels.iter_mut().for_each(|t| *t = *t * scale);
+            texels
+        } else {
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w).min(width - 1), (i / w).min(height - 1));
+                    texels[y * width + x] * scale
+                })
+                .collect()
+        };
         let mut map = Envmap {
             width: w,
             height: h,
             texels,
             to_world,
             to_local: to_world.transpose(),
-            cdf: Vec::new(),
-            density: Vec::new(),
+            marginal: Vec::new(),
+            conditional: Vec::new(),
         };
         map.build_distribution();
         map
     }
 
-    /// The cells' sampling weights and densities.
+    /// The cells' sampling tables. An all-black map is sampled uniformly.
     fn build_distribution(&mut self) {
         let (w, h) = (self.width, self.height);
-        let (mut cdf, mut weights) = (Vec::with_capacity(w * (h - 1)), Vec::with_capacity(w * (h - 1)));
-        let mut total = 0.0f64;
+        let mut conditional = Vec::with_capacity(w * (h - 1));
+        let mut bands = Vec::with_capacity(h - 1);
+        let lum = |x: usize, y: usize| luminance(self.texels[y * w + x]).max(0.0);
         for j in 0..h - 1 {
-            let solid_angle = self.cell_solid_angle(j);
+            let start = conditional.len();
+            let mut sum = 0.0f64;
             for i in 0..w {
-                let lum = [(i, j), ((i + 1) % w, j), (i, j + 1), ((i + 1) % w, j + 1)]
-                    .iter()
-                    .map(|&(x, y)| luminance(self.texels[y * w + x]).max(0.0))
-                    .fold(0.0f32, f32::max);
-                let weight = lum as f64 * solid_angle;
-                total += weight;
-                cdf.push(total);
-                weights.push(lum);
+                let i1 = (i + 1) % w;
+                sum += lum(i, j).max(lum(i1, j)).max(lum(i, j + 1)).max(lum(i1, j + 1)) as f64;
+                conditional.push(sum as f32);
             }
+            let row = &mut conditional[start..];
+            if sum > 0.0 {
+                row.iter_mut().for_each(|c| *c = (*c as f64 / sum) as f32);
+            } else {
+                row.iter_mut().enumerate().for_each(|(i, c)| *c = (i + 1) as f32 / w as f32);
+            }
+            row[w - 1] = 1.0;
+            bands.push(sum * self.cell_solid_angle(j));
         }
-        // the densities: P(cell) / Ω(cell) = lum / Σ lum·Ω; an all-black map is sampled uniformly
-        let (cdf, density) = if total > 0.0 {
-            (cdf, weights.iter().map(|&l| (l as f64 / total) as f32).collect())
-        } else {
-            let cells = (w * (h - 1)) as f64;
-            let uniform: Vec<f64> = (0..w * (h - 1)).map(|k| (k + 1) as f64 / cells).collect();
-            (uniform, vec![(1.0 / (4.0 * std::f64::consts::PI)) as f32; w * (h - 1)])
-        };
-        self.cdf = cdf;
-        self.density = density;
+        let total: f64 = bands.iter().sum();
+        let mut acc = 0.0;
+        let marginal: Vec<f64> = bands
+            .iter()
+            .enumerate()
+            .map(|(j, b)| {
+                acc += if total > 0.0 { b / total } else { self.cell_solid_angle(j) * w as f64 / (4.0 * std::f64::consts::PI) };
+                acc
+            })
+            .collect();
+        self.marginal = marginal;
+        if let Some(last) = self.marginal.last_mut() {
+            *last = 1.0;
+        }
+        self.conditional = conditional;
+    }
+
+    /// Probability of choosing band `j`, and cell `i` within it.
+    #[inline]
+    fn cell_probability(&self, i: usize, j: usize) -> f64 {
+        let band = self.marginal[j] - if j == 0 { 0.0 } else { self.marginal[j - 1] };
+        let row = &self.conditional[j * self.width..(j + 1) * self.width];
+        let cell = row[i] as f64 - if i == 0 { 0.0 } else { row[i - 1] as f64 };
+        band * cell
     }
 
     /// Solid angle of a cell of row band `j` (between rows j and j + 1).
@@ -126,22 +160,33 @@ impl Envmap {
     /// Samples a world direction towards the map (away from the scene) with two uniform
     /// numbers; returns it with its solid-angle density.
     pub fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
-        let total = *self.cdf.last()?;
-        let target = u.x as f64 * total;
-        let cell = self.cdf.partition_point(|&c| c <= target).min(self.cdf.len() - 1);
-        let lo = if cell == 0 { 0.0 } else { self.cdf[cell - 1] };
-        let span = self.cdf[cell] - lo;
-        let reuse = if span > 0.0 { ((target - lo) / span) as f32 } else { 0.5 };
-        let (i, j) = (cell % self.width, cell / self.width);
+        let w = self.width;
+        let ux = u.x as f64;
+        let j = self.marginal.partition_point(|&c| c <= ux).min(self.marginal.len() - 1);
+        let lo = if j == 0 { 0.0 } else { self.marginal[j - 1] };
+        let span = self.marginal[j] - lo;
+        // the first number, reused within the band to choose the cell
+        let v = if span > 0.0 { ((ux - lo) / span) as f32 } else { 0.5 };
+        let row = &self.conditional[j * w..(j + 1) * w];
+        let i = row.partition_point(|&c| c <= v).min(w - 1);
+        let lo = if i == 0 { 0.0 } else { row[i - 1] };
+        let span = row[i] - lo;
+        let reuse = if span > 0.0 { (v - lo) / span } else { 0.5 };
         // uniform in the cell's solid angle: φ uniform, cos θ uniform
-        let (w, h) = (self.width as f32, (self.height - 1) as f32);
-        let u_coord = (i as f32 + 0.5 + reuse.clamp(0.0, 1.0)) / w;
-        let (c0, c1) = ((PI * j as f32 / h).cos(), (PI * (j + 1) as f32 / h).cos());
+        let (wf, hf) = (w as f32, (self.height - 1) as f32);
+        let u_coord = (i as f32 + 0.5 + reuse.clamp(0.0, 1.0)) / wf;
+        let (c0, c1) = ((PI * j as f32 / hf).cos(), (PI * (j + 1) as f32 / hf).cos());
         let cos_t = c0 + (c1 - c0) * u.y;
         let v_coord = cos_t.clamp(-1.0, 1.0).acos() / PI;
         let d = self.to_world * uv_to_direction(Vec2::new(u_coord - u_coord.floor(), v_coord));
-        let pdf = self.density[cell];
+        let pdf = self.cell_density(i, j);
         (pdf > 0.0).then_some((d, pdf))
+    }
+
+    /// Solid-angle density inside cell (i, j).
+    #[inline]
+    fn cell_density(&self, i: usize, j: usize) -> f32 {
+        (self.cell_probability(i, j) / self.cell_solid_angle(j)) as f32
     }
 
     /// The solid-angle density of [`Envmap::sample`] producing world direction `d`.
@@ -151,7 +196,7 @@ impl Envmap {
         let x = uv.x * self.width as f32 - 0.5;
         let i = (x.floor() as i64).rem_euclid(self.width as i64) as usize;
         let j = ((uv.y * (self.height - 1) as f32) as usize).min(self.height - 2);
-        self.density[j * self.width + i]
+        self.cell_density(i, j)
     }
 
     /// Mean luminance of the radiance over the sphere (for light selection and EMIS).
@@ -170,12 +215,12 @@ impl Envmap {
 
     /// Bytes a map built from a `width × height` image will use (before padding small ones).
     pub fn bytes_for(width: usize, height: usize) -> usize {
-        width.max(2) * height.max(3) * (std::mem::size_of::<Rgb>() + 8 + 4)
+        width.max(2) * height.max(3) * (std::mem::size_of::<Rgb>() + 4) + height.max(3) * 8
     }
 
     /// Bytes the map's texels and tables use.
     pub fn bytes(&self) -> usize {
-        self.texels.len() * std::mem::size_of::<Rgb>() + self.cdf.len() * 8 + self.density.len() * 4
+        self.texels.len() * std::mem::size_of::<Rgb>() + self.conditional.len() * 4 + self.marginal.len() * 8
     }
 }
 

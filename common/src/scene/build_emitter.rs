@@ -156,14 +156,15 @@ fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
     let bitmap =
         Bitmap::load(&path, BitmapOptions::default(), &textures.limits()).map_err(|err| textures.load_error(e, err))?;
     let (width, height) = (bitmap.width() as usize, bitmap.height() as usize);
-    // the map's texels and tables count against the texture budget too
-    let needed = (Envmap::bytes_for(width, height) + width * height * std::mem::size_of::<Rgb>()) as u64;
-    let left = textures.limits().max_decoded_bytes.saturating_sub(bitmap.decoded_bytes() as u64);
+    // what the map holds (texels as f32 RGB and tables) counts against the budget; the decoded
+    // image is freed once converted
+    let needed = Envmap::bytes_for(width, height) as u64;
+    let left = textures.limits().max_decoded_bytes;
     if needed > left {
         return Err(SceneError::at(
             e.location_of("filename"),
             format!(
-                "{}: this {width}x{height} environment map needs {needed} bytes for its texels and sampling tables, over the {left} bytes left of the texture budget",
+                "{}: this {width}x{height} environment map needs {needed} bytes for its texels and sampling tables, over the {left} bytes the texture budget allows it",
                 path.display()
             ),
         ));
@@ -173,7 +174,7 @@ fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
     if texels.iter().any(|t| !t.is_finite()) {
         return Err(SceneError::at(e.location_of("filename"), format!("{}: the image has non-finite pixels", path.display())));
     }
-    let map = Envmap::new(width, height, &texels, scale, m);
+    let map = Envmap::from_texels(width, height, texels, scale, m);
     textures.add_bytes(map.bytes());
     Ok(map)
 }

@@ -181,11 +181,10 @@ pub enum AreaSampling {
         e2: Vec3,
         /// Unit geometric normal of the triangles (before `flip_normals`).
         normal: Vec3,
-        /// Vertex indices of corners A (the origin), B, C, D (B = A + e1, D = A + e2), and
-        /// the two triangles, to report which triangle a point lies in.
-        corners: [u32; 4],
-        /// The mesh's triangles: the first holds A, B, D; the second B, C, D.
-        triangles: [[u32; 3]; 2],
+        /// For each triangle (the first holds A, B, D; the second C, B, D, with A the origin,
+        /// B = A + e1, D = A + e2), which of those three corners are its second and third
+        /// vertices: where a sampled point's barycentrics (b1, b2) come from.
+        bary_slots: [[u8; 2]; 2],
     },
     /// Any triangle mesh: a triangle by area, then a point in it.
     Triangles {
@@ -271,17 +270,16 @@ pub fn texture_point<'a>(
 }
 
 /// The triangle and its (b1, b2) of the parallelogram point `A + u·e1 + v·e2`: the first
-/// triangle (A, B, D) when u + v ≤ 1, else the second (B, C, D).
-fn parallelogram_barycentrics(corners: &[u32; 4], triangles: &[[u32; 3]; 2], u: Vec2) -> (u32, Vec2) {
-    let [a, b, c, d] = *corners;
+/// triangle (A, B, D) when u + v ≤ 1, else the second (C, B, D).
+#[inline]
+fn parallelogram_barycentrics(slots: &[[u8; 2]; 2], u: Vec2) -> (u32, Vec2) {
     let (prim, weights) = if u.x + u.y <= 1.0 {
-        (0, [(a, 1.0 - u.x - u.y), (b, u.x), (d, u.y)])
+        (0, [1.0 - u.x - u.y, u.x, u.y])
     } else {
-        (1, [(c, u.x + u.y - 1.0), (b, 1.0 - u.y), (d, 1.0 - u.x)])
+        (1, [u.x + u.y - 1.0, 1.0 - u.y, 1.0 - u.x])
     };
-    let weight = |v: u32| weights.iter().find(|(i, _)| *i == v).map_or(0.0, |(_, w)| *w);
-    let t = triangles[prim];
-    (prim as u32, Vec2::new(weight(t[1]), weight(t[2])))
+    let [s1, s2] = slots[prim];
+    (prim as u32, Vec2::new(weights[s1 as usize], weights[s2 as usize]))
 }
 
 impl Shape {
@@ -295,8 +293,11 @@ impl Shape {
             // both triangles share this normal; orient it like triangle 0's winding
             let [p0, p1, p2] = mesh.corners(0);
             let normal = (p1 - p0).cross(p2 - p0).normalize_or_zero();
-            let triangles = [mesh.triangles[0], mesh.triangles[1]];
-            self.area_sampling = AreaSampling::Parallelogram { origin, e1, e2, normal, corners, triangles };
+            let [a, b, c, d] = corners;
+            let slot = |order: [u32; 3], v: u32| order.iter().position(|&x| x == v).unwrap_or(0) as u8;
+            let slots = |t: [u32; 3], order: [u32; 3]| [slot(order, t[1]), slot(order, t[2])];
+            let bary_slots = [slots(mesh.triangles[0], [a, b, d]), slots(mesh.triangles[1], [c, b, d])];
+            self.area_sampling = AreaSampling::Parallelogram { origin, e1, e2, normal, bary_slots };
             return;
         }
         let mut acc = 0.0f64;
@@ -318,9 +319,9 @@ impl Shape {
         match &self.geometry {
             ShapeGeometry::Mesh(m) => {
                 let cdf = match &self.area_sampling {
-                    AreaSampling::Parallelogram { origin, e1, e2, normal, corners, triangles } => {
+                    AreaSampling::Parallelogram { origin, e1, e2, normal, bary_slots } => {
                         let p = *origin + *e1 * u.x + *e2 * u.y;
-                        let (prim, bary) = parallelogram_barycentrics(corners, triangles, u);
+                        let (prim, bary) = parallelogram_barycentrics(bary_slots, u);
                         return SurfacePoint { p, n: *normal * flip, prim, bary };
                     }
                     AreaSampling::Triangles { cdf } => cdf,

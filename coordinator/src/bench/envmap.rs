@@ -61,7 +61,7 @@ pub fn run(args: &EnvmapArgs) -> anyhow::Result<()> {
         let texels = bitmap.linear_rgb();
         let convert = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let map = Envmap::new(w, h, &texels, 1.0, Mat3::IDENTITY);
+        let map = Envmap::from_texels(w, h, texels, 1.0, Mat3::IDENTITY);
         let tables = t.elapsed().as_secs_f64();
         println!(
             "envmap {} ({w}x{h}): decode {decode:.3} s, to linear RGB {convert:.3} s, tables {tables:.3} s; {:.1} MB held",
