@@ -2,17 +2,17 @@
 """Golden values for Tessera's texture module, computed by Mitsuba 3.9.1 (scalar_rgb).
 
 Evaluates `bitmap`, `checkerboard` and `mesh_attribute` textures through
-`mi.SurfaceInteraction3f` at fixed uvs and prints a Rust module with the results, which
+`mi.SurfaceInteraction3f` at fixed uvs and prints the results as JSON, which
 `common/tests/textures.rs` compares against. The test images are tiny files committed under
 `common/tests/data/textures/`; `--regenerate` rewrites them (BMP and TGA by hand, as Mitsuba
 cannot write those; the rest with `mi.Bitmap.write`).
 
-    python3 -m venv /work/venv-tex && /work/venv-tex/bin/pip install mitsuba numpy
-    /work/venv-tex/bin/python scripts/texture-goldens.py > common/tests/texture_goldens/mod.rs
-    cargo fmt --all
+    pip install mitsuba numpy
+    python3 scripts/texture-goldens.py > common/tests/data/texture-goldens.json
 """
 
 import argparse
+import json
 import struct
 import sys
 from pathlib import Path
@@ -121,20 +121,13 @@ def regenerate():
     write_tga(DATA / "rgb_rle.tga", tga, rle=True)
 
 
-def rs(x):
-    """A Rust f32 literal."""
-    s = str(np.float32(x))  # the shortest text that parses back to the same f32
-    if "e" not in s and "." not in s and "inf" not in s and "nan" not in s:
-        s += ".0"
-    return s
+def f32(x):
+    """`x` rounded to f32, as the shortest decimal that reads back as that f32."""
+    return float(str(np.float32(x)))
 
 
-def rs_arr(xs):
-    return "[" + ", ".join(rs(x) for x in xs) + "]"
-
-
-def rs_mat(m):
-    return "[" + ", ".join(rs_arr(r) for r in m) + "]"
+def f32s(xs):
+    return [f32(x) for x in xs]
 
 
 def si_at(uv):
@@ -148,7 +141,7 @@ def samples(tex):
     for uv in UVS:
         si = si_at(uv)
         c = tex.eval(si)
-        out.append(f"([{rs(uv[0])}, {rs(uv[1])}], {rs_arr([c[0], c[1], c[2]])}, {rs(tex.eval_1(si))})")
+        out.append([f32s(uv), f32s([c[0], c[1], c[2]]), f32(tex.eval_1(si))])
     return out
 
 
@@ -165,36 +158,35 @@ def half_rounding_differs(file):
     return bool(np.any(stored.reshape(ours.shape) != ours))
 
 
+def uv_spec(d, to_uv):
+    """Adds `to_uv` to Mitsuba's dict `d`; returns it as the test reads it."""
+    if to_uv is None:
+        return None
+    if len(to_uv) == 4:
+        d["to_uv"] = mi.ScalarTransform4f(np.array(to_uv))
+        return {"mat4": [f32s(r) for r in to_uv]}
+    d["to_uv"] = mi.ScalarTransform3f(np.array(to_uv))
+    return {"mat3": [f32s(r) for r in to_uv]}
+
+
 def bitmap_case(file, wrap="repeat", filt="bilinear", raw=False, to_uv=None, half=False):
     d = {"type": "bitmap", "filename": str(DATA / file), "wrap_mode": wrap, "filter_type": filt, "raw": raw}
-    rust_uv = "None"
-    if to_uv is not None:
-        if len(to_uv) == 4:
-            d["to_uv"] = mi.ScalarTransform4f(np.array(to_uv))
-            rust_uv = f"Some(ToUv::Mat4({rs_mat(to_uv)}))"
-        else:
-            d["to_uv"] = mi.ScalarTransform3f(np.array(to_uv))
-            rust_uv = f"Some(ToUv::Mat3({rs_mat(to_uv)}))"
+    uv = uv_spec(d, to_uv)
     tex = mi.load_dict(d)
-    body = ",\n            ".join(samples(tex))
-    return (
-        f'    BitmapCase {{\n        file: "{file}",\n'
-        + f'        wrap: "{wrap}",\n        filter: "{filt}",\n        raw: {str(raw).lower()},\n'
-        + f"        to_uv: {rust_uv},\n        half_rounding: {str(half).lower()},\n"
-        + f"        mean: {rs(tex.mean())},\n"
-        + f"        samples: &[\n            {body},\n        ],\n    }},"
-    )
+    return {"file": file, "wrap": wrap, "filter": filt, "raw": raw, "to_uv": uv, "half_rounding": half,
+            "mean": f32(tex.mean()), "samples": samples(tex)}
 
 
 def color_spec(c):
+    """A checkerboard colour: Mitsuba's value and the test's."""
     if c is None:
-        return None, "None"
+        return None, None
     kind, value = c
     if kind == "float":
-        return value, f"Some(Color::Float({rs(value)}))"
+        return value, {"float": f32(value)}
     if kind == "rgb":
-        return {"type": "rgb", "value": value}, f"Some(Color::Rgb({rs_arr(value)}))"
-    return {"type": "bitmap", "filename": str(DATA / value)}, f'Some(Color::Bitmap("{value}"))'
+        return {"type": "rgb", "value": value}, {"rgb": f32s(value)}
+    return {"type": "bitmap", "filename": str(DATA / value)}, {"bitmap": value}
 
 
 def checkerboard_case(color0=None, color1=None, to_uv=None):
@@ -205,16 +197,9 @@ def checkerboard_case(color0=None, color1=None, to_uv=None):
         d["color0"] = c0
     if c1 is not None:
         d["color1"] = c1
-    rust_uv = "None"
-    if to_uv is not None:
-        d["to_uv"] = mi.ScalarTransform4f(np.array(to_uv))
-        rust_uv = f"Some(ToUv::Mat4({rs_mat(to_uv)}))"
+    uv = uv_spec(d, to_uv)
     tex = mi.load_dict(d)
-    body = ",\n            ".join(samples(tex))
-    return (
-        f"    BoardCase {{\n        color0: {r0},\n        color1: {r1},\n        to_uv: {rust_uv},\n"
-        + f"        mean: {rs(tex.mean())},\n        samples: &[\n            {body},\n        ],\n    }},"
-    )
+    return {"color0": r0, "color1": r1, "to_uv": uv, "mean": f32(tex.mean()), "samples": samples(tex)}
 
 
 def mesh_attribute_cases():
@@ -245,12 +230,10 @@ def mesh_attribute_cases():
             si = scene.ray_intersect(mi.Ray3f(mi.Point3f(p[0], p[1], 1.0), mi.Vector3f(0, 0, -1)))
             assert si.is_valid() and si.prim_index == face
             c = tex.eval(si)
-            y = rs(tex.eval_1(si)) if attrs[name][0] == 1 else "f32::NAN"
-            rows.append(
-                f'    ("{name}", {rs(scale)}, {face}, {list(map(int, faces[face]))}, {rs_arr(b)}, '
-                f"{rs_arr([c[0], c[1], c[2]])}, {y}),"
-            )
-    attr_rows = [f'    ("{n}", {c}, &{rs_arr(d)}),' for n, (c, d) in attrs.items()]
+            # Mitsuba throws for eval_1 of a 3-component attribute: null
+            y = f32(tex.eval_1(si)) if attrs[name][0] == 1 else None
+            rows.append([name, f32(scale), face, list(map(int, faces[face])), f32s(b), f32s([c[0], c[1], c[2]]), y])
+    attr_rows = [[n, c, f32s(d)] for n, (c, d) in attrs.items()]
     return attr_rows, rows
 
 
@@ -290,22 +273,25 @@ def main():
     ]
     attr_rows, mesh_rows = mesh_attribute_cases()
 
+    goldens = {
+        "generator": "scripts/texture-goldens.py, Mitsuba " + mi.__version__ + " (scalar_rgb)",
+        "bitmap": cases,
+        "checkerboard": boards,
+        "mesh_attributes": attr_rows,
+        "mesh_lookups": mesh_rows,
+    }
+    # one case per line: diffs of a regenerated file stay readable
     out = sys.stdout
-    out.write("//! Generated by `scripts/texture-goldens.py` from Mitsuba " + mi.__version__ + " (scalar_rgb); do not edit.\n")
-    out.write("//! Regenerate: `/work/venv-tex/bin/python scripts/texture-goldens.py > common/tests/texture_goldens/mod.rs`,\n")
-    out.write("//! then `cargo fmt --all`.\n\n")
-    out.write("#![allow(clippy::approx_constant, clippy::excessive_precision, clippy::unreadable_literal)]\n\n")
-    out.write("use super::{BitmapCase, BoardCase, Color, ToUv};\n\n")
-    out.write("/// `bitmap` lookups: (uv, eval, eval_1).\n")
-    out.write("pub const BITMAP: &[BitmapCase] = &[\n" + "\n".join(cases) + "\n];\n\n")
-    out.write("/// `checkerboard` lookups: (uv, eval, eval_1).\n")
-    out.write("pub const CHECKERBOARD: &[BoardCase] = &[\n" + "\n".join(boards) + "\n];\n\n")
-    out.write("/// The quad's attributes: (name, components, data).\n")
-    out.write("pub const MESH_ATTRIBUTES: &[(&str, usize, &[f32])] = &[\n" + "\n".join(attr_rows) + "\n];\n\n")
-    out.write("/// `mesh_attribute` lookups: (name, scale, face, vertices, barycentrics, eval, eval_1 or NaN).\n")
-    out.write("pub type MeshLookup = (&'static str, f32, u32, [u32; 3], [f32; 3], [f32; 3], f32);\n\n")
-    out.write("pub const MESH_LOOKUPS: &[MeshLookup] = &[\n")
-    out.write("\n".join(mesh_rows) + "\n];\n")
+    out.write("{\n")
+    items = list(goldens.items())
+    for i, (key, value) in enumerate(items):
+        end = ",\n" if i + 1 < len(items) else "\n"
+        if isinstance(value, list):
+            rows = ",\n".join("  " + json.dumps(v) for v in value)
+            out.write(f"{json.dumps(key)}: [\n{rows}\n]{end}")
+        else:
+            out.write(f"{json.dumps(key)}: {json.dumps(value)}{end}")
+    out.write("}\n")
 
 
 if __name__ == "__main__":

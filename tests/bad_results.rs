@@ -92,3 +92,47 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
     download(&format!("{}/result.exr", job_url(&c, &id)), None, &out);
     assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "pt", 1, 6));
 }
+
+/// A hostile worker: uploads under another worker's lease or a lease that does not exist are
+/// stale before anything is buffered, and a claimed rectangle far larger than the lease buys no
+/// room: the leased tile's size bounds what is read.
+#[test]
+fn a_hostile_worker_cannot_make_the_coordinator_buffer_past_a_lease() {
+    use pb::upload_result_request::Part;
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (status, _) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], json!({"integrator": "pt", "spp": 1}));
+    assert_eq!(status, 201);
+    let huge = Some(pb::Rect { x0: 0, y0: 0, x1: 65535, y1: 65535 });
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
+        let register = async |name: &str| {
+            let reg = pb::RegisterRequest { name: name.into(), threads: 1, version: "test".into() };
+            client.clone().register(reg).await.unwrap().into_inner().worker_id
+        };
+        let (honest, thief) = (register("honest").await, register("thief").await);
+        let lease = lease_one(&mut client, &honest).await;
+        // 256 MiB in 1 MiB messages behind a header that claims 65535² pixels
+        let flood = |worker: &str, lease: &pb::TileLease| {
+            let mut header = tessera_proto::result_header(worker, lease, 0, 0.0, 0);
+            header.rect = huge;
+            let data = (0..256).map(|_| pb::UploadResultRequest { part: Some(Part::Data(vec![0u8; 1 << 20].into())) });
+            let first = pb::UploadResultRequest { part: Some(Part::Header(header)) };
+            tokio_stream::iter(std::iter::once(first).chain(data))
+        };
+        let stolen = client.upload_result(flood(&thief, &lease)).await.map(|r| r.into_inner().outcome);
+        assert_eq!(stolen.ok(), Some(pb::UploadOutcome::Stale as i32));
+        let mut unknown = lease.clone();
+        unknown.lease.as_mut().unwrap().job_id = "no-such-job".into();
+        let nowhere = client.upload_result(flood(&honest, &unknown)).await.map(|r| r.into_inner().outcome);
+        assert_eq!(nowhere.ok(), Some(pb::UploadOutcome::Stale as i32));
+        let e = client.upload_result(flood(&honest, &lease)).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::InvalidArgument, "{e}");
+        assert!(e.message().contains("exceeds"), "{}", e.message());
+    });
+    let peak = super::hostile::peak_rss_mib(&c);
+    assert!(peak < 128, "the coordinator peaked at {peak} MiB under 768 MiB of hostile uploads");
+    assert_eq!(rest::get(&format!("{}/healthz", c.url), None).0, 200);
+}

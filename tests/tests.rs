@@ -281,6 +281,9 @@ fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
         let job = rest::get_json(&job_url(&c, &id), None).1;
         // SAFETY: signalling our own child process
         unsafe { libc::kill(pid, libc::SIGSTOP) };
+        // an upload w0 finished sending may still be in the coordinator's hands: once that is
+        // done, a lease w0 still holds is one only expiry can end
+        std::thread::sleep(Duration::from_millis(300));
         let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
         let w0_busy = workers.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"].as_u64() >= Some(1));
         let ready = job["tiles_done"].as_u64() >= Some(1) && w0_busy;
@@ -498,3 +501,4 @@ fn image_comparison_notices_a_different_seed() {
 }
 
 mod bad_results;
+mod hostile;

@@ -1,7 +1,8 @@
 //! Scene bundles: which files a scene XML reaches (included XML files, spectrum files and every
 //! plugin `filename`, resolved exactly as the loader resolves them), the bundle a client ships to
-//! a render farm (the scene and everything it needs, with paths relative to the scene's folder),
-//! and the path rules for unpacking such a bundle safely on the other side.
+//! a render farm (the scene and everything it needs, with paths relative to the deepest folder
+//! holding them all, so that a scene reaching `../textures` ships unchanged), and the path rules
+//! for unpacking such a bundle safely on the other side.
 //!
 //! ```no_run
 //! use std::path::Path;
@@ -9,6 +10,7 @@
 //! assert!(files.iter().any(|f| f.ends_with("gem.obj")));
 //! ```
 
+use crate::scene::resolver::normalize;
 use crate::scene::xml::{Element, Value, parse};
 use crate::scene::{FileResolver, SceneError};
 use std::collections::HashMap;
@@ -49,15 +51,25 @@ pub enum BundleError {
 }
 
 /// Packs `scene` and every file it references ([`referenced_files`]) into a bundle rooted at
-/// the scene's folder.
+/// the deepest folder that holds the scene and all of them (the scene's own folder when nothing
+/// lies outside it), so the scene's relative names work unchanged inside the bundle.
 pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, BundleError> {
     let read = |path: &Path| std::fs::read(path).map_err(|source| BundleError::Read { path: path.into(), source });
-    let folder = scene.parent().unwrap_or(Path::new(""));
+    let referenced = referenced_files(scene, defines)?;
+    let absolute = |p: &Path| std::path::absolute(p).map(|a| normalize(&a)).unwrap_or_else(|_| normalize(p));
+    let mut folder = absolute(scene.parent().unwrap_or(Path::new("")));
+    for file in &referenced {
+        let parent = absolute(file.parent().unwrap_or(Path::new("")));
+        while !parent.starts_with(&folder) && folder.pop() {}
+    }
+    let folder = folder.as_path();
     let outside = |file: &Path| BundleError::Outside { file: file.into(), folder: folder.into() };
-    let scene_path = scene.file_name().and_then(|n| n.to_str()).ok_or_else(|| outside(scene))?.to_string();
+    let scene_path = relative_to(&absolute(scene), folder)
+        .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
+        .ok_or_else(|| outside(scene))?;
     let mut files = vec![(scene_path.clone(), read(scene)?)];
-    for file in referenced_files(scene, defines)? {
-        let relative = relative_to(&file, folder)
+    for file in referenced {
+        let relative = relative_to(&absolute(&file), folder)
             .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
             .filter(|r| safe_relative_path(r).is_some())
             .ok_or_else(|| outside(&file))?;
@@ -77,21 +89,6 @@ fn relative_to(file: &Path, folder: &Path) -> Option<PathBuf> {
     }
     let (file, folder) = (file.canonicalize().ok()?, folder.canonicalize().ok()?);
     file.strip_prefix(folder).ok().map(Path::to_path_buf)
-}
-
-/// `path` with `.` dropped and `name/..` pairs removed, without touching the file system.
-fn normalize(path: &Path) -> PathBuf {
-    let mut out = PathBuf::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
-                out.pop();
-            }
-            other => out.push(other),
-        }
-    }
-    out
 }
 
 /// The files `scene` reaches besides itself, in the order the loader meets them without
@@ -161,6 +158,22 @@ mod tests {
         assert_eq!(paths[0], "scene.xml");
         assert!(paths[1..].iter().all(|p| p.ends_with(".obj")), "{paths:?}");
         assert_eq!(bundle.files[0].1, std::fs::read(&scene).unwrap());
+    }
+
+    /// A scene reaching into a sibling folder ships from their common folder, names unchanged.
+    #[test]
+    fn pack_roots_the_bundle_where_every_file_fits() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (scene_dir, shared) = (tmp.path().join("project/scene"), tmp.path().join("project/meshes"));
+        std::fs::create_dir_all(&scene_dir).unwrap();
+        std::fs::create_dir_all(&shared).unwrap();
+        std::fs::write(shared.join("m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        let xml = r#"<scene version="3.0.0"><shape type="obj"><string name="filename" value="../meshes/m.obj"/></shape></scene>"#;
+        std::fs::write(scene_dir.join("scene.xml"), xml).unwrap();
+        let bundle = pack(&scene_dir.join("scene.xml"), &HashMap::new()).unwrap();
+        assert_eq!(bundle.scene_path, "scene/scene.xml");
+        let paths: Vec<&str> = bundle.files.iter().map(|(p, _)| p.as_str()).collect();
+        assert_eq!(paths, ["scene/scene.xml", "meshes/m.obj"]);
     }
 
     #[test]

@@ -162,8 +162,15 @@ mod light_tracing {
     /// behind filters with negative lobes: catmull-rom, mitchell, lanczos).
     #[test]
     fn delta_surfaces_seen_directly_stay_finite() {
-        let scenes =
-            ["caustic-glass", "env-lit", "checker-conductor", "envmap-glossy", "legacy-v06", "masked-leaves", "textured-room"];
+        let scenes = [
+            "caustic-glass",
+            "env-lit",
+            "checker-conductor",
+            "envmap-glossy",
+            "legacy-v06",
+            "masked-leaves",
+            "textured-room",
+        ];
         for name in scenes {
             let scene = Scene::load(&scene_path(name)).expect("scene loads");
             let film = render_lt(&scene, 2, 1, 0);

@@ -22,14 +22,18 @@ fn png() -> Vec<u8> {
 
 /// Writes `files` into a temporary folder and loads `scene.xml` (body wrapped in a scene with a
 /// sensor) with `limits`.
-fn load_with(body: &str, files: &[(&str, &[u8])], limits: TextureLimits) -> (Result<Scene, SceneError>, tempfile::TempDir) {
+fn load_with(
+    body: &str,
+    files: &[(&str, &[u8])],
+    limits: TextureLimits,
+) -> (Result<Scene, SceneError>, tempfile::TempDir) {
     let dir = tempfile::tempdir().expect("tempdir");
     for (name, data) in files {
         std::fs::write(dir.path().join(name), data).expect("write");
     }
     let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n{body}\n</scene>\n");
     std::fs::write(dir.path().join("scene.xml"), xml).expect("write");
-    let options = LoadOptions { defines: HashMap::new(), texture_limits: limits };
+    let options = LoadOptions { defines: HashMap::new(), texture_limits: limits, confine_to: None };
     (Scene::load_options(&dir.path().join("scene.xml"), &options), dir)
 }
 
@@ -67,7 +71,8 @@ fn a_texture_referenced_twice_is_decoded_once() {
 
 #[test]
 fn constant_textures_keep_the_fast_path() {
-    let body = diffuse_with(r#"<texture type="srgb" name="reflectance"><rgb name="color" value="0.2, 0.4, 0.6"/></texture>"#);
+    let body =
+        diffuse_with(r#"<texture type="srgb" name="reflectance"><rgb name="color" value="0.2, 0.4, 0.6"/></texture>"#);
     let (scene, _dir) = load(&body, &[]);
     let scene = scene.expect("loads");
     assert!(scene.material_textures.iter().all(|t| t.is_none()));
@@ -121,7 +126,12 @@ fn bad_texture_parameters_name_their_line() {
         4,
         "unknown parameter \"albedo\"",
     );
-    expect_error(&diffuse_with("\n<texture type=\"noise\" name=\"reflectance\"/>"), &[], 5, "unsupported texture \"noise\"");
+    expect_error(
+        &diffuse_with("\n<texture type=\"noise\" name=\"reflectance\"/>"),
+        &[],
+        5,
+        "unsupported texture \"noise\"",
+    );
 }
 
 #[test]
@@ -155,9 +165,11 @@ fn mask_and_twosided_follow_mitsuba_rules() {
 #[test]
 fn parameters_mitsuba_does_not_texture_are_refused() {
     let tex = r#"<texture type="checkerboard" name="NAME"/>"#;
-    let rough_plastic = format!("<shape type=\"sphere\"><bsdf type=\"roughplastic\">\n{}</bsdf></shape>", tex.replace("NAME", "alpha"));
+    let rough_plastic =
+        format!("<shape type=\"sphere\"><bsdf type=\"roughplastic\">\n{}</bsdf></shape>", tex.replace("NAME", "alpha"));
     expect_error(&rough_plastic, &[], 5, "must be a number");
-    let conductor = format!("<shape type=\"sphere\"><bsdf type=\"conductor\">\n{}</bsdf></shape>", tex.replace("NAME", "eta"));
+    let conductor =
+        format!("<shape type=\"sphere\"><bsdf type=\"conductor\">\n{}</bsdf></shape>", tex.replace("NAME", "eta"));
     expect_error(&conductor, &[], 5, "textured \"eta\"");
     let spot = "<emitter type=\"spot\">\n<texture type=\"checkerboard\" name=\"texture\"/></emitter>";
     expect_error(spot, &[], 5, "only an area light's radiance can be textured");
@@ -205,7 +217,12 @@ fn emitters_check_their_parameters() {
         5,
         "beam_width",
     );
-    expect_error("<emitter type=\"envmap\">\n<string name=\"filename\" value=\"sky.exr\"/></emitter>", &[], 5, "not found");
+    expect_error(
+        "<emitter type=\"envmap\">\n<string name=\"filename\" value=\"sky.exr\"/></emitter>",
+        &[],
+        5,
+        "not found",
+    );
     let (scene, _dir) = load(
         r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 2, 0" target="0, 0, 0"/></transform></emitter>
         <emitter type="envmap"><string name="filename" value="sky.png"/><float name="scale" value="2"/></emitter>"#,

@@ -3,18 +3,16 @@
 //! lookups compared with golden values from Mitsuba's Python API, plus the loader's failure
 //! modes and a check that lookups never allocate.
 //!
-//! The goldens in `texture_goldens/mod.rs` were computed from the same files as this test uses
-//! (`common/tests/data/textures/`) by
+//! The goldens in `data/texture-goldens.json` were computed from the same files as this test
+//! uses (`common/tests/data/textures/`) by
 //!
 //! ```text
-//! python3 -m venv /work/venv-tex && /work/venv-tex/bin/pip install mitsuba numpy
-//! /work/venv-tex/bin/python scripts/texture-goldens.py > common/tests/texture_goldens/mod.rs
-//! cargo fmt --all
+//! pip install mitsuba numpy
+//! python3 scripts/texture-goldens.py > common/tests/data/texture-goldens.json
 //! ```
 
-mod texture_goldens;
-
 use glam::{Mat3, Mat4, Vec2, Vec3};
+use serde::Deserialize;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::path::{Path, PathBuf};
@@ -24,39 +22,67 @@ use tessera_common::texture::{
     TextureError, TextureLimits, TexturePoint, Usage, UvTransform, WrapMode,
 };
 
-/// One `bitmap` configuration and its lookups (uv, eval, eval_1).
-pub struct BitmapCase {
-    pub file: &'static str,
-    pub wrap: &'static str,
-    pub filter: &'static str,
-    pub raw: bool,
-    pub to_uv: Option<ToUv>,
+/// Lookups: (uv, eval, eval_1).
+type Samples = Vec<([f32; 2], [f32; 3], f32)>;
+
+/// (name, scale, face, vertices, barycentrics, eval, eval_1 or null where Mitsuba throws).
+type MeshLookup = (String, f32, u32, [u32; 3], [f32; 3], [f32; 3], Option<f32>);
+
+/// Everything `scripts/texture-goldens.py` computed with Mitsuba.
+#[derive(Deserialize)]
+struct Goldens {
+    bitmap: Vec<BitmapCase>,
+    checkerboard: Vec<BoardCase>,
+    /// The quad's attributes: (name, components, data).
+    mesh_attributes: Vec<(String, usize, Vec<f32>)>,
+    mesh_lookups: Vec<MeshLookup>,
+}
+
+/// One `bitmap` configuration and its lookups.
+#[derive(Deserialize)]
+struct BitmapCase {
+    file: String,
+    wrap: String,
+    filter: String,
+    raw: bool,
+    to_uv: Option<ToUv>,
     /// Stored as half floats decoded from 16-bit sRGB: see [`tolerance`].
-    pub half_rounding: bool,
-    pub mean: f32,
-    pub samples: &'static [([f32; 2], [f32; 3], f32)],
+    half_rounding: bool,
+    mean: f32,
+    samples: Samples,
 }
 
 /// One `checkerboard` configuration (`None` = Mitsuba's default colour) and its lookups.
-pub struct BoardCase {
-    pub color0: Option<Color>,
-    pub color1: Option<Color>,
-    pub to_uv: Option<ToUv>,
-    pub mean: f32,
-    pub samples: &'static [([f32; 2], [f32; 3], f32)],
+#[derive(Deserialize)]
+struct BoardCase {
+    color0: Option<Color>,
+    color1: Option<Color>,
+    to_uv: Option<ToUv>,
+    mean: f32,
+    samples: Samples,
 }
 
 /// A checkerboard colour as the script gave it to Mitsuba.
-pub enum Color {
+#[derive(Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Color {
     Float(f32),
     Rgb([f32; 3]),
-    Bitmap(&'static str),
+    Bitmap(String),
 }
 
 /// A `to_uv` matrix, rows as written.
-pub enum ToUv {
+#[derive(Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum ToUv {
     Mat3([[f32; 3]; 3]),
     Mat4([[f32; 4]; 4]),
+}
+
+fn goldens() -> Goldens {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/texture-goldens.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 fn data(file: &str) -> PathBuf {
@@ -73,13 +99,13 @@ fn to_uv(m: &Option<ToUv>) -> UvTransform {
 }
 
 fn options(case: &BitmapCase) -> BitmapOptions {
-    let wrap = match case.wrap {
+    let wrap = match case.wrap.as_str() {
         "repeat" => WrapMode::Repeat,
         "mirror" => WrapMode::Mirror,
         "clamp" => WrapMode::Clamp,
         other => panic!("unknown wrap mode {other}"),
     };
-    let filter = match case.filter {
+    let filter = match case.filter.as_str() {
         "bilinear" => FilterType::Bilinear,
         "nearest" => FilterType::Nearest,
         other => panic!("unknown filter {other}"),
@@ -108,8 +134,8 @@ fn load(file: &str, options: BitmapOptions) -> Bitmap {
 fn bitmap_matches_mitsuba_goldens() {
     let mut failures = Vec::new();
     let mut checked = 0;
-    for case in texture_goldens::BITMAP {
-        let tex = Texture::from(load(case.file, options(case)));
+    for case in &goldens().bitmap {
+        let tex = Texture::from(load(&case.file, options(case)));
         let what = format!(
             "{} wrap={} filter={} raw={} to_uv={}",
             case.file,
@@ -122,7 +148,7 @@ fn bitmap_matches_mitsuba_goldens() {
         if !close(mean, case.mean, tolerance(case.mean, case.half_rounding)) {
             failures.push(format!("{what}: mean {mean} != {}", case.mean));
         }
-        for &(uv, rgb, y) in case.samples {
+        for &(uv, rgb, y) in &case.samples {
             let p = TexturePoint::uv(Vec2::from(uv));
             let (got, got_y) = (tex.eval(&p), tex.eval_1(&p));
             let ok = (0..3).all(|c| close(got[c], rgb[c], tolerance(rgb[c], case.half_rounding)))
@@ -147,12 +173,12 @@ fn board_color(c: &Option<Color>, default: f32) -> Texture {
 
 #[test]
 fn checkerboard_matches_mitsuba_goldens() {
-    for case in texture_goldens::CHECKERBOARD {
+    for case in &goldens().checkerboard {
         let board =
             Checkerboard::new(board_color(&case.color0, 0.4), board_color(&case.color1, 0.2), to_uv(&case.to_uv));
         let tex = Texture::from(board);
         assert!(close(tex.mean().unwrap(), case.mean, 1e-6), "mean {:?} != {}", tex.mean(), case.mean);
-        for &(uv, rgb, y) in case.samples {
+        for &(uv, rgb, y) in &case.samples {
             let p = TexturePoint::uv(Vec2::from(uv));
             let got = tex.eval(&p);
             assert!((0..3).all(|c| close(got[c], rgb[c], 1e-5)), "uv {uv:?}: eval {got:?}, mitsuba {rgb:?}");
@@ -163,22 +189,26 @@ fn checkerboard_matches_mitsuba_goldens() {
 
 #[test]
 fn mesh_attribute_matches_mitsuba_goldens() {
-    let attrs: Vec<MeshAttribute> = texture_goldens::MESH_ATTRIBUTES
+    let goldens = goldens();
+    let attrs: Vec<MeshAttribute> = goldens
+        .mesh_attributes
         .iter()
-        .map(|(name, components, values)| MeshAttribute::new(*name, *components, values.to_vec()).unwrap())
+        .map(|(name, components, values)| MeshAttribute::new(name, *components, values.clone()).unwrap())
         .collect();
-    for &(name, scale, face, vertices, b, rgb, y) in texture_goldens::MESH_LOOKUPS {
+    for (name, scale, face, vertices, b, rgb, y) in goldens.mesh_lookups {
+        let name = name.as_str();
         let tex = Texture::from(MeshAttributeTexture::new(name, scale).unwrap());
         tex.check_attributes(&attrs, Usage::Color).unwrap();
         let hit = MeshPoint { attributes: &attrs, face, vertices, barycentric: Vec3::from(b) };
         let p = TexturePoint::on_mesh(Vec2::ZERO, hit);
         let got = tex.eval(&p);
         assert!((0..3).all(|c| close(got[c], rgb[c], 1e-6)), "{name} {b:?}: eval {got:?}, mitsuba {rgb:?}");
-        if y.is_nan() {
+        match y {
             // Mitsuba throws for eval_1 of a 3-component attribute; the check refuses it up front
-            assert!(tex.check_attributes(&attrs, Usage::Scalar).is_err());
-        } else {
-            assert!(close(tex.eval_1(&p), y, 1e-6), "{name} {b:?}: eval_1 {}, mitsuba {y}", tex.eval_1(&p));
+            None => assert!(tex.check_attributes(&attrs, Usage::Scalar).is_err()),
+            Some(y) => {
+                assert!(close(tex.eval_1(&p), y, 1e-6), "{name} {b:?}: eval_1 {}, mitsuba {y}", tex.eval_1(&p))
+            }
         }
     }
 }
@@ -265,9 +295,7 @@ fn bitmap_over_budget_is_refused_from_the_header() {
     let e = expect_err(&data("rgb8.png"), &tight);
     let msg = e.to_string();
     assert!(msg.contains("rgb8.png") && msg.contains("36 bytes") && msg.contains("35 bytes"), "{msg}");
-    assert!(
-        Bitmap::load(&data("rgb8.png"), BitmapOptions::default(), &TextureLimits::total(36)).is_ok()
-    );
+    assert!(Bitmap::load(&data("rgb8.png"), BitmapOptions::default(), &TextureLimits::total(36)).is_ok());
     let exr = expect_err(&data("rgb32.exr"), &TextureLimits::total(100));
     assert!(matches!(exr, TextureError::OverBudget { needed: 144, .. }), "{exr}");
 }

@@ -30,7 +30,8 @@ pub struct SceneCache {
 impl SceneCache {
     /// A cache under `dir`.
     pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>) -> Self {
-        let texture_limits = texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+        let texture_limits =
+            texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
         SceneCache { dir, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
     }
 
@@ -48,7 +49,12 @@ impl SceneCache {
             return Ok(scene.clone());
         }
         let scene_file = self.unpack(client, digest).await?;
-        let options = LoadOptions { defines: defines.clone(), texture_limits: self.texture_limits };
+        // the scene may name only files of its own bundle, whatever the coordinator checked
+        let options = LoadOptions {
+            defines: defines.clone(),
+            texture_limits: self.texture_limits,
+            confine_to: Some(self.dir.join(digest)),
+        };
         let scene = tokio::task::spawn_blocking(move || Scene::load_options(&scene_file, &options)).await??;
         let scene = Arc::new(scene);
         self.loaded.push((key, scene.clone()));

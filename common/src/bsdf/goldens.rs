@@ -6,6 +6,7 @@ use crate::math::Rgb;
 
 type Row = (&'static str, (f32, f32), (f32, f32), [f32; 3], f32);
 
+#[rustfmt::skip]
 const GOLDENS: &[Row] = &[
     // roughplastic_ggx
     ("roughplastic_ggx", (0.0, 0.0), (0.0, 0.0), [1.0851021e-01, 1.1263822e-01, 1.1883023e-01], 3.5455078e-01),
@@ -57,7 +58,13 @@ const GOLDENS: &[Row] = &[
 fn model(name: &str) -> Material {
     let ggx = |au, av| Microfacet::new(MicrofacetKind::Ggx, au, av, true);
     let bxdf = match name {
-        "roughplastic_ggx" => Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.35, 0.35), 1.5 / 1.000277, Rgb::new(0.4, 0.42, 0.45), None, false)),
+        "roughplastic_ggx" => Bxdf::RoughPlastic(RoughPlastic::new(
+            ggx(0.35, 0.35),
+            1.5 / 1.000277,
+            Rgb::new(0.4, 0.42, 0.45),
+            None,
+            false,
+        )),
         "roughplastic_beckmann_nonlinear" => Bxdf::RoughPlastic(RoughPlastic::new(
             Microfacet::new(MicrofacetKind::Beckmann, 0.2, 0.2, true),
             1.33 / 1.000277,

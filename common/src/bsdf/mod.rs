@@ -198,8 +198,34 @@ impl Material {
     /// See [`Bxdf::sample`]. A mask's pass-through is a delta transmission with `wi = -wo`,
     /// weight 1 and probability 1 − opacity, as Mitsuba's `mask` samples it.
     #[inline]
-    pub fn sample(&self, wo: Vec3, mut uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        let alpha = self.opacity;
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        self.sample_in::<true>(wo, uc, u, mode)
+    }
+
+    /// See [`Bxdf::eval`]; scaled by the opacity (the pass-through lobe is delta).
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        self.eval_in::<true>(wo, wi, mode)
+    }
+
+    /// See [`Bxdf::pdf`]; scaled by the opacity.
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.pdf_in::<true>(wo, wi)
+    }
+
+    /// [`Material::sample`] in a scene that may have masks (`MASKS`) or has none, so that
+    /// integrators can compile the unmasked case without the opacity's branches.
+    #[inline]
+    pub fn sample_in<const MASKS: bool>(
+        &self,
+        wo: Vec3,
+        mut uc: f32,
+        u: Vec2,
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        debug_assert!(MASKS || self.opacity == 1.0, "a masked material in a scene declared without masks");
+        let alpha = if MASKS { self.opacity } else { 1.0 };
         if alpha < 1.0 {
             if uc >= alpha {
                 return Some(BsdfSample::delta(-wo, Rgb::ONE, 1.0 - alpha, 1.0, true));
@@ -218,21 +244,24 @@ impl Material {
         Some(bs)
     }
 
-    /// See [`Bxdf::eval`]; scaled by the opacity (the pass-through lobe is delta).
+    /// [`Material::eval`]; see [`Material::sample_in`] for `MASKS`.
     #[inline]
-    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+    pub fn eval_in<const MASKS: bool>(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Rgb {
+        debug_assert!(MASKS || self.opacity == 1.0, "a masked material in a scene declared without masks");
         let (b, s) = self.side(wo);
         let flip = Vec3::new(1.0, 1.0, s);
         let f = b.eval(wo * flip, wi * flip, mode);
-        if self.opacity < 1.0 { f * self.opacity } else { f }
+        if MASKS && self.opacity < 1.0 { f * self.opacity } else { f }
     }
 
-    /// See [`Bxdf::pdf`]; scaled by the opacity.
+    /// [`Material::pdf`]; see [`Material::sample_in`] for `MASKS`.
     #[inline]
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    pub fn pdf_in<const MASKS: bool>(&self, wo: Vec3, wi: Vec3) -> f32 {
+        debug_assert!(MASKS || self.opacity == 1.0, "a masked material in a scene declared without masks");
         let (b, s) = self.side(wo);
         let flip = Vec3::new(1.0, 1.0, s);
-        b.pdf(wo * flip, wi * flip) * self.opacity
+        let pdf = b.pdf(wo * flip, wi * flip);
+        if MASKS { pdf * self.opacity } else { pdf }
     }
 
     /// `f`, forward pdf (of `wi` given `wo`) and reverse pdf (of `wo` given `wi`) in one call, as

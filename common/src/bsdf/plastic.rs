@@ -144,7 +144,9 @@ impl CoatingTables {
         let mu = |i: usize| (i as f32 / (TRANSMITTANCE_RES - 1) as f32).max(1e-6);
         let external_transmittance = std::array::from_fn(|i| coating_albedo(distribution, mu(i), eta, true));
         let internal_reflectance = 2.0
-            * (0..TRANSMITTANCE_RES).map(|i| coating_albedo(distribution, mu(i), 1.0 / eta, false) * mu(i)).sum::<f32>()
+            * (0..TRANSMITTANCE_RES)
+                .map(|i| coating_albedo(distribution, mu(i), 1.0 / eta, false) * mu(i))
+                .sum::<f32>()
             / TRANSMITTANCE_RES as f32;
         CoatingTables { external_transmittance, internal_reflectance }
     }

@@ -21,6 +21,7 @@ use crate::math::{Rgb, max_component};
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
+use std::borrow::Cow;
 
 /// The path tracer.
 #[derive(Clone, Debug)]
@@ -40,6 +41,18 @@ fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 impl PathTracer {
     /// Radiance arriving along `ray` (a camera ray).
     pub fn li(&self, scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Rgb {
+        if scene.is_untextured() {
+            self.li_in::<false>(scene, ray, sampler)
+        } else {
+            self.li_in::<true>(scene, ray, sampler)
+        }
+    }
+
+    /// [`PathTracer::li`] compiled for scenes that may have textures or masks (`TEXTURED`) or
+    /// have none (see [`Scene::is_untextured`]), so that untextured scenes do not pay for them
+    /// (`docs/decisions/0014-untextured-scenes-compile-their-own-path-tracer.md`).
+    #[inline]
+    fn li_in<const TEXTURED: bool>(&self, scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Rgb {
         let s = self.settings;
         if s.max_depth == 0 {
             return Rgb::ZERO;
@@ -68,28 +81,32 @@ impl PathTracer {
                     self.environment(scene, ray.d, prev_p, prev_pdf, prev_delta)
                 }
                 None => Rgb::ZERO,
-                Some(hit) => self.surface_emission(scene, hit, prev_p, prev_pdf, prev_delta),
+                Some(hit) => self.surface_emission::<TEXTURED>(scene, hit, prev_p, prev_pdf, prev_delta),
             };
             result += throughput * emitted;
             let Some(hit) = si else { break };
             if depth + 1 >= s.max_depth {
                 break;
             }
-            let material = scene.material_of_hit(&hit);
+            let material = if TEXTURED {
+                scene.material_of_hit(&hit)
+            } else {
+                Cow::Borrowed(&scene.materials[scene.shapes[hit.shape as usize].material as usize])
+            };
             let wo = hit.frame.to_local(hit.wo);
 
             // ---- next-event estimation ----
             if material.has_smooth_lobe() {
                 let u_light = sampler.next_1d();
                 let u_pos = sampler.next_2d();
-                if let Some(contrib) = self.next_event(scene, &ctx, &hit, &material, wo, u_light, u_pos) {
+                if let Some(contrib) = self.next_event::<TEXTURED>(scene, &ctx, &hit, &material, wo, u_light, u_pos) {
                     result += throughput * contrib;
                 }
             }
 
             // ---- BSDF sampling ----
             let (uc, u) = (sampler.next_1d(), sampler.next_2d());
-            let Some(bs) = material.sample(wo, uc, u, TransportMode::Radiance) else { break };
+            let Some(bs) = material.sample_in::<TEXTURED>(wo, uc, u, TransportMode::Radiance) else { break };
             throughput *= bs.weight;
             eta *= bs.eta;
             prev_p = hit.p;
@@ -137,7 +154,7 @@ impl PathTracer {
     }
 
     /// Radiance emitted by a surface towards the path, MIS-weighted against light sampling.
-    fn surface_emission(
+    fn surface_emission<const TEXTURED: bool>(
         &self,
         scene: &Scene,
         hit: &SurfaceInteraction,
@@ -147,7 +164,11 @@ impl PathTracer {
     ) -> Rgb {
         let Some(li) = scene.shapes[hit.shape as usize].light else { return Rgb::ZERO };
         let light = &scene.lights[li as usize];
-        let le = Light::eval_area(light.area_radiance(&scene.light_context(), hit.surface(), hit.p), hit.frame.n, hit.wo);
+        let radiance = match light {
+            Light::Area { radiance, .. } if !TEXTURED => *radiance,
+            _ => light.area_radiance(&scene.light_context(), hit.surface(), hit.p),
+        };
+        let le = Light::eval_area(radiance, hit.frame.n, hit.wo);
         if le == Rgb::ZERO {
             return le;
         }
@@ -161,7 +182,7 @@ impl PathTracer {
 
     /// One light sample at `hit`: unoccluded radiance × BSDF × cosine / pdf, MIS-weighted.
     #[allow(clippy::too_many_arguments)]
-    fn next_event(
+    fn next_event<const TEXTURED: bool>(
         &self,
         scene: &Scene,
         ctx: &crate::light::LightContext,
@@ -173,12 +194,12 @@ impl PathTracer {
     ) -> Option<Rgb> {
         let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
         let light = &scene.lights[li];
-        let ds = light.sample_direct(ctx, hit.p, u_pos)?;
+        let ds = light.sample_direct_in::<TEXTURED>(ctx, hit.p, u_pos)?;
         if ds.radiance == Rgb::ZERO {
             return None;
         }
         let wi = hit.frame.to_local(ds.wi);
-        let f = material.eval(wo, wi, TransportMode::Radiance);
+        let f = material.eval_in::<TEXTURED>(wo, wi, TransportMode::Radiance);
         if f == Rgb::ZERO {
             return None;
         }
@@ -187,7 +208,7 @@ impl PathTracer {
             return None;
         }
         let pdf_light = pmf * ds.pdf;
-        let w = if ds.delta { 1.0 } else { power_heuristic(pdf_light, material.pdf(wo, wi)) };
+        let w = if ds.delta { 1.0 } else { power_heuristic(pdf_light, material.pdf_in::<TEXTURED>(wo, wi)) };
         Some(f * ds.radiance * (wi.z.abs() * w / pdf_light))
     }
 }
@@ -200,6 +221,7 @@ impl Integrator for PathTracer {
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
         let r = tile.rect;
         let width = scene.camera.width;
+        let untextured = scene.is_untextured();
         for y in r.y0..r.y1 {
             for x in r.x0..r.x1 {
                 let pixel = y * width + x;
@@ -207,10 +229,53 @@ impl Integrator for PathTracer {
                     let mut sampler = Sampler::for_pixel(tile.seed, pixel, s);
                     let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
                     let ray = scene.camera.generate_ray(raster);
-                    let l = self.li(scene, ray, &mut sampler);
+                    let l = if untextured {
+                        self.li_in::<false>(scene, ray, &mut sampler)
+                    } else {
+                        self.li_in::<true>(scene, ray, &mut sampler)
+                    };
                     accum.add_sample(x, y, raster, l);
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrator::PathSettings;
+    use std::path::Path;
+
+    fn scene(name: &str) -> Scene {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name).join("scene.xml");
+        Scene::load(&path).expect("scene loads")
+    }
+
+    /// The untextured specialisation is an optimisation only: on an untextured scene it gives
+    /// the same radiance, bit for bit, as the general code; scenes with textures, masks or
+    /// textured emitters are never given it.
+    #[test]
+    fn untextured_path_equals_the_general_one() {
+        for (name, untextured) in
+            [("cornell-box", true), ("env-lit", true), ("masked-leaves", false), ("textured-emitters", false)]
+        {
+            assert_eq!(scene(name).is_untextured(), untextured, "{name}");
+        }
+        let scene = scene("env-lit");
+        let pt = PathTracer { settings: PathSettings::from_scene(&scene, None) };
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        let mut nonzero = 0;
+        for pixel in (0..w * h).step_by(97) {
+            for s in 0..4 {
+                let raster = Vec2::new((pixel % w) as f32 + 0.5, (pixel / w) as f32 + 0.5);
+                let ray = scene.camera.generate_ray(raster);
+                let a = pt.li_in::<false>(&scene, ray, &mut Sampler::for_pixel(7, pixel, s));
+                let b = pt.li_in::<true>(&scene, ray, &mut Sampler::for_pixel(7, pixel, s));
+                assert_eq!(a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits), "pixel {pixel} sample {s}");
+                nonzero += usize::from(a != Rgb::ZERO);
+            }
+        }
+        assert!(nonzero > 100, "the comparison saw light: {nonzero}");
     }
 }

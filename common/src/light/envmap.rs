@@ -115,7 +115,11 @@ impl Envmap {
             .iter()
             .enumerate()
             .map(|(j, b)| {
-                acc += if total > 0.0 { b / total } else { self.cell_solid_angle(j) * w as f64 / (4.0 * std::f64::consts::PI) };
+                acc += if total > 0.0 {
+                    b / total
+                } else {
+                    self.cell_solid_angle(j) * w as f64 / (4.0 * std::f64::consts::PI)
+                };
                 acc
             })
             .collect();

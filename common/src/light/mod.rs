@@ -8,8 +8,8 @@
 pub mod envmap;
 pub mod sampler;
 
-use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};
 use crate::geometry::SurfaceRef;
+use crate::math::{Frame, INV_PI, PI, Rgb, safe_sqrt, warp};
 use crate::scene::shape::{Mesh, Shape, ShapeGeometry, SurfacePoint, texture_point};
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -139,6 +139,13 @@ pub struct LightContext<'a> {
     pub radius: f32,
 }
 
+/// A textured area light's radiance; out of line so that untextured lights keep the
+/// integrators' hot loops small.
+#[inline(never)]
+fn textured_radiance(ctx: &LightContext, t: &Texture, at: SurfaceRef, p: Vec3) -> Rgb {
+    t.eval(&texture_point(ctx.shapes, ctx.meshes, at, p, t.uses_mesh_attributes()))
+}
+
 /// Cone of directions a sphere subtends from outside: `(1 − cos θmax, sin² θmax)`, with a
 /// Taylor expansion for tiny spheres where `1 − cos` would cancel catastrophically.
 fn sphere_cone(dist2: f32, radius: f32) -> (f32, f32) {
@@ -175,9 +182,7 @@ impl Light {
     pub fn area_radiance(&self, ctx: &LightContext, at: SurfaceRef, p: Vec3) -> Rgb {
         match self {
             Light::Area { radiance, texture: None, .. } => *radiance,
-            Light::Area { texture: Some(t), .. } => {
-                t.eval(&texture_point(ctx.shapes, ctx.meshes, at, p, t.uses_mesh_attributes()))
-            }
+            Light::Area { texture: Some(t), .. } => textured_radiance(ctx, t, at, p),
             _ => Rgb::ZERO,
         }
     }
@@ -202,7 +207,25 @@ impl Light {
     }
 
     /// Samples a direction from `p_ref` towards the light.
+    #[inline]
     pub fn sample_direct(&self, ctx: &LightContext, p_ref: Vec3, u: Vec2) -> Option<DirectSample> {
+        self.sample_direct_in::<true>(ctx, p_ref, u)
+    }
+
+    /// Whether the light's emission varies over its surface (a textured area light).
+    pub fn is_textured(&self) -> bool {
+        matches!(self, Light::Area { texture: Some(_), .. })
+    }
+
+    /// [`Light::sample_direct`] for a light that may be textured (`TEXTURED`) or is known not to
+    /// be, so that integrators can compile the untextured case without texture lookups.
+    pub fn sample_direct_in<const TEXTURED: bool>(
+        &self,
+        ctx: &LightContext,
+        p_ref: Vec3,
+        u: Vec2,
+    ) -> Option<DirectSample> {
+        debug_assert!(TEXTURED || !self.is_textured(), "a textured light in a scene declared without textures");
         match self {
             Light::Point { position, intensity } => {
                 let delta = *position - p_ref;
@@ -243,8 +266,9 @@ impl Light {
             Light::Directional { direction, irradiance } => {
                 Some(infinite_sample(ctx, p_ref, -*direction, *irradiance, 1.0, true))
             }
-            Light::Area { shape: index, .. } => {
+            Light::Area { shape: index, texture, radiance } => {
                 let shape = &ctx.shapes[*index as usize];
+                let textured = TEXTURED && texture.is_some();
                 let (sp, pdf) = match &shape.geometry {
                     ShapeGeometry::Sphere { center, radius }
                         if (p_ref - *center).length_squared() > radius * radius * 1.0001 =>
@@ -252,7 +276,7 @@ impl Light {
                         sample_sphere_cone(p_ref, *center, *radius, shape.flip_normals, u)?
                     }
                     _ => {
-                        let sp = shape.sample_area(ctx.meshes, u);
+                        let sp = shape.sample_area(ctx.meshes, u, textured);
                         let d = sp.p - p_ref;
                         let dist2 = d.length_squared();
                         let cos = sp.n.dot(-d).abs() / dist2.sqrt();
@@ -268,13 +292,17 @@ impl Light {
                     return None;
                 }
                 let wi = delta / dist;
-                let at = SurfaceRef { shape: *index, prim: sp.prim, bary: sp.bary };
+                let le = if textured {
+                    self.area_radiance(ctx, SurfaceRef { shape: *index, prim: sp.prim, bary: sp.bary }, sp.p)
+                } else {
+                    *radiance
+                };
                 Some(DirectSample {
                     p: sp.p,
                     n: sp.n,
                     wi,
                     dist,
-                    radiance: Self::eval_area(self.area_radiance(ctx, at, sp.p), sp.n, -wi),
+                    radiance: Self::eval_area(le, sp.n, -wi),
                     pdf,
                     delta: false,
                 })
@@ -346,9 +374,9 @@ impl Light {
             Light::Directional { direction, irradiance } => {
                 Some(infinite_emission(ctx, *direction, *irradiance, 1.0, u_pos))
             }
-            Light::Area { shape: index, .. } => {
+            Light::Area { shape: index, texture, .. } => {
                 let shape = &ctx.shapes[*index as usize];
-                let sp = shape.sample_area(ctx.meshes, u_pos);
+                let sp = shape.sample_area(ctx.meshes, u_pos, texture.is_some());
                 let local = warp::square_to_cosine_hemisphere(u_dir);
                 let d = Frame::from_normal(sp.n).to_world(local);
                 let at = SurfaceRef { shape: *index, prim: sp.prim, bary: sp.bary };
@@ -397,7 +425,16 @@ fn infinite_emission(ctx: &LightContext, d: Vec3, radiance: Rgb, pdf_dir: f32, u
     let frame = Frame::from_normal(d);
     let disk = warp::square_to_disk_concentric(u_pos) * ctx.radius;
     let p = ctx.center - d * ctx.radius + frame.s * disk.x + frame.t * disk.y;
-    EmissionSample { p, n: d, at: SurfaceRef::default(), d, radiance, pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius), pdf_dir, delta_pos: false }
+    EmissionSample {
+        p,
+        n: d,
+        at: SurfaceRef::default(),
+        d,
+        radiance,
+        pdf_pos: 1.0 / (PI * ctx.radius * ctx.radius),
+        pdf_dir,
+        delta_pos: false,
+    }
 }
 
 /// Samples the cone a sphere subtends from `p_ref` uniformly and returns the point where the

@@ -5,8 +5,8 @@
 
 use super::build_bsdf::build_material;
 use super::build_emitter::build_emitter;
-use super::build_texture::Textures;
 use super::build_settings::{build_integrator, build_sampler};
+use super::build_texture::Textures;
 use super::error::{Location, SceneError};
 use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply, serialized::load_serialized};
 use super::refused::check_supported;
@@ -291,7 +291,9 @@ fn build_film(c: &Element) -> Result<FilmSettings, SceneError> {
     }
     match c.string("file_format")?.unwrap_or("openexr") {
         "openexr" | "exr" => {}
-        other => tracing::warn!(file = %c.location_of("file_format"), "file_format \"{other}\" ignored: Tessera writes OpenEXR and a PNG preview"),
+        other => {
+            tracing::warn!(file = %c.location_of("file_format"), "file_format \"{other}\" ignored: Tessera writes OpenEXR and a PNG preview")
+        }
     }
     if c.boolean_or("sample_border", false)? {
         return Err(SceneError::at(c.location_of("sample_border"), "sample_border = true is not supported"));
@@ -414,7 +416,10 @@ impl Builder<'_> {
                 let file = e
                     .string("filename")?
                     .ok_or_else(|| SceneError::at(&e.location, format!("{} needs \"filename\"", e.describe())))?;
-                let path = self.resolver.resolve(Path::new(file));
+                let path = self
+                    .resolver
+                    .resolve_checked(Path::new(file))
+                    .map_err(|why| SceneError::at(e.location_of("filename"), format!("\"{file}\" {why}")))?;
                 let mut mesh = match e.plugin.as_str() {
                     "obj" => load_obj(&path)?,
                     "ply" => load_ply(&path)?,
@@ -489,9 +494,9 @@ impl Builder<'_> {
                 ShapeGeometry::Mesh(m) => self.meshes[*m as usize].attributes.as_slice(),
                 _ => &[],
             };
-            textures.check_attributes(attributes).map_err(|err| {
-                SceneError::at(&e.location, format!("{} cannot use its bsdf: {err}", e.describe()))
-            })?;
+            textures
+                .check_attributes(attributes)
+                .map_err(|err| SceneError::at(&e.location, format!("{} cannot use its bsdf: {err}", e.describe())))?;
         }
         let index = self.shapes.len() as u32;
         let light = match emitter {

@@ -222,11 +222,7 @@ fn build_bxdf(e: &Element, ctx: &mut Ctx) -> Result<Bxdf, SceneError> {
     if let Some(child) = e.children.iter().find(|c| !c.is_spectrum() && c.tag != "texture") {
         return Err(SceneError::at(
             &child.location,
-            format!(
-                "{} cannot contain <{}> (nested bsdfs belong in twosided or mask)",
-                e.describe(),
-                child.tag
-            ),
+            format!("{} cannot contain <{}> (nested bsdfs belong in twosided or mask)", e.describe(), child.tag),
         ));
     }
     let bxdf = match e.plugin.as_str() {
@@ -392,7 +388,10 @@ fn mask(e: &Element, ctx: &mut Ctx) -> Result<Material, SceneError> {
         }
     };
     if let Some(c) = e.children.iter().find(|c| c.tag != "bsdf" && c.name.as_deref() != Some("opacity")) {
-        return Err(SceneError::at(&c.location, format!("mask cannot contain <{}> besides its bsdf and opacity", c.tag)));
+        return Err(SceneError::at(
+            &c.location,
+            format!("mask cannot contain <{}> besides its bsdf and opacity", c.tag),
+        ));
     }
     e.check_all_used()?;
     let mut material = match nested_bsdfs(e).as_slice() {

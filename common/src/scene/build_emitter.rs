@@ -62,7 +62,10 @@ pub(super) fn build_emitter(
             return Err(SceneError::at(&e.location, format!("a {kind} emitter cannot be attached to a shape")));
         }
         (other, _) => {
-            return Err(SceneError::at(&e.location, format!("unsupported emitter \"{other}\" (supported: {SUPPORTED})")));
+            return Err(SceneError::at(
+                &e.location,
+                format!("unsupported emitter \"{other}\" (supported: {SUPPORTED})"),
+            ));
         }
     };
     let weight = e.float_or("sampling_weight", 1.0)?;
@@ -141,9 +144,7 @@ fn spot(e: &Element) -> Result<Spot, SceneError> {
 /// Mitsuba's `envmap`: an image file (any format `bitmap` reads, decoded to linear RGB, alpha
 /// dropped) times `scale`, rotated by `to_world`.
 fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
-    let file = e
-        .string("filename")?
-        .ok_or_else(|| SceneError::at(&e.location, "envmap needs \"filename\""))?;
+    let file = e.string("filename")?.ok_or_else(|| SceneError::at(&e.location, "envmap needs \"filename\""))?;
     let scale = e.float_or("scale", 1.0)?;
     if !(scale >= 0.0 && scale.is_finite()) {
         return Err(SceneError::at(e.location_of("scale"), format!("\"scale\" must not be negative, found {scale}")));
@@ -152,7 +153,10 @@ fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
         return Err(SceneError::at(e.location_of("mis_compensation"), "envmap mis_compensation is not supported"));
     }
     let (m, _) = rotation(e, "envmap")?;
-    let path = textures.resolver().resolve(Path::new(file));
+    let path = textures
+        .resolver()
+        .resolve_checked(Path::new(file))
+        .map_err(|why| SceneError::at(e.location_of("filename"), format!("\"{file}\" {why}")))?;
     let bitmap =
         Bitmap::load(&path, BitmapOptions::default(), &textures.limits()).map_err(|err| textures.load_error(e, err))?;
     let (width, height) = (bitmap.width() as usize, bitmap.height() as usize);
@@ -172,7 +176,10 @@ fn envmap(e: &Element, textures: &mut Textures) -> Result<Envmap, SceneError> {
     let texels = bitmap.linear_rgb();
     drop(bitmap);
     if texels.iter().any(|t| !t.is_finite()) {
-        return Err(SceneError::at(e.location_of("filename"), format!("{}: the image has non-finite pixels", path.display())));
+        return Err(SceneError::at(
+            e.location_of("filename"),
+            format!("{}: the image has non-finite pixels", path.display()),
+        ));
     }
     let map = Envmap::from_texels(width, height, texels, scale, m);
     textures.add_bytes(map.bytes());

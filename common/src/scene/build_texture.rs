@@ -38,7 +38,8 @@ pub(super) struct Textures<'a> {
 }
 
 /// The texture plugins Tessera reads (spectrum plugins besides).
-const SUPPORTED: &str = "bitmap, checkerboard, mesh_attribute, rawconstant, and the constant spectra srgb, d65, uniform";
+const SUPPORTED: &str =
+    "bitmap, checkerboard, mesh_attribute, rawconstant, and the constant spectra srgb, d65, uniform";
 
 impl<'a> Textures<'a> {
     pub(super) fn new(resolver: &'a FileResolver, limits: TextureLimits) -> Self {
@@ -141,9 +142,9 @@ impl<'a> Textures<'a> {
     }
 
     fn bitmap(&mut self, e: &Element) -> Result<Arc<Texture>, SceneError> {
-        let file = e
-            .string("filename")?
-            .ok_or_else(|| SceneError::at(&e.location, "bitmap needs \"filename\" (Tessera reads textures from files)"))?;
+        let file = e.string("filename")?.ok_or_else(|| {
+            SceneError::at(&e.location, "bitmap needs \"filename\" (Tessera reads textures from files)")
+        })?;
         let filter = match e.string("filter_type")?.unwrap_or("bilinear") {
             "bilinear" => FilterType::Bilinear,
             "nearest" => FilterType::Nearest,
@@ -169,7 +170,10 @@ impl<'a> Textures<'a> {
         e.boolean_or("accel", true)?;
         let options = BitmapOptions { raw: e.boolean_or("raw", false)?, filter, wrap, to_uv: to_uv(e)? };
         e.check_all_used()?;
-        let path = self.resolver.resolve(Path::new(file));
+        let path = self
+            .resolver
+            .resolve_checked(Path::new(file))
+            .map_err(|why| SceneError::at(e.location_of("filename"), format!("\"{file}\" {why}")))?;
         let key = (path.clone(), format!("{options:?}"));
         if let Some(t) = self.by_file.get(&key) {
             return Ok(t.clone());
@@ -198,7 +202,13 @@ impl<'a> Textures<'a> {
     }
 
     /// [`Self::param`] as a texture, with a grey default (checkerboard colours).
-    fn param_texture(&mut self, e: &Element, name: &str, usage: ColorUsage, default: f32) -> Result<Texture, SceneError> {
+    fn param_texture(
+        &mut self,
+        e: &Element,
+        name: &str,
+        usage: ColorUsage,
+        default: f32,
+    ) -> Result<Texture, SceneError> {
         Ok(match self.param(e, name, usage)? {
             None => Texture::uniform(default),
             Some(Param::Constant(c)) if c.x == c.y && c.y == c.z => Texture::uniform(c.x),
@@ -217,5 +227,8 @@ fn to_uv(e: &Element) -> Result<UvTransform, SceneError> {
 }
 
 fn choice_error(e: &Element, name: &str, found: &str, choices: &str) -> SceneError {
-    SceneError::at(e.location_of(name), format!("\"{name}\" of {} must be one of {choices}, found \"{found}\"", e.describe()))
+    SceneError::at(
+        e.location_of(name),
+        format!("\"{name}\" of {} must be one of {choices}, found \"{found}\"", e.describe()),
+    )
 }

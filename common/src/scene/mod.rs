@@ -25,15 +25,15 @@ use crate::bsdf::textured::MaterialTextures;
 use crate::camera::PerspectiveCamera;
 use crate::film::FilmSpec;
 use crate::geometry::{Ray, SurfaceInteraction, SurfaceRef};
-use crate::texture::TextureLimits;
-use std::borrow::Cow;
 use crate::light::{Light, LightContext, LightSampler};
 use crate::math::Frame;
+use crate::texture::TextureLimits;
 use accel::Accel;
 pub use error::{Location, SceneError};
 use glam::Vec3;
 pub use resolver::FileResolver;
 use shape::{Mesh, Shape, ShapeGeometry};
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -57,6 +57,9 @@ pub struct LoadOptions {
     pub defines: HashMap<String, String>,
     /// The memory one image may take once decoded.
     pub texture_limits: TextureLimits,
+    /// The folder every file the scene names must lie in (a farm job's bundle); `None` lets a
+    /// local scene name any file.
+    pub confine_to: Option<PathBuf>,
 }
 
 /// What the builder hands to [`Scene::assemble`].
@@ -114,6 +117,9 @@ pub struct Scene {
     /// Per material: whether it is anisotropic, so that hits on it get Mitsuba's shading frame
     /// from ∂p/∂u rather than one built from the normal alone.
     needs_tangent: Vec<bool>,
+    /// No material has textures or a mask and no emitter a texture, so integrators may use
+    /// `materials` and the lights' constant radiance as they are.
+    untextured: bool,
     /// Unit geometric normal of every triangle, per mesh (zero for degenerate triangles),
     /// computed once rather than at every hit.
     face_normals: Vec<Vec<Vec3>>,
@@ -135,7 +141,7 @@ impl Scene {
     pub fn load_options(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
         let text =
             std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read scene: {e}")))?;
-        let tree = xml::parse(&text, path, &options.defines)?;
+        let tree = xml::parse_confined(&text, path, &options.defines, options.confine_to.as_deref())?;
         build::build(&tree, path, options.texture_limits)
     }
 
@@ -204,6 +210,9 @@ impl Scene {
             .zip(&material_textures)
             .map(|(m, t)| m.is_anisotropic() || t.as_ref().is_some_and(|t| t.is_anisotropic()))
             .collect();
+        let untextured = material_textures.iter().all(Option::is_none)
+            && materials.iter().all(|m| m.opacity == 1.0)
+            && !lights.iter().any(Light::is_textured);
         let infinite_lights =
             lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
         Scene {
@@ -225,6 +234,7 @@ impl Scene {
             bounds_radius,
             accel,
             needs_tangent,
+            untextured,
             face_normals,
         }
     }
@@ -306,6 +316,7 @@ impl Scene {
     /// Mitsuba's ∂p/∂u at a hit (`compute_surface_interaction` of each shape): from the
     /// triangle's uvs (its first edge without uvs, a basis of the normal when the uvs are
     /// degenerate), around a sphere's object z axis, radially outward on a disk.
+    #[inline(never)]
     fn dp_du(&self, shape: u32, prim: u32, p: Vec3, n_geo: Vec3) -> Vec3 {
         let shape = &self.shapes[shape as usize];
         match &shape.geometry {
@@ -348,11 +359,24 @@ impl Scene {
         let base = &self.materials[index as usize];
         match &self.material_textures[index as usize] {
             None => Cow::Borrowed(base),
-            Some(t) => {
-                let point = shape::texture_point(&self.shapes, &self.meshes, at, p, t.uses_mesh_attributes());
-                Cow::Owned(t.resolve(base, &point))
-            }
+            Some(t) => Cow::Owned(self.resolve_textured(base, t, at, p)),
         }
+    }
+
+    /// Out of line so that the integrators' hot loops stay small for untextured scenes.
+    #[inline(never)]
+    fn resolve_textured(&self, base: &Material, t: &MaterialTextures, at: SurfaceRef, p: Vec3) -> Material {
+        let point = shape::texture_point(&self.shapes, &self.meshes, at, p, t.uses_mesh_attributes());
+        t.resolve(base, &point)
+    }
+
+    /// Whether no material has textures or a mask and no emitter a texture: then
+    /// [`Scene::material_of_hit`] is always the shape's material itself, opacities are 1 and
+    /// area lights emit their constant radiance, and integrators can compile that case without
+    /// the checks (see [`crate::bsdf::Material::sample_in`], [`Light::sample_direct_in`]).
+    #[inline]
+    pub fn is_untextured(&self) -> bool {
+        self.untextured
     }
 
     /// The material of the shape a ray hit, at the hit.

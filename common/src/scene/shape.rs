@@ -273,13 +273,14 @@ pub fn texture_point<'a>(
 /// triangle (A, B, D) when u + v ≤ 1, else the second (C, B, D).
 #[inline]
 fn parallelogram_barycentrics(slots: &[[u8; 2]; 2], u: Vec2) -> (u32, Vec2) {
-    let (prim, weights) = if u.x + u.y <= 1.0 {
-        (0, [1.0 - u.x - u.y, u.x, u.y])
-    } else {
-        (1, [u.x + u.y - 1.0, 1.0 - u.y, 1.0 - u.x])
-    };
-    let [s1, s2] = slots[prim];
-    (prim as u32, Vec2::new(weights[s1 as usize], weights[s2 as usize]))
+    // selects rather than a branch: the two triangles are equally likely, so a branch here
+    // mispredicts every other light sample
+    let second = u.x + u.y > 1.0;
+    let s = u.x + u.y - 1.0;
+    let weights =
+        [if second { s } else { -s }, if second { 1.0 - u.y } else { u.x }, if second { 1.0 - u.x } else { u.y }];
+    let [s1, s2] = slots[second as usize];
+    (second as u32, Vec2::new(weights[s1 as usize], weights[s2 as usize]))
 }
 
 impl Shape {
@@ -313,15 +314,18 @@ impl Shape {
         self.area_sampling = AreaSampling::Triangles { cdf };
     }
 
-    /// Samples a point uniformly by area; the pdf is `1 / self.area`.
-    pub fn sample_area(&self, meshes: &[Mesh], u: Vec2) -> SurfacePoint {
+    /// Samples a point uniformly by area; the pdf is `1 / self.area`. A parallelogram reports
+    /// its triangle and barycentrics only `with_surface` (textured emitters need them; the
+    /// untextured common case should not pay for them).
+    pub fn sample_area(&self, meshes: &[Mesh], u: Vec2, with_surface: bool) -> SurfacePoint {
         let flip = if self.flip_normals { -1.0 } else { 1.0 };
         match &self.geometry {
             ShapeGeometry::Mesh(m) => {
                 let cdf = match &self.area_sampling {
                     AreaSampling::Parallelogram { origin, e1, e2, normal, bary_slots } => {
                         let p = *origin + *e1 * u.x + *e2 * u.y;
-                        let (prim, bary) = parallelogram_barycentrics(bary_slots, u);
+                        let (prim, bary) =
+                            if with_surface { parallelogram_barycentrics(bary_slots, u) } else { (0, Vec2::ZERO) };
                         return SurfacePoint { p, n: *normal * flip, prim, bary };
                     }
                     AreaSampling::Triangles { cdf } => cdf,
@@ -379,7 +383,7 @@ mod tests {
             let meshes = [mesh];
             for i in 0..64 {
                 let u = Vec2::new((i % 8) as f32 / 8.0 + 0.03, (i / 8) as f32 / 8.0 + 0.05);
-                let sp = shape.sample_area(&meshes, u);
+                let sp = shape.sample_area(&meshes, u, true);
                 let [a, b, c] = meshes[0].corners(sp.prim as usize);
                 let p = a * (1.0 - sp.bary.x - sp.bary.y) + b * sp.bary.x + c * sp.bary.y;
                 assert!((p - sp.p).length() < 1e-5, "{u}: {p} vs {}", sp.p);

@@ -39,7 +39,10 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--threads must be at least 1");
     }
     let texture_limits = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
-    let scene = Scene::load_options(&args.scene, &LoadOptions { defines: settings.define_map(), texture_limits })?;
+    let scene = Scene::load_options(
+        &args.scene,
+        &LoadOptions { defines: settings.define_map(), texture_limits, confine_to: None },
+    )?;
     let renderer = make_renderer(&settings, &scene)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match settings.time_s {

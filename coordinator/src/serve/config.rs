@@ -3,7 +3,7 @@
 //! service's settings and the API tokens.
 
 use super::auth::Tokens;
-use super::job::service::ServiceConfig;
+use super::job::service::{DEFAULT_MAX_PIXELS, ServiceConfig};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -47,6 +47,9 @@ pub struct ServeArgs {
     /// coordinator validates it, in MiB [default: 1024 per image, 4096 in all].
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
+    /// Largest film a job may have, in pixels (width × height).
+    #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
+    pub max_pixels: u64,
 }
 
 impl ServeArgs {
@@ -68,7 +71,10 @@ impl ServeArgs {
         let cfg = ServiceConfig {
             lease_timeout_ms: (self.lease_timeout * 1000.0) as u64,
             checkpoint_interval_ms: (self.checkpoint_interval.max(0.0) * 1000.0) as u64,
-            texture_limits: self.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
+            texture_limits: self
+                .texture_budget
+                .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
+            max_pixels: self.max_pixels,
         };
         Ok((tokens, cfg))
     }

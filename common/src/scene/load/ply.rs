@@ -115,7 +115,8 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
         mesh.attributes.push(attribute(path, name, fields.len(), data)?);
     }
     let mut face_attributes = Vec::new();
-    for (name, fields) in attribute_groups("face_", &property_names("face"), &["vertex_indices", "vertex_index"], path) {
+    for (name, fields) in attribute_groups("face_", &property_names("face"), &["vertex_indices", "vertex_index"], path)
+    {
         let data = values(faces, &fields, |_| Location::new(path, 0, 0))?;
         face_attributes.push((name, fields.len(), data, Vec::new()));
     }
@@ -173,9 +174,10 @@ fn values(
     let mut out = Vec::with_capacity(elements.len() * fields.len());
     for (k, e) in elements.iter().enumerate() {
         for f in fields {
-            let v = e.get(f).and_then(scalar).ok_or_else(|| {
-                SceneError::at(&loc(k), format!("property \"{f}\" of element {k} must be a number"))
-            })?;
+            let v = e
+                .get(f)
+                .and_then(scalar)
+                .ok_or_else(|| SceneError::at(&loc(k), format!("property \"{f}\" of element {k} must be a number")))?;
             out.push(v as f32);
         }
     }

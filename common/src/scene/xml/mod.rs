@@ -77,8 +77,23 @@ impl SceneTree {
 /// (includes, `<path>`, filenames); `defines` are the caller's `$name` values (Mitsuba's
 /// `-D name=value`), which override `<default>`s.
 pub fn parse(text: &str, file: &Path, defines: &HashMap<String, String>) -> Result<SceneTree, SceneError> {
+    parse_confined(text, file, defines, None)
+}
+
+/// [`parse`], finding files only inside folder `root` when given (a farm job's bundle: see
+/// [`FileResolver::confined`]).
+pub fn parse_confined(
+    text: &str,
+    file: &Path,
+    defines: &HashMap<String, String>,
+    root: Option<&Path>,
+) -> Result<SceneTree, SceneError> {
     let dir = file.parent().unwrap_or(Path::new(""));
-    let mut session = Session::new(Params::new(defines), FileResolver::new(dir));
+    let resolver = match root {
+        Some(root) => FileResolver::confined(dir, root),
+        None => FileResolver::new(dir),
+    };
+    let mut session = Session::new(Params::new(defines), resolver);
     let (mut root, old) = parse_document(&mut session, file, text, 0)?;
     if root.tag != "scene" {
         return Err(SceneError::at(&root.location, format!("the root element must be <scene>, found <{}>", root.tag)));

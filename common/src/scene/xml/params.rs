@@ -5,8 +5,26 @@
 //! `a=Q` gives `xQy`); `\$` escapes a dollar sign; any `$` left over is an undefined parameter.
 //! A caller's value wins over every `<default>`, and the first `<default>` of a name wins over
 //! later ones. A caller's value that no attribute uses is an error once parsing ends.
+//!
+//! Substitution is bounded: `<default>`s that repeat each other grow geometrically, so one
+//! attribute may expand to at most [`MAX_VALUE_BYTES`] and a document's attributes together to
+//! [`MAX_TOTAL_BYTES`] (`docs/decisions/0015-limits-on-hostile-input.md`).
 
 use std::collections::HashMap;
+
+/// The longest attribute value substitution may produce.
+pub const MAX_VALUE_BYTES: usize = 1 << 20;
+/// The most text substitution may produce over a whole scene (its includes too).
+pub const MAX_TOTAL_BYTES: usize = 64 << 20;
+
+/// Why an attribute could not be substituted.
+#[derive(Debug, PartialEq)]
+pub(super) enum SubstituteError {
+    /// `$name` is not defined.
+    Undefined(String),
+    /// The value would exceed [`MAX_VALUE_BYTES`], or the scene's total [`MAX_TOTAL_BYTES`].
+    TooLong,
+}
 
 struct Param {
     /// `$name`
@@ -20,6 +38,8 @@ struct Param {
 /// The parameters known at a point of the document, longest key first.
 pub(super) struct Params {
     entries: Vec<Param>,
+    /// Bytes substitution has produced so far.
+    produced: usize,
 }
 
 impl Params {
@@ -29,7 +49,7 @@ impl Params {
             defines.iter().map(|(k, v)| Param { key: format!("${k}"), value: v.clone(), used: false }).collect();
         // longest first; ties by name so that the result does not depend on hash order
         entries.sort_by(|a, b| b.key.len().cmp(&a.key.len()).then_with(|| a.key.cmp(&b.key)));
-        Params { entries }
+        Params { entries, produced: 0 }
     }
 
     /// A `<default>`: added only if the name is not defined yet.
@@ -42,8 +62,8 @@ impl Params {
         self.entries.insert(at, Param { key, value: value.to_string(), used: true });
     }
 
-    /// `raw` with every parameter substituted; `Err(name)` names an undefined one.
-    pub(super) fn substitute(&mut self, raw: &str) -> Result<String, String> {
+    /// `raw` with every parameter substituted.
+    pub(super) fn substitute(&mut self, raw: &str) -> Result<String, SubstituteError> {
         if !raw.contains('$') {
             return Ok(raw.to_string());
         }
@@ -55,6 +75,9 @@ impl Params {
                 if at > 0 && value.as_bytes()[at - 1] == b'\\' {
                     pos = at + p.key.len();
                 } else {
+                    if value.len() - p.key.len() + p.value.len() > MAX_VALUE_BYTES {
+                        return Err(SubstituteError::TooLong);
+                    }
                     value.replace_range(at..at + p.key.len(), &p.value);
                     p.used = true;
                     pos = at + p.value.len();
@@ -69,7 +92,11 @@ impl Params {
                 continue;
             }
             let name: String = value[at + 1..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
-            return Err(name);
+            return Err(SubstituteError::Undefined(name));
+        }
+        self.produced += value.len();
+        if self.produced > MAX_TOTAL_BYTES {
+            return Err(SubstituteError::TooLong);
         }
         Ok(value.replace("\\$", "$"))
     }
@@ -109,7 +136,7 @@ mod tests {
     #[test]
     fn params_undefined_name_is_reported() {
         let mut p = params(&[]);
-        assert_eq!(p.substitute("1.5 * $radius_2!"), Err("radius_2".to_string()));
+        assert_eq!(p.substitute("1.5 * $radius_2!"), Err(SubstituteError::Undefined("radius_2".to_string())));
     }
 
     #[test]

@@ -8,13 +8,17 @@
 use super::super::error::{Location, SceneError};
 use super::super::resolver::FileResolver;
 use super::element::Element;
-use super::params::Params;
+use super::params::{MAX_TOTAL_BYTES, MAX_VALUE_BYTES, Params, SubstituteError};
 use super::upgrade::upgrade_from_v1;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// Mitsuba's `max_include_depth`: the main file is depth 0, so includes nest 14 deep.
 pub const MAX_INCLUDE_DEPTH: usize = 15;
+/// The most XML a scene may have, its includes (each time included) counted.
+pub const MAX_XML_BYTES: usize = 256 << 20;
+/// The most XML nodes (elements, attributes' text and whitespace) one file may have.
+pub const MAX_XML_NODES: u32 = 1_000_000;
 
 /// Tags of plugin objects (besides `<scene>` and `<spectrum type=..>`).
 const OBJECT_TAGS: &[&str] = &[
@@ -43,11 +47,13 @@ pub(super) struct Session {
     pub(super) resolver: FileResolver,
     /// Included XML and spectrum files read, in order, without repeats.
     pub(super) files: Vec<PathBuf>,
+    /// Bytes of XML parsed so far.
+    pub(super) xml_bytes: usize,
 }
 
 impl Session {
     pub(super) fn new(params: Params, resolver: FileResolver) -> Self {
-        Session { params, ids: HashMap::new(), aliases: HashMap::new(), resolver, files: vec![] }
+        Session { params, ids: HashMap::new(), aliases: HashMap::new(), resolver, files: vec![], xml_bytes: 0 }
     }
 
     pub(super) fn record_file(&mut self, path: &Path) {
@@ -95,9 +101,22 @@ pub(super) fn parse_document(
     text: &str,
     depth: usize,
 ) -> Result<(Element, bool), SceneError> {
-    let doc = roxmltree::Document::parse(text).map_err(|e| {
-        let pos = e.pos();
-        SceneError::at(&Location::new(file, pos.row, pos.col), format!("malformed xml: {e}"))
+    session.xml_bytes += text.len();
+    if session.xml_bytes > MAX_XML_BYTES {
+        return Err(SceneError::file(
+            file,
+            format!("the scene's XML, includes counted each time, exceeds {} MiB", MAX_XML_BYTES >> 20),
+        ));
+    }
+    let options = roxmltree::ParsingOptions { nodes_limit: MAX_XML_NODES, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| match e {
+        roxmltree::Error::NodesLimitReached => {
+            SceneError::file(file, format!("more than {MAX_XML_NODES} XML nodes in one file"))
+        }
+        e => {
+            let pos = e.pos();
+            SceneError::at(&Location::new(file, pos.row, pos.col), format!("malformed xml: {e}"))
+        }
     })?;
     let mut parser = FileParser { session, file, doc: &doc, depth, old: false };
     let root = parser.root(doc.root_element())?;
@@ -137,13 +156,19 @@ impl FileParser<'_, '_, '_> {
     pub(super) fn attrs(&mut self, node: roxmltree::Node) -> Result<Attrs, SceneError> {
         let mut pairs = Vec::new();
         for a in node.attributes() {
-            let value = self.session.params.substitute(a.value()).map_err(|name| {
-                SceneError::at(
-                    &self.loc(node),
-                    format!(
+            let value = self.session.params.substitute(a.value()).map_err(|e| {
+                let why = match e {
+                    SubstituteError::Undefined(name) => format!(
                         "undefined parameter \"${name}\" (declare it with <default name=\"{name}\" value=\"...\"/>)"
                     ),
-                )
+                    SubstituteError::TooLong => format!(
+                        "attribute \"{}\" grows past {} KiB (or the scene's attributes past {} MiB) as its $parameters are substituted",
+                        a.name(),
+                        MAX_VALUE_BYTES >> 10,
+                        MAX_TOTAL_BYTES >> 20
+                    ),
+                };
+                SceneError::at(&self.loc(node), why)
             })?;
             pairs.push((a.name().to_string(), value));
         }
@@ -283,6 +308,9 @@ impl FileParser<'_, '_, '_> {
     }
 
     fn include_file(&mut self, filename: &str, loc: &Location) -> Result<(Element, bool), SceneError> {
+        if let Some(why) = self.session.resolver.refusal(Path::new(filename)) {
+            return Err(SceneError::at(loc, format!("included file \"{filename}\" {why}")));
+        }
         let path = self
             .session
             .resolver
@@ -324,7 +352,11 @@ impl FileParser<'_, '_, '_> {
             let local = self.file.parent().unwrap_or(Path::new("")).join(p);
             if local.exists() { local } else { self.session.resolver.find(p).unwrap_or(local) }
         };
-        if !dir.exists() {
+        if let Some(why) = self.session.resolver.refusal_of_folder(&dir) {
+            return Err(SceneError::at(loc, format!("<path>: folder \"{value}\" {why}")));
+        }
+        // a bundle holds files only, so a folder the client found empty does not arrive
+        if !dir.exists() && !self.session.resolver.is_confined() {
             return Err(SceneError::at(loc, format!("<path>: folder \"{value}\" not found")));
         }
         self.session.resolver.prepend(dir);

@@ -112,6 +112,9 @@ impl FileParser<'_, '_, '_> {
         match (attrs.get("value").filter(|v| !v.is_empty()), attrs.get("filename").filter(|v| !v.is_empty())) {
             (Some(value), None) => Spectrum::parse(value).map_err(bad),
             (None, Some(filename)) => {
+                if let Some(why) = self.session.resolver.refusal(Path::new(filename)) {
+                    return Err(SceneError::at(loc, format!("spectrum file \"{filename}\" {why}")));
+                }
                 let path = self
                     .session
                     .resolver

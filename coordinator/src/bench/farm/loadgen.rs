@@ -435,14 +435,19 @@ mod tests {
     use super::*;
     use crate::serve::grpc::convert::{grant_to_pb, lease_from_pb, rect_from_pb, settings_from_pb};
     use crate::serve::job::model::{JobState, ResultOutcome};
-    use crate::serve::job::service::{Bundle, JobService, ServiceConfig};
+    use crate::serve::job::service::{Bundle, DEFAULT_MAX_PIXELS, JobService, ServiceConfig};
     use crate::serve::job::validate::ResultClaim;
 
     /// Drains a generated job through the service with generated results; every one must be
     /// accepted and the job must finish.
     fn drain_with_generated_results(integrator: IntegratorName, width: u32, height: u32, spp: u32) -> usize {
         let dir = tempfile::tempdir().unwrap();
-        let cfg = ServiceConfig { lease_timeout_ms: 60_000, checkpoint_interval_ms: 0, texture_limits: Default::default() };
+        let cfg = ServiceConfig {
+            lease_timeout_ms: 60_000,
+            checkpoint_interval_ms: 0,
+            texture_limits: Default::default(),
+            max_pixels: DEFAULT_MAX_PIXELS,
+        };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();
         let req = generated_job(integrator, width, height, spp, "t");
         let b = req.bundle.unwrap();

@@ -70,15 +70,22 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         };
         let rect = rect_from_pb(header.rect)?;
         let lease = lease_from_pb(header.lease)?;
-        // never buffer more than the claimed rectangle can need
-        let pilot_limit = rect.area() as u64 * tessera_proto::MAX_PILOT_BYTES_PER_PIXEL + 4096;
+        // the lease is checked before anything is buffered, and bounds what may arrive: never
+        // more than the leased tile can need, whatever rectangle the header claims
+        let svc = self.0.svc.clone();
+        let (worker, held) = (header.worker_id.clone(), lease.clone());
+        let Some((leased, result_bytes)) = blocking(move || Ok(svc.upload_limit(&worker, &held))).await? else {
+            let message = "lease no longer current".to_string();
+            return Ok(Response::new(pb::UploadResultResponse { outcome: pb::UploadOutcome::Stale as i32, message }));
+        };
+        let pilot_limit = leased.area() as u64 * tessera_proto::MAX_PILOT_BYTES_PER_PIXEL + 4096;
         if header.pilot_bytes > pilot_limit {
             return Err(Status::invalid_argument(format!(
-                "field \"pilot_bytes\" ({}) exceeds {pilot_limit} for {rect:?}",
+                "field \"pilot_bytes\" ({}) exceeds {pilot_limit} for the leased {leased:?}",
                 header.pilot_bytes
             )));
         }
-        let limit = self.0.svc.result_bytes(&lease, rect) + header.pilot_bytes as usize;
+        let limit = result_bytes + header.pilot_bytes as usize;
         let mut payload = Vec::with_capacity(limit.min(1 << 28));
         while let Some(msg) = stream.next().await {
             match msg?.part {

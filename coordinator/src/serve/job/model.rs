@@ -148,7 +148,25 @@ pub struct Job {
     pub finished_ms: Option<u64>,
 }
 
+/// Results that arrive ahead of the merge frontier wait in memory: a job leases no further
+/// ahead than about this many bytes of them ...
+pub const HELD_RESULTS_BYTES: u64 = 512 << 20;
+/// ... but always at least this many tiles from the frontier on.
+pub const MIN_LEASE_WINDOW: usize = 2;
+
 impl Job {
+    /// The tiles that may be leased: from the merge frontier, as many as
+    /// [`HELD_RESULTS_BYTES`] of results allows (their image sums, and the moments of a pass
+    /// that collects them), at least [`MIN_LEASE_WINDOW`].
+    pub fn leasable(&self) -> Range<usize> {
+        let Some(next) = self.tiles.get(self.merged) else { return self.merged..self.merged };
+        let collect = self.passes.iter().any(|p| p.collect && p.tiles.contains(&self.merged));
+        let per_pixel = 32 + if collect { tessera_proto::MAX_PILOT_BYTES_PER_PIXEL } else { 0 };
+        let bytes = (next.spec.rect.area() as u64).max(1) * per_pixel;
+        let window = ((HELD_RESULTS_BYTES / bytes) as usize).max(MIN_LEASE_WINDOW);
+        self.merged..(self.merged + window).min(self.tiles.len())
+    }
+
     /// Whether `worker` may lease this job's tiles.
     pub fn is_blocklisted(&self, worker: &str) -> bool {
         self.worker_failures.get(worker).is_some_and(|&n| n >= BLOCKLIST_AFTER_FAILURES)
@@ -315,14 +333,15 @@ impl JobsModel {
             .values()
             .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
             .filter(|j| !j.is_blocklisted(worker))
-            .filter(|j| j.tiles.iter().any(|t| t.state == TileState::Queued))
+            .filter(|j| j.tiles[j.leasable()].iter().any(|t| t.state == TileState::Queued))
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
             .map(|j| j.id.clone());
         let Some(id) = candidate else { return (Vec::new(), changes) };
         let job = self.jobs.get_mut(&id).expect("invariant: candidate job exists");
         let max = if job.spec.full_frame { 1 } else { max_tiles.max(1) };
         let mut leases = Vec::new();
-        for (i, tile) in job.tiles.iter_mut().enumerate() {
+        let leasable = job.leasable();
+        for (i, tile) in job.tiles.iter_mut().enumerate().skip(leasable.start).take(leasable.len()) {
             if leases.len() == max {
                 break;
             }

@@ -14,6 +14,7 @@ const CFG: ServiceConfig = ServiceConfig {
     lease_timeout_ms: 10_000,
     checkpoint_interval_ms: 3_600_000,
     texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
+    max_pixels: super::service::DEFAULT_MAX_PIXELS,
 };
 
 fn cornell() -> (Bundle, Scene) {
@@ -86,4 +87,84 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
     let exr = dir.path().join("out.exr");
     std::fs::write(&exr, svc.output(&job, super::service::OutputKind::Exr).unwrap()).unwrap();
     assert!(tessera_common::film::exr::read_sample_counts(&exr).unwrap().iter().all(|&c| c == 1));
+}
+
+/// A bundle whose scene names a file outside it, and a film over the pixel budget, are refused
+/// at submission with the reason, and the service goes on taking jobs.
+#[test]
+fn hostile_submissions_are_refused_and_the_service_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
+    let settings = RenderSettings { spp: Some(1), ..Default::default() };
+    let (cornell, _) = cornell();
+    let xml = String::from_utf8(cornell.files[0].1.clone()).unwrap();
+    let submit = |xml: String| {
+        let bundle = Bundle { scene_path: "scene.xml".into(), files: vec![("scene.xml".into(), xml.into_bytes())] };
+        svc.submit(bundle, settings.clone(), 0, None, 1_000)
+    };
+    let escape = xml.replacen(
+        "</scene>",
+        "<shape type=\"obj\"><string name=\"filename\" value=\"/dev/zero\"/></shape></scene>",
+        1,
+    );
+    match submit(escape) {
+        Err(ServiceError::InvalidArgument(m)) => {
+            assert!(m.contains("absolute path") && m.contains("scene.xml:"), "{m}")
+        }
+        other => panic!("/dev/zero accepted: {other:?}"),
+    }
+    let (w, h) = (
+        integer_element(&xml, "width").expect("cornell names its width"),
+        integer_element(&xml, "height").expect("cornell names its height"),
+    );
+    let huge = xml.replacen(&w, "<integer name=\"width\" value=\"65535\"/>", 1).replacen(
+        &h,
+        "<integer name=\"height\" value=\"65535\"/>",
+        1,
+    );
+    match submit(huge) {
+        Err(ServiceError::InvalidArgument(m)) => {
+            assert!(m.contains("65535×65535") && m.contains("--max-pixels"), "{m}")
+        }
+        other => panic!("a 65535² film accepted: {other:?}"),
+    }
+    assert!(submit(xml).is_ok(), "the service still takes jobs");
+}
+
+/// The `<integer name="NAME" value="..."/>` element of `xml`.
+fn integer_element(xml: &str, name: &str) -> Option<String> {
+    let start = xml.find(&format!("<integer name=\"{name}\""))?;
+    let end = start + xml[start..].find("/>")? + 2;
+    Some(xml[start..end].to_string())
+}
+
+/// When every live worker is blocklisted for a job, the job fails with that reason instead of
+/// waiting forever; a worker that has gone quiet does not keep it alive.
+#[test]
+fn a_job_no_live_worker_may_serve_fails_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
+    let (bundle, _) = cornell();
+    let settings = RenderSettings { spp: Some(1), ..Default::default() };
+    let job = svc.submit(bundle, settings, 0, None, 1_000).unwrap().id;
+    let quiet = svc.register("quiet", 1, 1_000).unwrap();
+    let workers: Vec<String> = (0..2).map(|i| svc.register(&format!("w{i}"), 1, 20_000).unwrap()).collect();
+    let now = 20_100;
+    let blocklist = crate::serve::job::model::BLOCKLIST_AFTER_FAILURES as usize;
+    for (k, w) in workers.iter().enumerate() {
+        // each fails as many different tiles as blocklist it (no tile reaches its own limit)
+        for grant in svc.lease(w, blocklist, now).unwrap() {
+            svc.report_failure(w, &grant.lease, "out of memory", now).unwrap();
+        }
+        assert!(svc.lease(w, 1, now).unwrap().is_empty(), "blocklisted");
+        svc.expire(now).unwrap();
+        if k == 0 {
+            assert_ne!(svc.get(&job, now).unwrap().state, JobState::Failed, "w1 can still serve it");
+        }
+    }
+    // `quiet` was last seen at 1 000, more than a lease timeout ago: only w0 and w1 are live
+    let view = svc.get(&job, now).unwrap();
+    assert_eq!(view.state, JobState::Failed, "{view:?}");
+    assert!(view.error.as_deref().is_some_and(|e| e.contains("no eligible worker")), "{view:?}");
+    let _ = quiet;
 }

@@ -1,7 +1,8 @@
 //! The blob directory: content-addressed blobs (scene bundles, merge masks, result EXRs and
 //! PNGs, named by [`tessera_proto::blob_digest`]) and checkpoints of merged films. Every file is
-//! written to a temporary name and renamed into place, so a crash never leaves a half-written
-//! blob under a real name. Accepted tile results live in the database
+//! written to a temporary name, synced, renamed into place and its folder synced, so a crash
+//! never leaves a half-written blob under a real name nor loses a rename that was reported
+//! done; a blob is checked against its digest whenever it is read. Accepted tile results live in the database
 //! (docs/decisions/0009-results-in-the-database.md); [`BlobStore::get_result`] reads the result
 //! files a data directory may still hold from before that.
 
@@ -46,7 +47,8 @@ impl BlobStore {
         let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
         write(&mut f)?;
         f.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&tmp, path)
+        std::fs::rename(&tmp, path)?;
+        sync_parent(path)
     }
 
     /// Stores `bytes` content-addressed; returns the digest.
@@ -64,11 +66,16 @@ impl BlobStore {
         tessera_proto::is_blob_digest(digest).then(|| self.root.join("cas").join(&digest[..2]).join(digest))
     }
 
-    /// A content-addressed blob; `Ok(None)` when there is no such blob.
+    /// A content-addressed blob; `Ok(None)` when there is no such blob, an error when the bytes
+    /// on disk no longer match their digest.
     pub fn get(&self, digest: &str) -> std::io::Result<Option<Vec<u8>>> {
         let Some(path) = self.cas_path(digest) else { return Ok(None) };
         match std::fs::read(path) {
-            Ok(b) => Ok(Some(b)),
+            Ok(b) if tessera_proto::blob_digest(&b) == digest => Ok(Some(b)),
+            Ok(_) => Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("blob {digest} is corrupt on disk (its bytes no longer match the digest)"),
+            )),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
             Err(e) => Err(e),
         }
@@ -164,8 +171,17 @@ impl BlobStore {
                 std::fs::create_dir_all(dir)?;
             }
             std::fs::rename(path, &target)?;
+            sync_parent(&target)?;
         }
         Ok(digest)
+    }
+}
+
+/// Syncs the folder holding `path`, so that a rename into it survives a crash.
+fn sync_parent(path: &Path) -> std::io::Result<()> {
+    match path.parent() {
+        Some(dir) => std::fs::File::open(dir)?.sync_all(),
+        None => Ok(()),
     }
 }
 
@@ -181,6 +197,10 @@ mod tests {
         assert_eq!(d, "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824");
         assert_eq!(blobs.get(&d).unwrap().unwrap(), b"hello");
         assert!(blobs.get("../../etc/passwd").unwrap().is_none());
+        // a blob changed on disk is refused, not served
+        std::fs::write(blobs.cas_path(&d).unwrap(), b"jello").unwrap();
+        let err = blobs.get(&d).unwrap_err();
+        assert!(err.to_string().contains("corrupt"), "{err}");
         let boxed = tessera_common::film::filter::Filter::BOX;
         let gaussian = tessera_common::film::filter::Filter::new(tessera_common::film::filter::FilterKind::DEFAULT);
         for (i, filter) in [boxed, gaussian].iter().enumerate() {

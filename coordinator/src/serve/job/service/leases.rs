@@ -3,11 +3,10 @@
 //! the timer's lease expiry.
 
 use super::{Inner, JobService, LeaseGrant, ServiceError};
-use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
+use crate::serve::job::model::{BLOCKLIST_AFTER_FAILURES, LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
-use tessera_common::film::filter::Filter;
-use tessera_common::film::{Layout, Rect};
+use tessera_common::film::Rect;
 
 impl JobService {
     /// Registers a worker; returns its id.
@@ -59,16 +58,19 @@ impl JobService {
         Ok(grants)
     }
 
-    /// The size of the image sums a result for `lease` carries: the leased tile's layout (its
-    /// rectangle, the filter's border and channels), or, for a lease no longer known, that of
-    /// the `claimed` rectangle with the box filter (the result will be refused anyway).
-    pub fn result_bytes(&self, lease: &LeaseRef, claimed: Rect) -> usize {
+    /// What an upload for `lease` by `worker` may carry, checked before a byte of it is
+    /// buffered: the leased tile's rectangle and the size of its image sums (the rectangle, the
+    /// filter's border and channels). `None` when the lease is unknown, of another epoch, or
+    /// held by another worker: such an upload is stale whatever it holds.
+    pub fn upload_limit(&self, worker: &str, lease: &LeaseRef) -> Option<(Rect, usize)> {
         let inner = self.lock();
-        let layout = match inner.model.jobs.get(&lease.job) {
-            Some(job) => job.spec.layout(job.tiles.get(lease.tile).map_or(claimed, |t| t.spec.rect)),
-            None => Layout::of(claimed, claimed.x1, claimed.y1, &Filter::BOX),
-        };
-        tessera_proto::payload::payload_bytes(&layout).unwrap_or(usize::MAX)
+        let job = inner.model.jobs.get(&lease.job)?;
+        let tile = job.tiles.get(lease.tile).filter(|t| t.epoch == lease.epoch)?;
+        if matches!(&tile.state, TileState::Leased { worker: holder, .. } if holder != worker) {
+            return None;
+        }
+        let bytes = tessera_proto::payload::payload_bytes(&job.spec.layout(tile.spec.rect))?;
+        Some((tile.spec.rect, bytes))
     }
 
     /// The tile a lease refers to.
@@ -84,18 +86,58 @@ impl JobService {
         Ok(inner.model.heartbeat(worker, leases, now_ms, self.cfg.lease_timeout_ms))
     }
 
-    /// Re-queues expired leases.
+    /// Re-queues expired leases, and fails the jobs no live worker may serve any more.
     pub fn expire(&self, now_ms: u64) -> Result<(), ServiceError> {
         let mut inner = self.lock();
-        let changes = inner.model.expire(now_ms);
+        let mut changes = inner.model.expire(now_ms);
         if !changes.is_empty() {
             inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
             tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
+        }
+        let stranded = self.stranded_jobs(&inner, now_ms);
+        for (job, error) in &stranded {
+            tracing::error!(job_id = %job, %error, "job failed");
+            for (j, tiles) in inner.model.fail(job, error.clone(), now_ms) {
+                changes.entry(j).or_default().extend(tiles);
+            }
+        }
+        if !changes.is_empty() {
             self.persist(&mut inner, &changes, &[])?;
             self.sync(&inner)?;
+            for (job, _) in &stranded {
+                inner.job(job).end();
+            }
             self.work.notify_waiters();
         }
         Ok(())
+    }
+
+    /// Jobs with work left whose every live worker (seen within a lease timeout) is blocklisted
+    /// for them: nobody will ever render them, so they fail with that reason.
+    fn stranded_jobs(&self, inner: &Inner, now_ms: u64) -> Vec<(String, String)> {
+        let live: Vec<&str> = inner
+            .workers
+            .values()
+            .filter(|w| now_ms.saturating_sub(w.last_seen_ms) <= self.cfg.lease_timeout_ms)
+            .map(|w| w.id.as_str())
+            .collect();
+        if live.is_empty() {
+            return Vec::new();
+        }
+        inner
+            .model
+            .jobs
+            .values()
+            .filter(|j| !j.state.is_terminal() && j.tiles.iter().any(|t| t.state == TileState::Queued))
+            .filter(|j| live.iter().all(|w| j.is_blocklisted(w)))
+            .map(|j| {
+                let error = format!(
+                    "no eligible worker is left: each of the {} live workers failed {BLOCKLIST_AFTER_FAILURES} of its tiles",
+                    live.len()
+                );
+                (j.id.clone(), error)
+            })
+            .collect()
     }
 
     /// A worker's failure to render a lease.

@@ -129,8 +129,17 @@ impl JobService {
         extras: Vec<Extra>,
     ) -> Result<Option<Finishing>, ServiceError> {
         let range = inner.model.mergeable(job);
-        let film = if range.is_empty() { None } else { inner.job(job).film.take() };
-        let Some(mut film) = film else { return self.persist(inner, &pending, &extras).map(|()| None) };
+        if range.is_empty() {
+            return self.persist(inner, &pending, &extras).map(|()| None);
+        }
+        // a queued job holds no film: it is made when the job's first tiles merge
+        let mut film = match inner.job(job).film.take() {
+            Some(film) => film,
+            None => {
+                let spec = &inner.model.jobs[job].spec;
+                Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter))
+            }
+        };
         if let Err(e) = self.merge_range(inner, job, range.clone(), &mut film) {
             inner.job(job).film = Some(film);
             self.persist(inner, &pending, &extras)?;

@@ -45,7 +45,13 @@ pub struct ServiceConfig {
     pub checkpoint_interval_ms: u64,
     /// What a submitted scene's decoded textures may take when the coordinator loads it.
     pub texture_limits: tessera_common::texture::TextureLimits,
+    /// The largest film a job may have, in pixels: the coordinator holds it (16 bytes a pixel,
+    /// more under EMIS) from the job's first run to its end.
+    pub max_pixels: u64,
 }
+
+/// [`ServiceConfig::max_pixels`] unless `tessera serve --max-pixels` says otherwise: 8192².
+pub const DEFAULT_MAX_PIXELS: u64 = 8192 * 8192;
 
 /// Why a call failed; the API layer maps each variant onto its error table.
 #[derive(Debug, thiserror::Error)]

@@ -7,8 +7,6 @@ use crate::serve::job::emis::EmisJob;
 use crate::serve::job::model::JobSpec;
 use crate::serve::job::view::JobView;
 use std::path::Path;
-use tessera_common::film::Film;
-use tessera_common::film::filter::Filter;
 use tessera_common::scene::{LoadOptions, Scene};
 use tessera_common::settings::RenderSettings;
 
@@ -25,6 +23,14 @@ impl JobService {
     ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
         let (digest, scene) = self.store_bundle(&bundle, &settings)?;
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        if u64::from(w) * u64::from(h) > self.cfg.max_pixels {
+            return Err(ServiceError::InvalidArgument(format!(
+                "the film is {w}×{h} = {} pixels, over this coordinator's limit of {} (tessera serve --max-pixels)",
+                u64::from(w) * u64::from(h),
+                self.cfg.max_pixels
+            )));
+        }
         let integrator_settings = settings.resolved(&scene);
         integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
         let spec = JobSpec {
@@ -42,7 +48,6 @@ impl JobService {
         let mut inner = self.lock();
         let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
         let runtime = inner.job(&id);
-        runtime.film = Some(Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter)));
         runtime.emis = EmisJob::new(&spec);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
@@ -80,7 +85,11 @@ impl JobService {
                 let _ = std::fs::remove_dir_all(&tmp);
             }
         }
-        let options = LoadOptions { defines: settings.define_map(), texture_limits: self.cfg.texture_limits };
+        let options = LoadOptions {
+            defines: settings.define_map(),
+            texture_limits: self.cfg.texture_limits,
+            confine_to: Some(dir.clone()),
+        };
         let scene = Scene::load_options(&dir.join(&bundle.scene_path), &options).map_err(|e| {
             let prefix = format!("{}/", dir.display());
             invalid(e.to_string().replace(&prefix, ""))

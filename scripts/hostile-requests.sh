@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Submits each hostile scene of issue 19 to a fresh release coordinator on loopback and prints
+# the answer, the time to refuse (curl's time_total) and the coordinator's peak RSS after it.
+#   cargo build --release -p tessera-coordinator && scripts/hostile-requests.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+work=$(mktemp -d)
+trap 'kill "$pid" 2>/dev/null; rm -rf "$work"' EXIT
+python3 - "$work" <<'PY'
+import sys
+out = sys.argv[1]
+xml = open("scenes/cornell-box/scene.xml").read()
+add = lambda extra: xml.replace("</scene>", extra + "\n</scene>", 1)
+chain = '<default name="p0" value="xxxxxxxxxx"/>' + "".join(
+    f'<default name="p{i}" value="{("$p%d" % (i - 1)) * 10}"/>' for i in range(1, 10))
+cases = {
+    "devzero": add('<shape type="obj"><string name="filename" value="/dev/zero"/></shape>'),
+    "outside": add('<shape type="ply"><string name="filename" value="../../../etc/passwd"/></shape>'),
+    "include": add('<include filename="/etc/passwd"/>'),
+    "film65535": xml.replace('value="256"', 'value="65535"', 2),
+    "defaults": xml.replace("<sensor", chain + "<sensor", 1).replace(
+        '<sensor type="perspective">', '<sensor type="perspective"><string name="label" value="$p9"/>', 1),
+    "nodes": xml.replace("</scene>", "<a/>" * 1_000_001 + "</scene>", 1),
+}
+for name, text in cases.items():
+    open(f"{out}/{name}.xml", "w").write(text)
+PY
+target/release/tessera serve --listen 127.0.0.1:0 --data-dir "$work/data" > "$work/out" 2> "$work/log" &
+pid=$!
+until grep -q http "$work/out" 2>/dev/null; do sleep 0.1; done
+url=$(grep -o 'http://[0-9.:]*' "$work/out" | head -1)
+echo "baseline $(grep VmHWM /proc/$pid/status)"
+for name in devzero outside include film65535 defaults nodes; do
+    answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -F "scene=@$work/$name.xml;filename=scene.xml" \
+        -F 'settings={"integrator":"pt","spp":1}' "$url/api/v1/jobs")
+    echo "$name: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
+done
