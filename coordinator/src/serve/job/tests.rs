@@ -188,6 +188,39 @@ fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     );
 }
 
+#[test]
+fn progress_never_falls_when_an_update_discards_a_path_tracing_start() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::EmisVcm, 6, 0), 0).unwrap();
+    let (mut shown, mut barriers) = (vec![0.0], 0);
+    for _ in 0..20 {
+        for l in m.lease("w", 1, 3, TTL).0 {
+            m.result("w", &l, Ok(()), 3);
+            shown.push(super::view::JobView::of(&m.jobs["a"], 3).progress);
+        }
+        loop {
+            let r = m.mergeable("a");
+            if r.is_empty() {
+                break;
+            }
+            let action = m.merged("a", r.end, 3).0;
+            shown.push(super::view::JobView::of(&m.jobs["a"], 3).progress);
+            if let Some(BarrierAction::Optimize) = action {
+                barriers += 1;
+                // the second update ends the path-tracing start, as the service's EMIS state says
+                m.optimized("a", barriers == 2, 3).unwrap();
+                shown.push(super::view::JobView::of(&m.jobs["a"], 3).progress);
+            }
+        }
+    }
+    let job = &m.jobs["a"];
+    assert_eq!(job.state, JobState::Done);
+    assert!(job.passes.iter().any(|p| p.restart) && job.kept_from() > 0, "{:?}", job.passes);
+    assert!(shown.windows(2).all(|w| w[1] >= w[0]), "progress fell: {shown:?}");
+    assert!(shown.iter().rev().nth(1).is_some_and(|&p| p < 1.0), "{shown:?}");
+    assert_eq!(shown.last(), Some(&1.0));
+}
+
 /// One step of a random schedule.
 #[derive(Clone, Debug)]
 enum Event {
@@ -302,4 +335,35 @@ proptest! {
             prop_assert_eq!(job.samples_merged(), 128 * 128 * spp as u64);
         }
     }
+}
+
+/// A stalled first tile bounds what can pile up behind it: 1080p full-frame vcm results
+/// (66 MB each) are leased no further than the window past the merge frontier, and the window
+/// moves on once the frontier does.
+#[test]
+fn leases_stay_within_a_window_past_the_merge_frontier() {
+    let mut m = JobsModel::default();
+    let mut s = spec(IntegratorName::Vcm, 64, 0);
+    (s.width, s.height) = (1920, 1080);
+    m.submit("a", s, 0).unwrap();
+    let window = m.jobs["a"].leasable();
+    assert_eq!(window.start, 0);
+    assert!((MIN_LEASE_WINDOW..=16).contains(&window.len()), "{window:?}");
+    assert!(m.jobs["a"].tiles.len() > window.len());
+    let mut leases = Vec::new();
+    for _ in 0..m.jobs["a"].tiles.len() {
+        leases.extend(m.lease("w1", 1, 10, TTL).0);
+    }
+    assert_eq!(leases.len(), window.len(), "no lease past the window");
+    // every tile but the stalled first one arrives and waits
+    for l in &leases[1..] {
+        assert_eq!(m.result("w1", l, Ok(()), 20).0, ResultOutcome::Accepted);
+    }
+    assert!(m.lease("w2", 1, 30, TTL).0.is_empty(), "the window is full while tile 0 stalls");
+    m.result("w1", &leases[0], Ok(()), 40);
+    let mut merges = Vec::new();
+    merge_all(&mut m, "a", &mut merges, 50);
+    assert_eq!(m.jobs["a"].merged, window.len());
+    let next = m.lease("w2", 1, 60, TTL).0;
+    assert_eq!(next.iter().map(|l| l.tile).collect::<Vec<_>>(), [window.len()], "the window moved");
 }

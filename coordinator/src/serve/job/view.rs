@@ -58,17 +58,29 @@ pub struct JobView {
     pub strategy: Option<StrategyView>,
 }
 
+/// The fraction of a sample-budget job's samples merged, never decreasing: passes are planned
+/// at barriers, so the budget is the measure of the whole; when an EMIS update discards a
+/// path-tracing start, the progress shown at that barrier is kept and the rest of the bar is
+/// the new film's share.
+fn sample_progress(job: &Job) -> f64 {
+    let pixels = job.spec.width as u64 * job.spec.height as u64;
+    let target = job.spec.settings.spp.map_or(0, |n| n as u64 * pixels);
+    let kept_from = job.passes.iter().rev().find(|p| p.restart).map_or(0, |p| p.tiles.start);
+    let discarded: u64 = job.tiles[..kept_from].iter().map(|t| t.spec.pixel_samples()).sum();
+    let before = discarded as f64 / discarded.max(target).max(1) as f64;
+    let kept_merged = job.samples_merged().saturating_sub(discarded);
+    let kept_planned = (job.samples_planned() - discarded).max(target);
+    before + (1.0 - before) * kept_merged as f64 / kept_planned.max(1) as f64
+}
+
 impl JobView {
     /// The view of `job` at `now_ms`.
     pub fn of(job: &Job, now_ms: u64) -> JobView {
-        // passes are planned at barriers (EMIS), so a sample budget is the measure of the whole
-        let pixels = job.spec.width as u64 * job.spec.height as u64;
-        let planned = job.samples_planned().max(job.spec.settings.spp.map_or(0, |n| n as u64 * pixels));
         let elapsed_s = job.started_ms.map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
         let progress = match (job.state, job.spec.settings.time_s) {
             (JobState::Done, _) => 1.0,
             (_, Some(budget)) => (elapsed_s.unwrap_or(0.0) / budget).clamp(0.0, 0.99),
-            _ => job.samples_merged() as f64 / planned.max(1) as f64,
+            _ => sample_progress(job),
         };
         let eta_s = match elapsed_s {
             Some(e) if !job.state.is_terminal() && progress > 0.0 => Some(e * (1.0 - progress) / progress),
