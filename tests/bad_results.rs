@@ -41,7 +41,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
         let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
-        let reg = pb::RegisterRequest { name: "hand".into(), threads: 1, version: "test".into() };
+        let reg = pb::RegisterRequest { name: "hand".into(), threads: 1, version: "test".into(), ..Default::default() };
         let worker = client.register(reg).await.unwrap().into_inner().worker_id;
 
         let first = lease_one(&mut client, &worker).await;
@@ -75,7 +75,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
         let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(&scene) else { panic!("a tile integrator") };
         let rect = Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 };
         let mut accum = TileAccum::new(rect, &scene.film);
-        integrator.render_tile(&scene, &TileRequest { rect, samples: 0..1, seed: 6 }, &mut accum);
+        integrator.render_tile(&scene, &TileRequest::new(rect, 0..1, 6), &mut accum);
         let payload = tessera_proto::payload::encode_tile(&accum);
         let ok = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();
         assert_eq!(ok.outcome, pb::UploadOutcome::Accepted as i32);
@@ -109,7 +109,8 @@ fn a_hostile_worker_cannot_make_the_coordinator_buffer_past_a_lease() {
     rt.block_on(async {
         let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
         let register = async |name: &str| {
-            let reg = pb::RegisterRequest { name: name.into(), threads: 1, version: "test".into() };
+            let reg =
+                pb::RegisterRequest { name: name.into(), threads: 1, version: "test".into(), ..Default::default() };
             client.clone().register(reg).await.unwrap().into_inner().worker_id
         };
         let (honest, thief) = (register("honest").await, register("thief").await);

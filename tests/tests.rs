@@ -501,4 +501,5 @@ fn image_comparison_notices_a_different_seed() {
 }
 
 mod bad_results;
+mod faults;
 mod hostile;

@@ -113,11 +113,7 @@ pub fn render(
                 .par_iter()
                 .map(|rect| {
                     let mut accum = TileAccum::new(*rect, &scene.film);
-                    integrator.render_tile(
-                        scene,
-                        &TileRequest { rect: *rect, samples: samples.clone(), seed: opts.seed },
-                        &mut accum,
-                    );
+                    integrator.render_tile(scene, &TileRequest::new(*rect, samples.clone(), opts.seed), &mut accum);
                     let n = done.fetch_add(rect.area() as u64 * pass as u64, std::sync::atomic::Ordering::Relaxed)
                         + rect.area() as u64 * pass as u64;
                     progress(n, total.max(n));

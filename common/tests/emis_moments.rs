@@ -38,7 +38,7 @@ fn per_iteration_totals(scene: &Scene, pilot: (f32, u32), candidates: &[Candidat
             let estimator = MomentEstimator::new(w, h, candidates, MomentSettings::default());
             let bidir = Bidir::bdpt(settings, pilot.0, pilot.1).with_observer(&estimator);
             let mut accum = TileAccum::new(Rect::full(w, h), &scene.film);
-            bidir.render_tile(scene, &TileRequest { rect: Rect::full(w, h), samples: it..it + 1, seed }, &mut accum);
+            bidir.render_tile(scene, &TileRequest::new(Rect::full(w, h), it..it + 1, seed), &mut accum);
             let (buffer, _) = estimator.snapshot();
             (0..candidates.len()).map(|c| (0..w * h).map(|p| buffer.moment(p, c)).sum::<f64>()).collect()
         })
@@ -104,9 +104,7 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
         let vcm = Bidir::vcm(settings, 1.0, 1, merge).with_observer(&estimator);
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         let mut accum = TileAccum::new(Rect::full(w, h), &scene.film);
-        pool.install(|| {
-            vcm.render_tile(&scene, &TileRequest { rect: Rect::full(w, h), samples: iterations, seed: 5 }, &mut accum)
-        });
+        pool.install(|| vcm.render_tile(&scene, &TileRequest::new(Rect::full(w, h), iterations, 5), &mut accum));
         estimator.snapshot().0
     };
     let one = render(0..2, 1);
@@ -145,7 +143,7 @@ fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
     let (odd, _) = render_iterations(&scene, settings, &config, &pt, 3, 3..4, Some(CandidateSet::Full));
     let (w, h) = (scene.camera.width, scene.camera.height);
     let mut direct = TileAccum::new(Rect::full(w, h), &scene.film);
-    let request = TileRequest { rect: Rect::full(w, h), samples: 3..4, seed: 3 };
+    let request = TileRequest::new(Rect::full(w, h), 3..4, 3);
     PathTracer { settings }.render_tile(&scene, &request, &mut direct);
     assert_eq!(odd.sum, direct.sum, "a non-recording iteration is rendered by pt");
     for recorded in [0, 2, 6] {

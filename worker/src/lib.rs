@@ -1,8 +1,9 @@
 //! Tessera's render worker. It registers with a coordinator, pulls tiles (long poll), fetches
 //! scene bundles by digest into a local cache, renders on a rayon pool on a blocking thread
 //! (never on a tokio thread), uploads the unnormalised sums, heartbeats its leases, reconnects
-//! with backoff and drains on SIGTERM. It keeps no state worth saving: killing it loses at most
-//! the tiles it holds, which the coordinator re-queues when their leases expire.
+//! with backoff and drains on SIGTERM. It keeps no state worth saving but its identity (in the
+//! cache folder): killing it loses at most the tiles it holds, which the coordinator re-queues
+//! when their leases expire or the worker registers again.
 //!
 //! ```text
 //! tessera-worker --coordinator http://farm:7878 --threads 16 --token $TOKEN
@@ -10,6 +11,7 @@
 
 pub mod client;
 pub mod convert;
+pub mod identity;
 pub mod render;
 pub mod runner;
 pub mod scene_cache;
@@ -29,7 +31,8 @@ pub struct Args {
     /// Worker bearer token.
     #[arg(long, env = "TESSERA_WORKER_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
-    /// Where scene bundles are cached [default: the system temp folder].
+    /// Where scene bundles and the worker's identity are kept [default: the system temp
+    /// folder]. Workers sharing it each take an identity of their own.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
     /// Name shown by the coordinator [default: the host name].

@@ -5,9 +5,9 @@
 //! guides) encoded for the upload.
 
 use std::time::Instant;
-use tessera_common::emis::{CandidateSet, Strategy, render_iterations};
+use tessera_common::emis::{CandidateSet, Strategy, render_iterations_until};
 use tessera_common::film::{Rect, TileAccum};
-use tessera_common::integrator::TileRequest;
+use tessera_common::integrator::{Stop, TileRequest};
 use tessera_common::scene::Scene;
 use tessera_common::settings::Renderer;
 
@@ -20,6 +20,8 @@ pub struct TileWork {
     pub samples: std::ops::Range<u32>,
     /// Seed of the job.
     pub seed: u64,
+    /// Requested when the lease is lost (cancelled, expired): the render gives up.
+    pub stop: Stop,
 }
 
 /// What an EMIS lease renders with.
@@ -41,7 +43,8 @@ pub struct TileOutput {
     pub pilot: Vec<u8>,
 }
 
-/// Renders `tiles` with `renderer` on `pool` (`emis` is required for EMIS renderers).
+/// Renders `tiles` with `renderer` on `pool` (`emis` is required for EMIS renderers). A tile
+/// whose `stop` was requested comes back incomplete, to be dropped.
 pub fn render_batch(
     pool: &rayon::ThreadPool,
     scene: &Scene,
@@ -55,7 +58,7 @@ pub fn render_batch(
             .iter()
             .map(|t| {
                 let start = Instant::now();
-                let (accum, pilot) = render_iterations(
+                let (accum, pilot) = render_iterations_until(
                     scene,
                     *settings,
                     config,
@@ -63,6 +66,7 @@ pub fn render_batch(
                     t.seed,
                     t.samples.clone(),
                     work.collect,
+                    &t.stop,
                 );
                 let pilot = pilot.map(|p| p.encode()).unwrap_or_default();
                 TileOutput { accum, seconds: start.elapsed().as_secs_f64(), pilot }
@@ -74,7 +78,7 @@ pub fn render_batch(
             .map(|t| {
                 let start = Instant::now();
                 let mut accum = TileAccum::new(t.rect, &scene.film);
-                let req = TileRequest { rect: t.rect, samples: t.samples.clone(), seed: t.seed };
+                let req = TileRequest::new(t.rect, t.samples.clone(), t.seed).stoppable(t.stop.clone());
                 integrator.render_tile(scene, &req, &mut accum);
                 TileOutput { accum, seconds: start.elapsed().as_secs_f64(), pilot: Vec::new() }
             })

@@ -7,10 +7,11 @@ use crate::client::{Backoff, Client};
 use crate::convert;
 use crate::render::{EmisWork, TileOutput, TileWork, render_batch};
 use crate::scene_cache::{MaskCache, SceneCache};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tessera_common::emis::{CandidateSet, Strategy};
+use tessera_common::integrator::Stop;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::settings::Renderer;
 use tessera_proto::v1 as pb;
@@ -27,7 +28,14 @@ const UPLOAD_RETRY: Duration = Duration::from_secs(120);
 struct Held {
     leases: Vec<pb::LeaseRef>,
     lost: HashSet<(String, u32, u64)>,
+    /// The stop flag of each held lease's render, requested when the lease is lost.
+    stops: HashMap<(String, u32, u64), Stop>,
 }
+
+/// An error retrying cannot mend.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct Fatal(String);
 
 fn key(l: &pb::LeaseRef) -> (String, u32, u64) {
     (l.job_id.clone(), l.tile, l.epoch)
@@ -39,6 +47,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?);
     let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
     std::fs::create_dir_all(&cache_dir)?;
+    let identity = crate::identity::Identity::keep(&cache_dir)?;
     let mut cache = SceneCache::new(cache_dir, args.texture_budget);
     let name = args.name.clone().unwrap_or_else(|| std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into()));
     let max_tiles = args.max_tiles.unwrap_or(threads as u32).max(1);
@@ -58,8 +67,17 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                     name: name.clone(),
                     threads: threads as u32,
                     version: env!("CARGO_PKG_VERSION").into(),
+                    worker_id: identity.id.clone(),
+                    worker_secret: identity.secret.clone(),
                 }))
-                .await?
+                .await
+                .map_err(|s| match s.code() {
+                    // another worker's identity: retrying cannot help
+                    tonic::Code::FailedPrecondition | tonic::Code::InvalidArgument => {
+                        anyhow::Error::new(Fatal(s.message().to_string()))
+                    }
+                    _ => s.into(),
+                })?
                 .into_inner();
             tracing::info!(worker = %reg.worker_id, coordinator = %args.coordinator, threads, "registered");
             backoff.reset();
@@ -77,6 +95,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
         };
         match session.await {
             Ok(()) => break,
+            Err(e) if e.is::<Fatal>() => return Err(e.context("registration refused")),
             Err(e) => {
                 let delay = backoff.next_delay();
                 tracing::warn!(error = %format!("{e:#}"), retry_in_ms = delay.as_millis() as u64, "coordinator unavailable");
@@ -119,12 +138,17 @@ async fn work_loop(
         if leases.is_empty() {
             continue;
         }
-        held.lock().unwrap_or_else(|p| p.into_inner()).leases = leases.iter().filter_map(|l| l.lease.clone()).collect();
+        {
+            let mut h = held.lock().unwrap_or_else(|p| p.into_inner());
+            h.leases = leases.iter().filter_map(|l| l.lease.clone()).collect();
+            h.stops = h.leases.iter().map(|l| (key(l), Stop::new())).collect();
+        }
         let outcome = render_and_upload(client, worker, pool, cache, held, &leases).await;
         {
             let mut h = held.lock().unwrap_or_else(|p| p.into_inner());
             h.leases.clear();
             h.lost.clear();
+            h.stops.clear();
         }
         outcome?;
     }
@@ -174,6 +198,7 @@ async fn render_and_upload(
             (Renderer::Emis(..), None) => anyhow::bail!("an EMIS lease came without a strategy"),
             (Renderer::Tiles(_), _) => None,
         };
+        let stops = held.lock().unwrap_or_else(|p| p.into_inner()).stops.clone();
         let tiles = leases
             .iter()
             .map(|l| {
@@ -181,6 +206,7 @@ async fn render_and_upload(
                     rect: convert::rect(l.rect.as_ref())?,
                     samples: l.sample_begin..l.sample_end,
                     seed: settings.seed.unwrap_or(0),
+                    stop: l.lease.as_ref().and_then(|l| stops.get(&key(l)).cloned()).unwrap_or_default(),
                 })
             })
             .collect::<Result<Vec<_>, String>>()
@@ -284,6 +310,11 @@ async fn heartbeat_loop(mut client: Client, worker: String, interval_ms: u32, he
             Ok(r) => {
                 let mut h = held.lock().unwrap_or_else(|p| p.into_inner());
                 for l in r.into_inner().lost {
+                    // cancelled, expired or past its lifetime: stop rendering it now
+                    if let Some(stop) = h.stops.get(&key(&l)) {
+                        stop.request();
+                        tracing::info!(job_id = %l.job_id, tile = l.tile, "lease lost: render stopped");
+                    }
                     h.lost.insert(key(&l));
                 }
             }

@@ -40,14 +40,20 @@ impl GuideBuffer {
         }
     }
 
-    /// Adds another buffer of the same size.
-    pub fn merge(&mut self, o: &GuideBuffer) -> Result<(), String> {
+    /// Whether [`GuideBuffer::merge`] would take `o`: the same size.
+    pub fn check_shape(&self, o: &GuideBuffer) -> Result<(), String> {
         if (self.width, self.height) != (o.width, o.height) {
             return Err(format!(
                 "guide buffers differ in size: {}x{} vs {}x{}",
                 self.width, self.height, o.width, o.height
             ));
         }
+        Ok(())
+    }
+
+    /// Adds another buffer of the same size.
+    pub fn merge(&mut self, o: &GuideBuffer) -> Result<(), String> {
+        self.check_shape(o)?;
         for (a, b) in self.albedo.iter_mut().zip(&o.albedo) {
             *a = [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
         }

@@ -31,6 +31,6 @@ mod wire;
 
 pub use render::{
     CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, GUIDE_ITERATIONS, PilotData,
-    PilotStart, Strategy, collecting_call, collects_moments, render_emis, render_iterations,
+    PilotStart, Strategy, collecting_call, collects_moments, render_emis, render_iterations, render_iterations_until,
 };
 pub use state::{EmisState, UpdateReport};

@@ -43,16 +43,22 @@ impl MomentBuffer {
 
     /// Adds another buffer of the same shape (another worker's iterations).
     pub fn merge(&mut self, other: &MomentBuffer) -> Result<(), String> {
+        self.check_shape(other)?;
+        for (a, b) in self.sums.iter_mut().zip(&other.sums) {
+            *a += b;
+        }
+        self.iterations += other.iterations;
+        Ok(())
+    }
+
+    /// Whether [`MomentBuffer::merge`] would take `other`: the same size and candidates.
+    pub fn check_shape(&self, other: &MomentBuffer) -> Result<(), String> {
         if (self.width, self.height, self.candidates) != (other.width, other.height, other.candidates) {
             return Err(format!(
                 "moment buffers differ in shape: {}x{}x{} vs {}x{}x{}",
                 self.width, self.height, self.candidates, other.width, other.height, other.candidates
             ));
         }
-        for (a, b) in self.sums.iter_mut().zip(&other.sums) {
-            *a += b;
-        }
-        self.iterations += other.iterations;
         Ok(())
     }
 

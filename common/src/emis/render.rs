@@ -36,7 +36,7 @@ use super::moments::MomentBuffer;
 use super::optimize::FilterSettings;
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
-use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, TileRequest};
+use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, Stop, TileRequest};
 use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -270,10 +270,25 @@ pub fn render_iterations(
     iterations: Range<u32>,
     collect: Option<CandidateSet>,
 ) -> (TileAccum, Option<PilotData>) {
+    render_iterations_until(scene, settings, config, strategy, seed, iterations, collect, &Stop::default())
+}
+
+/// [`render_iterations`], given up when `stop` is requested (the result is then incomplete).
+#[allow(clippy::too_many_arguments)]
+pub fn render_iterations_until(
+    scene: &Scene,
+    settings: PathSettings,
+    config: &EmisConfig,
+    strategy: &Strategy,
+    seed: u64,
+    iterations: Range<u32>,
+    collect: Option<CandidateSet>,
+    stop: &Stop,
+) -> (TileAccum, Option<PilotData>) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let rect = Rect::full(w, h);
     let mut accum = TileAccum::new(rect, &scene.film);
-    let request = TileRequest { rect, samples: iterations.clone(), seed };
+    let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
     let collect = collect.filter(|_| collects_moments(strategy.nu, &iterations));
     if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
@@ -285,7 +300,8 @@ pub fn render_iterations(
                 .into_par_iter()
                 .map(|rect| {
                     let mut tile = TileAccum::new(rect, &scene.film);
-                    pt.render_tile(scene, &TileRequest { rect, samples: iterations.clone(), seed }, &mut tile);
+                    let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
+                    pt.render_tile(scene, &request, &mut tile);
                     tile
                 })
                 .collect()

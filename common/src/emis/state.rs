@@ -154,6 +154,12 @@ impl EmisState {
         self.next_update() == Some(iterations)
     }
 
+    /// Whether [`EmisState::absorb`] would take `pilot`: buffers of this state's shape.
+    pub fn check(&self, pilot: &PilotData) -> Result<(), String> {
+        self.moments.check_shape(&pilot.moments)?;
+        self.guides.check_shape(&pilot.guides)
+    }
+
     /// Adds a pilot range's data.
     pub fn absorb(&mut self, pilot: &PilotData) -> Result<(), String> {
         self.moments.merge(&pilot.moments)?;

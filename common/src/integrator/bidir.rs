@@ -335,6 +335,9 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
         assert_eq!(tile.rect, crate::film::Rect::full(w, h), "invariant: bdpt renders full-frame tiles");
         let n = light_path_count(self.light_paths_per_pixel, w * h);
         for iteration in tile.samples.clone() {
+            if tile.stop.requested() {
+                return;
+            }
             if self.settings.max_depth == 0 {
                 for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
                     accum.add_sample(x, y, Vec2::new(x as f32 + 0.5, y as f32 + 0.5), Rgb::ZERO);
@@ -368,6 +371,9 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 .into_par_iter()
                 .map_init(Vec::new, |verts, y| {
                     let mut counters = PathCounters::default();
+                    if tile.stop.requested() {
+                        return (Vec::new(), counters);
+                    }
                     let row = (0..w)
                         .map(|x| {
                             let value = self.camera_path(scene, &it, x, y, tile.seed, iteration, verts, &mut counters);

@@ -79,6 +79,9 @@ impl Integrator for LightTracer {
         // the pixel filter's importance is P times the image-normalised We
         let scale = (w * h) as f32 / n as f32;
         for iteration in tile.samples.clone() {
+            if tile.stop.requested() {
+                return;
+            }
             let chunks: Vec<Vec<(Vec2, Rgb)>> = (0..n.div_ceil(LIGHT_PATH_CHUNK))
                 .into_par_iter()
                 .map(|c| {

@@ -19,7 +19,7 @@ pub use lt::LightTracer;
 pub use pt::PathTracer;
 
 /// One unit of work.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug)]
 pub struct TileRequest {
     /// Pixels to render.
     pub rect: Rect,
@@ -27,6 +27,46 @@ pub struct TileRequest {
     pub samples: Range<u32>,
     /// Job seed.
     pub seed: u64,
+    /// Asks the render to give up early; what it returns then is to be thrown away.
+    pub stop: Stop,
+}
+
+impl TileRequest {
+    /// A request that runs to its end.
+    pub fn new(rect: Rect, samples: Range<u32>, seed: u64) -> Self {
+        TileRequest { rect, samples, seed, stop: Stop::default() }
+    }
+
+    /// The same request, given up when `stop` is requested.
+    pub fn stoppable(self, stop: Stop) -> Self {
+        TileRequest { stop, ..self }
+    }
+}
+
+/// A request to stop rendering, shared between whoever may ask (a worker that lost its lease)
+/// and the render, which checks it between pixels, rows or iterations: a stopped tile's sums
+/// are incomplete and must be discarded.
+#[derive(Clone, Debug, Default)]
+pub struct Stop(Option<std::sync::Arc<std::sync::atomic::AtomicBool>>);
+
+impl Stop {
+    /// A flag that can be requested.
+    pub fn new() -> Self {
+        Stop(Some(Default::default()))
+    }
+
+    /// Asks every render holding this flag to stop.
+    pub fn request(&self) {
+        if let Some(f) = &self.0 {
+            f.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    /// Whether stopping was asked for.
+    #[inline]
+    pub fn requested(&self) -> bool {
+        self.0.as_ref().is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed))
+    }
 }
 
 /// Path-length and emitter settings shared by the integrators (Mitsuba's `path` parameters).

@@ -224,6 +224,10 @@ impl Integrator for PathTracer {
         let untextured = scene.is_untextured();
         for y in r.y0..r.y1 {
             for x in r.x0..r.x1 {
+                // per pixel: at thousands of samples per pixel a row takes seconds
+                if tile.stop.requested() {
+                    return;
+                }
                 let pixel = y * width + x;
                 for s in tile.samples.clone() {
                     let mut sampler = Sampler::for_pixel(tile.seed, pixel, s);

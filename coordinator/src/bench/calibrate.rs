@@ -81,7 +81,7 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
     for round in 0..=repeats {
         for (i, integrator) in integrators.iter().enumerate() {
             let samples = 2 + round * iterations..2 + (round + 1) * iterations;
-            let request = TileRequest { rect: Rect::full(w, h), samples, seed: 7 };
+            let request = TileRequest::new(Rect::full(w, h), samples, 7);
             let t = Instant::now();
             pool.install(|| integrator.render_tile(scene, &request, &mut TileAccum::new(request.rect, &scene.film)));
             if round > 0 {

@@ -167,7 +167,7 @@ fn pilot_moments(
     pool.install(|| {
         pilot.with_observer(&estimators[..]).render_tile(
             &s.scene,
-            &TileRequest { rect: full, samples: 0..iterations, seed: 7 },
+            &TileRequest::new(full, 0..iterations, 7),
             &mut TileAccum::new(full, &s.scene.film),
         )
     });
@@ -190,7 +190,7 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
     let mut m = Measured::default();
     for c in candidates {
         let own = MomentEstimator::new(w as u32, h as u32, std::slice::from_ref(c), MomentSettings::default());
-        let request = TileRequest { rect: full, samples: 1000..1000 + k, seed: 11 };
+        let request = TileRequest::new(full, 1000..1000 + k, 11);
         let integrator = strategy_of(c).integrator(s.settings, s.config.correlation_aware);
         pool.install(|| {
             integrator.with_observer(&own).render_tile(&s.scene, &request, &mut TileAccum::new(full, &s.scene.film))

@@ -51,7 +51,7 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
         tracing::info!(%addr, data_dir = %args.data_dir.display(), "coordinator started");
         let ticker = {
             let svc = svc.clone();
-            let period = Duration::from_millis((svc.lease_timeout_ms() / 4).clamp(50, 1000));
+            let period = Duration::from_millis(svc.expiry_period_ms());
             tokio::spawn(async move {
                 let mut tick = tokio::time::interval(period);
                 loop {

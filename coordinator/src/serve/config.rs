@@ -3,7 +3,7 @@
 //! service's settings and the API tokens.
 
 use super::auth::Tokens;
-use super::job::service::{DEFAULT_MAX_PIXELS, ServiceConfig};
+use super::job::service::{DEFAULT_MAX_PIXELS, LeaseLifetime, ServiceConfig};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -36,6 +36,14 @@ pub struct ServeArgs {
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
+    /// Least seconds a lease may be held with heartbeats but no result (doubled at each
+    /// earlier failure of its tile): the floor of its lifetime.
+    #[arg(long, default_value_t = 120.0, value_name = "SECONDS")]
+    pub lease_max_floor: f64,
+    /// A lease's lifetime is this many times what its tile should take at the slowest rate
+    /// measured for its job (never below --lease-max-floor).
+    #[arg(long, default_value_t = 8.0)]
+    pub lease_max_factor: f64,
     /// Least seconds between film checkpoints of a job (big films wait longer: at least 20 times
     /// the last checkpoint's write time).
     #[arg(long, default_value_t = 2.0)]
@@ -68,8 +76,18 @@ impl ServeArgs {
         if !(self.lease_timeout > 0.0 && self.lease_timeout.is_finite()) {
             bail!("--lease-timeout must be a positive number of seconds, got {}", self.lease_timeout);
         }
+        if !(self.lease_max_floor > 0.0 && self.lease_max_floor.is_finite()) {
+            bail!("--lease-max-floor must be a positive number of seconds, got {}", self.lease_max_floor);
+        }
+        if !(self.lease_max_factor >= 1.0 && self.lease_max_factor.is_finite()) {
+            bail!("--lease-max-factor must be a number of at least 1, got {}", self.lease_max_factor);
+        }
         let cfg = ServiceConfig {
             lease_timeout_ms: (self.lease_timeout * 1000.0) as u64,
+            lease_lifetime: LeaseLifetime {
+                floor_ms: (self.lease_max_floor * 1000.0) as u64,
+                factor: self.lease_max_factor,
+            },
             checkpoint_interval_ms: (self.checkpoint_interval.max(0.0) * 1000.0) as u64,
             texture_limits: self
                 .texture_budget

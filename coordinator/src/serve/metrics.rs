@@ -101,6 +101,7 @@ impl Collector for ServiceCollector {
             ("tessera_results_refused", "Tile results refused by validation.", c.results_refused),
             ("tessera_results_ignored", "Stale or duplicate tile results.", c.results_ignored),
             ("tessera_leases_expired", "Leases that expired.", c.leases_expired),
+            ("tessera_coordinator_stalls", "Times the coordinator found itself stalled (leases postponed).", c.stalls),
             ("tessera_tiles_merged", "Tiles merged into films.", c.tiles_merged),
         ] {
             let counter = ConstCounter::new(value);

@@ -46,7 +46,7 @@ pub fn measure(scene_path: &Path) -> anyhow::Result<TileTimes> {
     pool.install(|| {
         for rect in &picked {
             let mut accum = TileAccum::new(*rect, &scene.film);
-            pt.render_tile(&scene, &TileRequest { rect: *rect, samples: 0..spp, seed: 1 }, &mut accum);
+            pt.render_tile(&scene, &TileRequest::new(*rect, 0..spp, 1), &mut accum);
             pixels += rect.area();
         }
     });
@@ -60,7 +60,7 @@ pub fn measure(scene_path: &Path) -> anyhow::Result<TileTimes> {
     pool.install(|| {
         for i in 0..iterations {
             let mut accum = TileAccum::new(full, &scene.film);
-            vcm.render_tile(&scene, &TileRequest { rect: full, samples: i..i + 1, seed: 1 }, &mut accum);
+            vcm.render_tile(&scene, &TileRequest::new(full, i..i + 1, 1), &mut accum);
         }
     });
     let vcm_iteration_s = t.elapsed().as_secs_f64() / iterations as f64;

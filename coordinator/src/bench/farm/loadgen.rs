@@ -113,7 +113,7 @@ pub async fn connect_worker(url: &str) -> anyhow::Result<WorkerServiceClient<Cha
 
 /// Registers a simulated worker; returns its id.
 pub async fn register(client: &mut WorkerServiceClient<Channel>, name: &str) -> anyhow::Result<String> {
-    let req = pb::RegisterRequest { name: name.into(), threads: 1, version: "bench".into() };
+    let req = pb::RegisterRequest { name: name.into(), threads: 1, version: "bench".into(), ..Default::default() };
     Ok(client.register(req).await?.into_inner().worker_id)
 }
 
@@ -444,6 +444,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let cfg = ServiceConfig {
             lease_timeout_ms: 60_000,
+            lease_lifetime: crate::serve::job::service::LeaseLifetime { floor_ms: 600_000, factor: 8.0 },
             checkpoint_interval_ms: 0,
             texture_limits: Default::default(),
             max_pixels: DEFAULT_MAX_PIXELS,
@@ -457,7 +458,7 @@ mod tests {
         };
         let job = svc.submit(bundle, settings_from_pb(req.settings).unwrap(), 0, None, 1).unwrap();
         assert_eq!((job.width, job.height), (width, height), "the -D size overrides reach the scene");
-        let worker = svc.register("sim", 1, 1).unwrap();
+        let worker = svc.register("sim", 1, None, 1).unwrap();
         let mut tiles = 0;
         loop {
             let grants = svc.lease(&worker, 3, 2).unwrap();

@@ -22,7 +22,12 @@ const MAX_WAIT: Duration = Duration::from_secs(30);
 impl pb::worker_service_server::WorkerService for WorkerApi {
     async fn register(&self, req: Request<pb::RegisterRequest>) -> Result<Response<pb::RegisterResponse>, Status> {
         let req = req.into_inner();
-        let id = self.0.svc.register(&req.name, req.threads, now_ms())?;
+        let svc = self.0.svc.clone();
+        let id = blocking(move || {
+            let identity = (!req.worker_id.is_empty()).then_some((req.worker_id.as_str(), req.worker_secret.as_str()));
+            svc.register(&req.name, req.threads, identity, now_ms())
+        })
+        .await?;
         let ttl = self.0.svc.lease_timeout_ms();
         Ok(Response::new(pb::RegisterResponse {
             worker_id: id,

@@ -139,6 +139,11 @@ impl EmisJob {
         self.shape().decode(tile, collect, bytes)
     }
 
+    /// Whether [`EmisJob::absorb`] would take `pilot`.
+    pub fn check(&self, pilot: &PilotData) -> Result<(), String> {
+        self.state.check(pilot)
+    }
+
     /// Adds a tile's pilot data (tiles are merged in order, so the sums are those of a local
     /// render).
     pub fn absorb(&mut self, pilot: &PilotData) -> Result<(), String> {

@@ -3,6 +3,7 @@
 //! service that wraps them with storage and notifications ([`service`]).
 
 pub mod emis;
+pub mod leasing;
 pub mod model;
 pub mod plan;
 pub mod service;
@@ -10,6 +11,8 @@ pub mod spec;
 pub mod validate;
 pub mod view;
 
+#[cfg(test)]
+mod fault_tests;
 #[cfg(test)]
 mod service_tests;
 #[cfg(test)]

@@ -93,12 +93,15 @@ pub struct Pass {
 pub enum TileState {
     /// Waiting for a worker.
     Queued,
-    /// Held by `worker` until `deadline_ms` unless heartbeats extend it.
+    /// Held by `worker` until `deadline_ms` unless heartbeats extend it, and never much
+    /// longer than the job's tiles take (see `leasing.rs`).
     Leased {
         /// The holder.
         worker: String,
         /// Expiry time.
         deadline_ms: u64,
+        /// When it was leased (or restored after a restart).
+        since_ms: u64,
     },
     /// A valid result is stored and waits for its turn in the merge order.
     Accepted,
@@ -146,6 +149,9 @@ pub struct Job {
     pub started_ms: Option<u64>,
     /// Reaching a terminal state.
     pub finished_ms: Option<u64>,
+    /// The slowest rate any accepted result of this job was rendered at, from lease to
+    /// result, per pixel sample: what bounds a lease's lifetime. Measured again after a restart.
+    pub slowest_ms_per_sample: Option<f64>,
 }
 
 /// Results that arrive ahead of the merge frontier wait in memory: a job leases no further
@@ -236,7 +242,7 @@ impl Job {
 /// changed (the job's own row is always saved for a job listed here).
 pub type Changes = BTreeMap<String, BTreeSet<usize>>;
 
-fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
+pub(super) fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
     let set = changes.entry(job.to_string()).or_default();
     if let Some(t) = tile {
         set.insert(t);
@@ -310,6 +316,7 @@ impl JobsModel {
             created_ms: now_ms,
             started_ms: None,
             finished_ms: None,
+            slowest_ms_per_sample: None,
         };
         let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
         let range = job.append_pass(kind, first, false);
@@ -324,46 +331,8 @@ impl JobsModel {
         self.jobs.insert(job.id.clone(), job);
     }
 
-    /// Leases up to `max_tiles` queued tiles of the most urgent job `worker` may render
-    /// (highest priority, then oldest). Full-frame jobs hand out one tile at a time.
-    pub fn lease(&mut self, worker: &str, max_tiles: usize, now_ms: u64, ttl_ms: u64) -> (Vec<LeaseRef>, Changes) {
-        let mut changes = Changes::new();
-        let candidate = self
-            .jobs
-            .values()
-            .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
-            .filter(|j| !j.is_blocklisted(worker))
-            .filter(|j| j.tiles[j.leasable()].iter().any(|t| t.state == TileState::Queued))
-            .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
-            .map(|j| j.id.clone());
-        let Some(id) = candidate else { return (Vec::new(), changes) };
-        let job = self.jobs.get_mut(&id).expect("invariant: candidate job exists");
-        let max = if job.spec.full_frame { 1 } else { max_tiles.max(1) };
-        let mut leases = Vec::new();
-        let leasable = job.leasable();
-        for (i, tile) in job.tiles.iter_mut().enumerate().skip(leasable.start).take(leasable.len()) {
-            if leases.len() == max {
-                break;
-            }
-            if tile.state == TileState::Queued {
-                tile.state = TileState::Leased { worker: worker.to_string(), deadline_ms: now_ms + ttl_ms };
-                leases.push(LeaseRef { job: id.clone(), tile: i, epoch: tile.epoch });
-                touch(&mut changes, &id, Some(i));
-            }
-        }
-        if job.state == JobState::Queued {
-            job.state = match job.passes.last().map(|p| p.kind) {
-                Some(PassKind::Pilot) => JobState::Pilot,
-                _ => JobState::Final,
-            };
-            job.started_ms = Some(now_ms);
-            touch(&mut changes, &id, None);
-        }
-        (leases, changes)
-    }
-
     /// The tile a lease refers to, if that lease is still the current one.
-    fn current_tile(&mut self, worker: &str, lease: &LeaseRef) -> Option<(&mut Job, usize)> {
+    pub(super) fn current_tile(&mut self, worker: &str, lease: &LeaseRef) -> Option<(&mut Job, usize)> {
         let job = self.jobs.get_mut(&lease.job)?;
         if job.state.is_terminal() {
             return None;
@@ -371,43 +340,6 @@ impl JobsModel {
         let tile = job.tiles.get(lease.tile)?;
         let held = matches!(&tile.state, TileState::Leased { worker: w, .. } if w == worker);
         (held && tile.epoch == lease.epoch).then_some((job, lease.tile))
-    }
-
-    /// Extends `worker`'s current leases among `leases` to `now_ms + ttl_ms`; returns those
-    /// that are not current any more. Deadlines are not persisted (see `service.rs`), so this
-    /// reports no changes.
-    pub fn heartbeat(&mut self, worker: &str, leases: &[LeaseRef], now_ms: u64, ttl_ms: u64) -> Vec<LeaseRef> {
-        let mut lost = Vec::new();
-        for lease in leases {
-            match self.current_tile(worker, lease) {
-                Some((job, i)) => {
-                    if let TileState::Leased { deadline_ms, .. } = &mut job.tiles[i].state {
-                        *deadline_ms = (*deadline_ms).max(now_ms + ttl_ms);
-                    }
-                }
-                None => lost.push(lease.clone()),
-            }
-        }
-        lost
-    }
-
-    /// Returns every lease whose deadline has passed to the queue with epoch + 1, counting a
-    /// failure against its worker.
-    pub fn expire(&mut self, now_ms: u64) -> Changes {
-        let mut changes = Changes::new();
-        for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
-            for i in 0..job.tiles.len() {
-                let expired = match &job.tiles[i].state {
-                    TileState::Leased { worker, deadline_ms } if *deadline_ms <= now_ms => Some(worker.clone()),
-                    _ => None,
-                };
-                if let Some(worker) = expired {
-                    fail_tile(job, i, &worker, "lease expired", now_ms);
-                    touch(&mut changes, &job.id, Some(i));
-                }
-            }
-        }
-        changes
     }
 
     /// Applies an uploaded result. `verdict` is the validation of its buffers (done outside
@@ -430,6 +362,10 @@ impl JobsModel {
         touch(&mut changes, &lease.job, Some(i));
         match verdict {
             Ok(()) => {
+                if let TileState::Leased { since_ms, .. } = job.tiles[i].state {
+                    let rate = now_ms.saturating_sub(since_ms) as f64 / job.tiles[i].spec.pixel_samples().max(1) as f64;
+                    job.slowest_ms_per_sample = Some(job.slowest_ms_per_sample.map_or(rate, |r| r.max(rate)));
+                }
                 job.tiles[i].state = TileState::Accepted;
                 (ResultOutcome::Accepted, changes)
             }
@@ -545,25 +481,12 @@ impl JobsModel {
         }
         changes
     }
-
-    /// Current leases of `worker`.
-    pub fn leases_of(&self, worker: &str) -> Vec<LeaseRef> {
-        let mut out = Vec::new();
-        for job in self.jobs.values() {
-            for (i, t) in job.tiles.iter().enumerate() {
-                if matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker) {
-                    out.push(LeaseRef { job: job.id.clone(), tile: i, epoch: t.epoch });
-                }
-            }
-        }
-        out
-    }
 }
 
 /// Sends tile `i` back to the queue with a new epoch and counts the failure against `worker`
 /// (blocklisting it for the job after [`BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile
 /// has failed [`MAX_TILE_FAILURES`] times.
-fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now_ms: u64) {
+pub(super) fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now_ms: u64) {
     let tile = &mut job.tiles[i];
     tile.state = TileState::Queued;
     tile.epoch += 1;

@@ -10,14 +10,15 @@ use tessera_common::integrator::TileRequest;
 use tessera_common::scene::Scene;
 use tessera_common::settings::{RenderSettings, Renderer};
 
-const CFG: ServiceConfig = ServiceConfig {
+pub(super) const CFG: ServiceConfig = ServiceConfig {
     lease_timeout_ms: 10_000,
+    lease_lifetime: super::leasing::LeaseLifetime { floor_ms: 60_000, factor: 8.0 },
     checkpoint_interval_ms: 3_600_000,
     texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
     max_pixels: super::service::DEFAULT_MAX_PIXELS,
 };
 
-fn cornell() -> (Bundle, Scene) {
+pub(super) fn cornell() -> (Bundle, Scene) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
     let xml = std::fs::read(&path).unwrap();
     let bundle = Bundle { scene_path: "scene.xml".into(), files: vec![("scene.xml".into(), xml)] };
@@ -25,7 +26,7 @@ fn cornell() -> (Bundle, Scene) {
 }
 
 /// Renders a lease's tile honestly and uploads it.
-fn upload(
+pub(super) fn upload(
     svc: &JobService,
     scene: &Scene,
     worker: &str,
@@ -36,7 +37,7 @@ fn upload(
     let settings = RenderSettings { spp: Some(1), seed: Some(3), ..Default::default() };
     let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(scene) else { panic!("a tile integrator") };
     let mut accum = TileAccum::new(tile.rect, &scene.film);
-    integrator.render_tile(scene, &TileRequest { rect: tile.rect, samples: tile.samples.clone(), seed: 3 }, &mut accum);
+    integrator.render_tile(scene, &TileRequest::new(tile.rect, tile.samples.clone(), 3), &mut accum);
     let payload = tessera_proto::payload::encode_tile(&accum);
     let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite, pilot_bytes: 0 };
     svc.upload(worker, lease, &claim, &payload, now)
@@ -51,7 +52,7 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
         let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
         let job = svc.submit(bundle.clone(), settings.clone(), 0, None, 1_000).unwrap();
         assert_eq!(job.tiles_total, 16);
-        let worker = svc.register("w", 1, 1_000).unwrap();
+        let worker = svc.register("w", 1, None, 1_000).unwrap();
         let leases: Vec<_> = svc.lease(&worker, 3, 1_000).unwrap().into_iter().map(|g| g.lease).collect();
         // tiles 1 and 2 arrive before tile 0: accepted, held, not merged
         for l in &leases[1..] {
@@ -147,8 +148,8 @@ fn a_job_no_live_worker_may_serve_fails_with_the_reason() {
     let (bundle, _) = cornell();
     let settings = RenderSettings { spp: Some(1), ..Default::default() };
     let job = svc.submit(bundle, settings, 0, None, 1_000).unwrap().id;
-    let quiet = svc.register("quiet", 1, 1_000).unwrap();
-    let workers: Vec<String> = (0..2).map(|i| svc.register(&format!("w{i}"), 1, 20_000).unwrap()).collect();
+    let quiet = svc.register("quiet", 1, None, 1_000).unwrap();
+    let workers: Vec<String> = (0..2).map(|i| svc.register(&format!("w{i}"), 1, None, 20_000).unwrap()).collect();
     let now = 20_100;
     let blocklist = crate::serve::job::model::BLOCKLIST_AFTER_FAILURES as usize;
     for (k, w) in workers.iter().enumerate() {
@@ -167,4 +168,29 @@ fn a_job_no_live_worker_may_serve_fails_with_the_reason() {
     assert_eq!(view.state, JobState::Failed, "{view:?}");
     assert!(view.error.as_deref().is_some_and(|e| e.contains("no eligible worker")), "{view:?}");
     let _ = quiet;
+}
+
+/// The expiry timer running a minute late means the coordinator stalled: the lease it would
+/// have expired is postponed by the stall, and ends at its deadline after it as usual.
+#[test]
+fn a_coordinator_stall_is_not_held_against_its_workers() {
+    let dir = tempfile::tempdir().unwrap();
+    let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
+    let (bundle, _) = cornell();
+    svc.submit(bundle, RenderSettings { spp: Some(1), ..Default::default() }, 0, None, 1_000).unwrap();
+    let w = svc.register("w", 1, None, 1_000).unwrap();
+    let lease = svc.lease(&w, 1, 1_000).unwrap().remove(0).lease;
+    svc.expire(1_000).unwrap();
+    svc.expire(61_000).unwrap();
+    let m = svc.metrics();
+    assert_eq!((m.counters.stalls, m.counters.leases_expired), (1, 0));
+    assert_eq!(svc.heartbeat(&w, std::slice::from_ref(&lease), 61_000).unwrap(), vec![], "still held");
+    let mut now = 61_000;
+    while svc.metrics().counters.leases_expired == 0 {
+        now += svc.expiry_period_ms();
+        assert!(now <= 61_000 + CFG.lease_timeout_ms + svc.expiry_period_ms(), "never expired");
+        svc.expire(now).unwrap();
+    }
+    assert!(now >= 61_000 + CFG.lease_timeout_ms, "expired before its deadline");
+    assert_eq!(svc.heartbeat(&w, std::slice::from_ref(&lease), now).unwrap(), vec![lease]);
 }

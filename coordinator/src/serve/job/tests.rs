@@ -1,12 +1,15 @@
 //! Tests of the pure job state machine: every transition, plus property tests over arbitrary
 //! interleavings of lease, heartbeat, expiry, result and failure events.
 
+use super::leasing::LeaseLifetime;
 use super::model::*;
 use super::plan::BarrierAction;
 use proptest::prelude::*;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
 const TTL: u64 = 1000;
+/// A lifetime long enough never to matter, but in the tests of it.
+const LONG: LeaseLifetime = LeaseLifetime { floor_ms: 1 << 40, factor: 8.0 };
 
 fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
     JobSpec {
@@ -71,8 +74,8 @@ fn expired_lease_requeues_with_next_epoch_and_late_result_is_stale() {
     let (l, _) = m.lease("w1", 8, 0, TTL);
     assert_eq!(l.len(), 1, "full-frame jobs lease one tile at a time");
     assert_eq!(m.heartbeat("w1", &l, 900, TTL), vec![]);
-    assert!(m.expire(1500).is_empty(), "the heartbeat extended the lease");
-    let changes = m.expire(1900);
+    assert!(m.expire(1500, &LONG).is_empty(), "the heartbeat extended the lease");
+    let changes = m.expire(1900, &LONG);
     assert_eq!(changes["a"].iter().copied().collect::<Vec<_>>(), vec![0]);
     assert_eq!(m.jobs["a"].tiles[0].epoch, 1);
     assert_eq!(m.result("w1", &l[0], Ok(()), 2000).0, ResultOutcome::Stale);
@@ -81,6 +84,52 @@ fn expired_lease_requeues_with_next_epoch_and_late_result_is_stale() {
     assert_eq!(l2[0], LeaseRef { job: "a".into(), tile: 0, epoch: 1 });
     assert_eq!(m.result("w2", &l2[0], Ok(()), 2100).0, ResultOutcome::Accepted);
     assert_eq!(m.result("w2", &l2[0], Ok(()), 2100).0, ResultOutcome::Duplicate);
+}
+
+/// A worker that heartbeats but never returns loses its tile at the lease's lifetime: the
+/// floor before anything is measured, then `factor` times the slowest measured rate, doubled
+/// at each earlier failure of the tile.
+#[test]
+fn a_lease_held_past_its_lifetime_is_requeued_despite_heartbeats() {
+    let life = LeaseLifetime { floor_ms: 5 * TTL, factor: 4.0 };
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    let (stuck, _) = m.lease("stuck", 1, 0, TTL);
+    let mut now = 0;
+    while m.heartbeat("stuck", &stuck, now, TTL).is_empty() {
+        assert!(now < 5 * TTL, "held past the floor");
+        now += TTL / 2;
+        m.expire(now, &life);
+    }
+    assert_eq!(now, 5 * TTL, "lost at the floor, not before");
+    assert_eq!((m.jobs["a"].tiles[0].epoch, m.jobs["a"].worker_failures["stuck"]), (1, 1));
+    // "fast" takes tiles 0 and 1; tile 1 (64² pixels × 1 sample) comes back after 2 s
+    let (l, _) = m.lease("fast", 2, now, TTL);
+    assert_eq!((l[0].tile, l[1].tile), (0, 1));
+    m.result("fast", &l[1], Ok(()), now + 2000);
+    let rate = m.jobs["a"].slowest_ms_per_sample.unwrap();
+    let samples = m.jobs["a"].tiles[1].spec.pixel_samples() as f64;
+    assert!((rate * samples - 2000.0).abs() < 1e-6, "{rate}");
+    assert_eq!(life.of(&m.jobs["a"], 2), 8000, "4 × 2 s, above the 5 s floor");
+    assert_eq!(life.of(&m.jobs["a"], 0), 16_000, "tile 0 failed once: twice as long");
+    // tile 0's second holder heartbeats but never returns it: cut off 16 s after its lease
+    m.heartbeat("fast", &l[..1], now + 15_900, TTL);
+    assert!(m.expire(now + 15_900, &life).is_empty());
+    assert!(!m.expire(now + 16_000, &life).is_empty());
+    assert_eq!(m.heartbeat("fast", &l[..1], now + 16_000, TTL), l[..1], "told to abandon it");
+}
+
+/// When the coordinator stalled, its leases' clocks move on by the stall: nothing expires for it.
+#[test]
+fn postponed_leases_do_not_expire_for_the_coordinators_stall() {
+    let life = LeaseLifetime { floor_ms: 2 * TTL, factor: 4.0 };
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+    let (l, _) = m.lease("w", 1, 0, TTL);
+    m.postpone_leases(10 * TTL);
+    assert!(m.expire(10 * TTL + TTL / 2, &life).is_empty());
+    assert_eq!(m.heartbeat("w", &l, 10 * TTL + TTL / 2, TTL), vec![]);
+    assert!(!m.expire(12 * TTL, &life).is_empty(), "the lifetime still holds after the stall");
 }
 
 #[test]
@@ -247,7 +296,8 @@ proptest! {
 
     /// Under any interleaving, each tile is accepted at most once, merged exactly once when
     /// the job completes, epochs never go back, and the merged prefix is exactly the merged
-    /// tiles; a fresh well-behaved worker always finishes a job that has not failed.
+    /// tiles; the same workers, well-behaved from then on, finish the job or see it fail with
+    /// a reason (a tile failed too often, or every one of them is blocklisted).
     // long: one scenario, its interleaving then the invariants over the state it left
     #[test]
     fn exactly_once_merge_under_arbitrary_interleavings(
@@ -284,7 +334,7 @@ proptest! {
                 }
                 Event::Advance { ms } => {
                     now += ms;
-                    m.expire(now);
+                    m.expire(now, &LONG);
                 }
                 Event::Result { pick, valid, wrong_worker } if !issued.is_empty() => {
                     let (w, l) = issued[pick % issued.len()].clone();
@@ -312,27 +362,39 @@ proptest! {
             prop_assert!(accepted.values().all(|&n| n == 1), "a tile was accepted twice");
             prop_assert!(merges.iter().all(|&n| n <= 1), "a tile was merged twice");
         }
-        // a fresh worker drives the job to completion after all leases lapse (unless expiring
-        // them pushes a tile over the failure limit, which fails the job)
+        // the same workers drive the job to completion after all leases lapse: it ends done,
+        // or failed because a tile failed too often or every worker is blocklisted for it
         now += 10 * TTL;
-        m.expire(now);
-        if m.jobs["j"].state == JobState::Failed {
-            prop_assert!(m.jobs["j"].tiles.iter().any(|t| t.failures >= MAX_TILE_FAILURES));
-            prop_assert!(m.lease("finisher", 4, now, TTL).0.is_empty());
-        } else {
-            for _ in 0..1000 {
-                let (leases, _) = m.lease("finisher", 4, now, TTL);
-                if leases.is_empty() { break; }
-                for l in leases {
-                    prop_assert_eq!(m.result("finisher", &l, Ok(()), now).0, ResultOutcome::Accepted);
+        m.expire(now, &LONG);
+        let workers = ["w0", "w1", "w2"];
+        for _ in 0..1000 {
+            let mut leased = false;
+            for w in workers {
+                for l in m.lease(w, 4, now, TTL).0 {
+                    leased = true;
+                    prop_assert_eq!(m.result(w, &l, Ok(()), now).0, ResultOutcome::Accepted);
                 }
                 merge_all(&mut m, "j", &mut merges, now);
             }
-            let job = &m.jobs["j"];
-            prop_assert_eq!(job.state, JobState::Done);
-            prop_assert_eq!(merges.len(), job.tiles.len());
-            prop_assert!(merges.iter().all(|&n| n == 1));
-            prop_assert_eq!(job.samples_merged(), 128 * 128 * spp as u64);
+            if !leased {
+                m.fail_stranded(&workers, now);
+                break;
+            }
+        }
+        let job = &m.jobs["j"];
+        match job.state {
+            JobState::Failed => {
+                let blocklisted = workers.iter().all(|w| job.is_blocklisted(w));
+                let failed_tile = job.tiles.iter().any(|t| t.failures >= MAX_TILE_FAILURES);
+                prop_assert!(blocklisted || failed_tile, "failed for no reason: {:?}", job.error);
+                prop_assert!(workers.iter().all(|w| m.lease(w, 4, now, TTL).0.is_empty()));
+            }
+            _ => {
+                prop_assert_eq!(job.state, JobState::Done);
+                prop_assert_eq!(merges.len(), job.tiles.len());
+                prop_assert!(merges.iter().all(|&n| n == 1));
+                prop_assert_eq!(job.samples_merged(), 128 * 128 * spp as u64);
+            }
         }
     }
 }

@@ -99,6 +99,8 @@ pub struct WorkerRow {
     pub registered_ms: u64,
     /// Last contact.
     pub last_seen_ms: u64,
+    /// SHA-256 (hex) of the secret a worker that keeps its identity registered with.
+    pub secret_sha256: Option<String>,
 }
 
 /// The database.
@@ -122,7 +124,7 @@ CREATE TABLE IF NOT EXISTS results (
     payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
 CREATE TABLE IF NOT EXISTS workers (
     id TEXT PRIMARY KEY, name TEXT NOT NULL, threads INTEGER NOT NULL,
-    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL);
+    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL, secret_sha256 TEXT);
 ";
 
 /// The rows of one transition, taken from the model under the service's lock and written
@@ -243,6 +245,12 @@ impl Store {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
+        // databases from before workers kept their identity
+        let has_secret =
+            conn.prepare("SELECT 1 FROM pragma_table_info('workers') WHERE name = 'secret_sha256'")?.exists([])?;
+        if !has_secret {
+            conn.execute_batch("ALTER TABLE workers ADD COLUMN secret_sha256 TEXT")?;
+        }
         Ok(Store { conn })
     }
 
@@ -304,8 +312,13 @@ impl Store {
         Ok(())
     }
 
-    /// Every job as last committed, with its files. Leased tiles get `deadline_ms`.
-    pub fn load_jobs(&self, deadline_ms: u64) -> Result<Vec<(Job, JobFiles)>, StoreError> {
+    /// Every job as last committed, with its files, or why its rows do not decode (with its
+    /// id: one broken job must not keep the others from loading). Leased tiles get `deadline_ms`.
+    #[allow(clippy::type_complexity)]
+    pub fn load_jobs(
+        &self,
+        deadline_ms: u64,
+    ) -> Result<Vec<Result<(Job, JobFiles), (String, StoreError)>>, StoreError> {
         let mut stmt = self.conn.prepare(
             "SELECT id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms,
                     merged, checkpoint, result_exr, preview_png FROM jobs ORDER BY seq",
@@ -328,7 +341,34 @@ impl Store {
         })?;
         let mut out = Vec::new();
         for row in rows {
-            let (id, seq, spec, state, passes, failures, error, created, started, finished, merged, files) = row?;
+            let row = row?;
+            let id = row.0.clone();
+            out.push(self.decode_job(row, deadline_ms).map_err(|e| (id, e)));
+        }
+        Ok(out)
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn decode_job(
+        &self,
+        row: (
+            String,
+            i64,
+            String,
+            String,
+            String,
+            String,
+            Option<String>,
+            i64,
+            Option<i64>,
+            Option<i64>,
+            i64,
+            JobFiles,
+        ),
+        deadline_ms: u64,
+    ) -> Result<(Job, JobFiles), StoreError> {
+        {
+            let (id, seq, spec, state, passes, failures, error, created, started, finished, merged, files) = row;
             let corrupt = |message: String| StoreError::Corrupt { job: id.clone(), message };
             let spec: JobSpec = serde_json::from_str(&spec).map_err(|e| corrupt(format!("spec: {e}")))?;
             let state: JobState =
@@ -353,10 +393,19 @@ impl Store {
                 created_ms: created as u64,
                 started_ms: started.map(|t| t as u64),
                 finished_ms: finished.map(|t| t as u64),
+                slowest_ms_per_sample: None,
             };
-            out.push((job, files));
+            Ok((job, files))
         }
-        Ok(out)
+    }
+
+    /// Marks a job whose rows cannot be loaded as failed with `error`, so that it stays so.
+    pub fn mark_failed(&self, job: &str, error: &str, now_ms: u64) -> Result<(), StoreError> {
+        self.conn.execute(
+            "UPDATE jobs SET state = 'failed', error = ?2, finished_ms = COALESCE(finished_ms, ?3) WHERE id = ?1",
+            params![job, error, now_ms as i64],
+        )?;
+        Ok(())
     }
 
     fn load_tiles(&self, job: &str, merged: usize, deadline_ms: u64) -> Result<Vec<Tile>, StoreError> {
@@ -368,7 +417,7 @@ impl Store {
             let rect = Rect { x0: r.get(1)?, y0: r.get(2)?, x1: r.get(3)?, y1: r.get(4)? };
             let samples = r.get::<_, u32>(5)?..r.get::<_, u32>(6)?;
             let state = match (r.get::<_, String>(8)?.as_str(), r.get::<_, Option<String>>(9)?) {
-                ("leased", Some(worker)) => TileState::Leased { worker, deadline_ms },
+                ("leased", Some(worker)) => TileState::Leased { worker, deadline_ms, since_ms: deadline_ms },
                 ("accepted", _) if (idx as usize) < merged => TileState::Merged,
                 ("accepted", _) => TileState::Accepted,
                 _ => TileState::Queued,
@@ -409,15 +458,17 @@ impl Store {
     /// Registers or refreshes a worker.
     pub fn save_worker(&self, w: &WorkerRow) -> Result<(), StoreError> {
         self.conn.execute(
-            "INSERT OR REPLACE INTO workers (id, name, threads, registered_ms, last_seen_ms) VALUES (?1, ?2, ?3, ?4, ?5)",
-            params![w.id, w.name, w.threads, w.registered_ms as i64, w.last_seen_ms as i64],
+            "INSERT OR REPLACE INTO workers (id, name, threads, registered_ms, last_seen_ms, secret_sha256)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            params![w.id, w.name, w.threads, w.registered_ms as i64, w.last_seen_ms as i64, w.secret_sha256],
         )?;
         Ok(())
     }
 
     /// Every registered worker.
     pub fn load_workers(&self) -> Result<Vec<WorkerRow>, StoreError> {
-        let mut stmt = self.conn.prepare("SELECT id, name, threads, registered_ms, last_seen_ms FROM workers")?;
+        let mut stmt =
+            self.conn.prepare("SELECT id, name, threads, registered_ms, last_seen_ms, secret_sha256 FROM workers")?;
         let rows = stmt.query_map([], |r| {
             Ok(WorkerRow {
                 id: r.get(0)?,
@@ -425,6 +476,7 @@ impl Store {
                 threads: r.get(2)?,
                 registered_ms: r.get::<_, i64>(3)? as u64,
                 last_seen_ms: r.get::<_, i64>(4)? as u64,
+                secret_sha256: r.get(5)?,
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)
@@ -473,8 +525,15 @@ mod tests {
         let (_, c) = m.merged("a", 2, 12);
         // merged but not yet checkpointed: reloads as accepted
         store.persist(&m, &c, &[]).unwrap();
-        let loaded = store.load_jobs(10 + 1000).unwrap();
+        let loaded: Vec<_> = store.load_jobs(10 + 1000).unwrap().into_iter().map(Result::unwrap).collect();
         let mut expected = m.jobs["a"].clone();
+        // what is not stored: the measured tile rate, a lease's start (counted from its
+        // restored deadline)
+        expected.slowest_ms_per_sample = None;
+        if let TileState::Leased { since_ms, deadline_ms, .. } = &mut expected.tiles[2].state {
+            *since_ms = *deadline_ms;
+        }
+        let restored = expected.clone();
         expected.merged = 0;
         expected.tiles[0].state = TileState::Accepted;
         expected.tiles[1].state = TileState::Accepted;
@@ -482,8 +541,8 @@ mod tests {
         store
             .persist(&m, &Changes::new(), &[Extra::Checkpoint { job: "a".into(), merged: 2, file: "f".into() }])
             .unwrap();
-        let loaded = store.load_jobs(10 + 1000).unwrap();
-        assert_eq!(loaded[0].0, m.jobs["a"]);
+        let loaded: Vec<_> = store.load_jobs(10 + 1000).unwrap().into_iter().map(Result::unwrap).collect();
+        assert_eq!(loaded[0].0, restored);
         assert_eq!(loaded[0].1.checkpoint.as_deref(), Some("f"));
     }
 }

@@ -3,23 +3,56 @@
 //! the timer's lease expiry.
 
 use super::{Inner, JobService, LeaseGrant, ServiceError};
-use crate::serve::job::model::{BLOCKLIST_AFTER_FAILURES, LeaseRef, ResultOutcome, TileSpec, TileState};
+use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
 use tessera_common::film::Rect;
 
 impl JobService {
-    /// Registers a worker; returns its id.
-    pub fn register(&self, name: &str, threads: u32, now_ms: u64) -> Result<String, ServiceError> {
-        let row = WorkerRow {
-            id: uuid::Uuid::new_v4().to_string(),
-            name: name.to_string(),
-            threads,
-            registered_ms: now_ms,
-            last_seen_ms: now_ms,
-        };
+    /// Registers a worker; returns its id. A worker that keeps its identity (`identity`: id
+    /// and secret) gets the same id back after a restart, with its failures and blocklists;
+    /// the leases its earlier process held are lost with it and go back to the queue now,
+    /// each counted as a failure, as their expiry would have. An id registered with another
+    /// secret is refused.
+    pub fn register(
+        &self,
+        name: &str,
+        threads: u32,
+        identity: Option<(&str, &str)>,
+        now_ms: u64,
+    ) -> Result<String, ServiceError> {
         let mut inner = self.lock();
+        let (id, secret_sha256) = match identity {
+            None => (uuid::Uuid::new_v4().to_string(), None),
+            Some((id, secret)) => {
+                check_identity(id, secret)?;
+                let hash = hex::encode(<sha2::Sha256 as sha2::Digest>::digest(secret.as_bytes()));
+                if let Some(known) = inner.workers.get(id)
+                    && known.secret_sha256.as_deref() != Some(hash.as_str())
+                {
+                    return Err(ServiceError::FailedPrecondition(format!(
+                        "worker id {id} is registered with another secret: give each worker its own --cache-dir"
+                    )));
+                }
+                (id.to_string(), Some(hash))
+            }
+        };
+        let registered_ms = inner.workers.get(&id).map_or(now_ms, |w| w.registered_ms);
+        let row = WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256 };
         self.commits.store().save_worker(&row)?;
+        let orphaned = inner.model.leases_of(&row.id);
+        let mut changes = crate::serve::job::model::Changes::new();
+        for lease in &orphaned {
+            for (job, tiles) in inner.model.report_failure(&row.id, lease, "the worker restarted", now_ms) {
+                changes.entry(job).or_default().extend(tiles);
+            }
+        }
+        if !changes.is_empty() {
+            tracing::warn!(worker = %row.id, tiles = orphaned.len(), "worker restarted: its leases are re-queued");
+            self.persist(&mut inner, &changes, &[])?;
+            self.sync(&inner)?;
+            self.work.notify_waiters();
+        }
         tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
@@ -86,25 +119,43 @@ impl JobService {
         Ok(inner.model.heartbeat(worker, leases, now_ms, self.cfg.lease_timeout_ms))
     }
 
-    /// Re-queues expired leases, and fails the jobs no live worker may serve any more.
+    /// Re-queues expired leases, and fails the jobs no live worker may serve any more. The
+    /// timer calls this every [`JobService::expiry_period_ms`]; when it ran much later than
+    /// that, the coordinator itself stalled (suspended, starved, a long lock), and the stall
+    /// is not held against the workers: every lease's clock moves on by it first.
     pub fn expire(&self, now_ms: u64) -> Result<(), ServiceError> {
         let mut inner = self.lock();
-        let mut changes = inner.model.expire(now_ms);
+        let period = self.expiry_period_ms();
+        let late = now_ms.saturating_sub(inner.last_expiry_ms.unwrap_or(now_ms)).saturating_sub(period);
+        inner.last_expiry_ms = Some(now_ms);
+        if late > period.max(self.cfg.lease_timeout_ms / 4) {
+            tracing::warn!(stalled_ms = late, "the coordinator stalled: leases postponed");
+            inner.model.postpone_leases(late);
+            inner.counters.stalls += 1;
+        }
+        let mut changes = inner.model.expire(now_ms, &self.cfg.lease_lifetime);
         if !changes.is_empty() {
             inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
             tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
         }
-        let stranded = self.stranded_jobs(&inner, now_ms);
-        for (job, error) in &stranded {
-            tracing::error!(job_id = %job, %error, "job failed");
-            for (j, tiles) in inner.model.fail(job, error.clone(), now_ms) {
-                changes.entry(j).or_default().extend(tiles);
-            }
+        let live: Vec<String> = inner
+            .workers
+            .values()
+            .filter(|w| now_ms.saturating_sub(w.last_seen_ms) <= self.cfg.lease_timeout_ms)
+            .map(|w| w.id.clone())
+            .collect();
+        let (stranded, failed) =
+            inner.model.fail_stranded(&live.iter().map(String::as_str).collect::<Vec<_>>(), now_ms);
+        for job in &stranded {
+            tracing::error!(job_id = %job, error = ?inner.model.jobs[job].error, "job failed");
+        }
+        for (j, tiles) in failed {
+            changes.entry(j).or_default().extend(tiles);
         }
         if !changes.is_empty() {
             self.persist(&mut inner, &changes, &[])?;
             self.sync(&inner)?;
-            for (job, _) in &stranded {
+            for job in &stranded {
                 inner.job(job).end();
             }
             self.work.notify_waiters();
@@ -112,32 +163,9 @@ impl JobService {
         Ok(())
     }
 
-    /// Jobs with work left whose every live worker (seen within a lease timeout) is blocklisted
-    /// for them: nobody will ever render them, so they fail with that reason.
-    fn stranded_jobs(&self, inner: &Inner, now_ms: u64) -> Vec<(String, String)> {
-        let live: Vec<&str> = inner
-            .workers
-            .values()
-            .filter(|w| now_ms.saturating_sub(w.last_seen_ms) <= self.cfg.lease_timeout_ms)
-            .map(|w| w.id.as_str())
-            .collect();
-        if live.is_empty() {
-            return Vec::new();
-        }
-        inner
-            .model
-            .jobs
-            .values()
-            .filter(|j| !j.state.is_terminal() && j.tiles.iter().any(|t| t.state == TileState::Queued))
-            .filter(|j| live.iter().all(|w| j.is_blocklisted(w)))
-            .map(|j| {
-                let error = format!(
-                    "no eligible worker is left: each of the {} live workers failed {BLOCKLIST_AFTER_FAILURES} of its tiles",
-                    live.len()
-                );
-                (j.id.clone(), error)
-            })
-            .collect()
+    /// How often the timer should call [`JobService::expire`].
+    pub fn expiry_period_ms(&self) -> u64 {
+        (self.cfg.lease_timeout_ms / 4).clamp(50, 1000)
     }
 
     /// A worker's failure to render a lease.
@@ -177,10 +205,16 @@ impl JobService {
             current.map(|t| (t.spec.clone(), job.is_some_and(|j| j.collects(lease.tile))))
         };
         let Some((tile, collect)) = tile else {
-            // not current: let the model say whether it is a duplicate or stale
+            // not current: let the model say whether it is a duplicate or stale; a duplicate
+            // is answered once the acceptance it repeats is saved (it may still be queued)
             let mut inner = self.lock();
             let (outcome, _) = inner.model.result(worker, lease, Ok(()), now_ms);
             inner.counters.results_ignored += 1;
+            let ticket = inner.ticket;
+            drop(inner);
+            if outcome == ResultOutcome::Duplicate {
+                self.commits.wait(ticket)?;
+            }
             return Ok(outcome);
         };
         let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
@@ -226,4 +260,16 @@ impl JobService {
             }
         }
     }
+}
+
+/// A kept identity is a short printable id and a secret long enough not to be guessed.
+fn check_identity(id: &str, secret: &str) -> Result<(), ServiceError> {
+    let printable = |s: &str| s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+    if id.is_empty() || id.len() > 64 || !printable(id) {
+        return Err(ServiceError::InvalidArgument("worker_id must be 1 to 64 letters, digits, '-' or '_'".to_string()));
+    }
+    if !(16..=256).contains(&secret.len()) {
+        return Err(ServiceError::InvalidArgument("worker_secret must be 16 to 256 bytes".to_string()));
+    }
+    Ok(())
 }

@@ -141,9 +141,15 @@ impl JobService {
             }
         };
         if let Err(e) = self.merge_range(inner, job, range.clone(), &mut film) {
+            // nothing was merged (see `merge_range`) and the accepted result is kept; a result
+            // that cannot be read back or absorbed fails its job, since no retry can merge it
             inner.job(job).film = Some(film);
             self.persist(inner, &pending, &extras)?;
-            return Err(e);
+            if !matches!(e, ServiceError::Corrupt { .. } | ServiceError::Emis { .. }) {
+                return Err(e);
+            }
+            self.fail_locked(inner, job, &format!("cannot merge its results: {e}"), now_ms)?;
+            return Ok(None);
         }
         inner.counters.tiles_merged += range.len() as u64;
         if inner.model.merge_finishes(job, range.end, now_ms) {
@@ -189,7 +195,13 @@ impl JobService {
             // the update is committed with its own checkpoint of the new strategy
             Some(BarrierAction::Optimize) => {
                 self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?;
-                self.optimize(inner, job, now_ms)?;
+                if let Err(e) = self.optimize(inner, job, now_ms) {
+                    if e.is_storage() {
+                        return Err(e);
+                    }
+                    // e.g. its checkpoint cannot be written: the job cannot go on
+                    self.fail_locked(inner, job, &format!("EMIS update failed: {e}"), now_ms)?;
+                }
             }
             None => self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?,
         }
@@ -219,7 +231,11 @@ impl JobService {
     /// `done`, so nobody asks for outputs that do not exist yet; a crash in between merges the
     /// accepted tiles again on start-up and finishes the job then.
     pub(super) fn finish(&self, f: Finishing) -> Result<(), ServiceError> {
-        let outputs = self.write_outputs(&f.spec, &f.job, &f.film, f.emis.as_ref())?;
+        let outputs = match self.write_outputs(&f.spec, &f.job, &f.film, f.emis.as_ref()) {
+            Ok(o) => o,
+            // its film is gone with `f`: a job whose outputs cannot be written fails
+            Err(e) => return self.fail_job(&f.job, &format!("cannot write its outputs: {e}"), f.now_ms),
+        };
         let mut inner = self.lock();
         let (action, changes) = inner.model.merged(&f.job, f.upto, f.now_ms);
         if action == Some(BarrierAction::Finish) {
@@ -261,6 +277,8 @@ impl JobService {
         Ok(())
     }
 
+    /// Merges `range` into `film` and the EMIS moments, all or nothing: every result is read
+    /// and checked first, and on an error the film is untouched and the held results are kept.
     fn merge_range(
         &self,
         inner: &mut Inner,
@@ -268,14 +286,32 @@ impl JobService {
         range: std::ops::Range<usize>,
         film: &mut Film,
     ) -> Result<(), ServiceError> {
-        for i in range {
-            let (accum, pilot) = match inner.job(job).held.remove(&i) {
-                Some(r) => r,
-                None => self.stored_result(inner, job, i)?,
+        let mut results = Vec::with_capacity(range.len());
+        for i in range.clone() {
+            let read = match inner.job(job).held.remove(&i) {
+                Some(r) => Ok(r),
+                None => self.stored_result(inner, job, i),
             };
+            match read {
+                Ok(r) => results.push((i, r)),
+                Err(e) => {
+                    let held = &mut inner.job(job).held;
+                    held.extend(results);
+                    return Err(e);
+                }
+            }
+        }
+        if let Some(e) = inner.job(job).emis.as_ref() {
+            for (_, (_, pilot)) in &results {
+                if let Some(p) = pilot {
+                    e.check(p).map_err(|message| ServiceError::Emis { job: job.to_string(), message })?;
+                }
+            }
+        }
+        for (_, (accum, pilot)) in results {
             film.merge_tile(&accum);
             if let (Some(p), Some(e)) = (pilot, inner.job(job).emis.as_mut()) {
-                e.absorb(&p).map_err(|message| ServiceError::Emis { job: job.to_string(), message })?;
+                e.absorb(&p).expect("invariant: pilot data checked before the merge");
             }
         }
         Ok(())

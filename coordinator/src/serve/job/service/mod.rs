@@ -19,6 +19,7 @@ mod runtime;
 mod submit;
 
 use super::emis::{EmisJob, TileStrategy};
+pub use super::leasing::LeaseLifetime;
 use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, TileSpec, TransitionError};
 use crate::serve::storage::commit::{Committer, Ticket};
 use crate::serve::storage::{BlobStore, Extra, Store, StoreError, WorkerRow, sqlite::Batch};
@@ -27,7 +28,6 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tessera_common::film::Film;
-use tessera_common::film::filter::Filter;
 
 pub use super::view::{JobView, StrategyView, WorkerView};
 pub use merge::CHECKPOINT_SPACING;
@@ -39,6 +39,8 @@ pub use tessera_common::bundle::Bundle;
 pub struct ServiceConfig {
     /// A lease lives this long without a heartbeat.
     pub lease_timeout_ms: u64,
+    /// How long a lease may live with heartbeats but no result.
+    pub lease_lifetime: LeaseLifetime,
     /// Least time between film checkpoints of a job. The interval also grows with the
     /// checkpoint's cost (see [`CHECKPOINT_SPACING`]); a finished job's outputs replace its last
     /// checkpoint.
@@ -52,6 +54,14 @@ pub struct ServiceConfig {
 
 /// [`ServiceConfig::max_pixels`] unless `tessera serve --max-pixels` says otherwise: 8192².
 pub const DEFAULT_MAX_PIXELS: u64 = 8192 * 8192;
+
+impl ServiceError {
+    /// The database failed (not one job's data): the service must not go
+    /// on as if it had not.
+    pub fn is_storage(&self) -> bool {
+        matches!(self, ServiceError::Storage(StoreError::Sqlite(_) | StoreError::Commit(_)))
+    }
+}
 
 /// Why a call failed; the API layer maps each variant onto its error table.
 #[derive(Debug, thiserror::Error)]
@@ -125,6 +135,8 @@ pub struct Counters {
     pub leases_expired: u64,
     /// Tiles merged into films.
     pub tiles_merged: u64,
+    /// Times the expiry timer found the coordinator had stalled (leases postponed).
+    pub stalls: u64,
 }
 
 struct Inner {
@@ -135,6 +147,8 @@ struct Inner {
     jobs: HashMap<String, JobRuntime>,
     workers: BTreeMap<String, WorkerRow>,
     counters: Counters,
+    /// When the expiry timer last ran, to notice the coordinator's own stalls.
+    last_expiry_ms: Option<u64>,
 }
 
 impl Inner {
@@ -169,17 +183,35 @@ impl JobService {
             jobs: HashMap::new(),
             workers: BTreeMap::new(),
             counters: Counters::default(),
+            last_expiry_ms: None,
         };
         for w in store.load_workers()? {
             inner.workers.insert(w.id.clone(), w);
         }
-        let jobs = store.load_jobs(now_ms + cfg.lease_timeout_ms)?;
-        let ids: Vec<String> = jobs.iter().map(|(j, _)| j.id.clone()).collect();
-        for (job, files) in jobs {
+        // one job that cannot be loaded or resumed fails with its error; the others go on
+        let mut broken = Vec::new();
+        let mut ids = Vec::new();
+        for loaded in store.load_jobs(now_ms + cfg.lease_timeout_ms)? {
+            let (job, files) = match loaded {
+                Ok(j) => j,
+                Err((id, e)) => {
+                    let error = format!("cannot load the job after a restart: {e}");
+                    tracing::error!(job_id = %id, %error, "job failed");
+                    store.mark_failed(&id, &error, now_ms)?;
+                    // listed as failed with its error, though its settings are lost
+                    inner.model.restore(unreadable_job(&id, error, now_ms));
+                    continue;
+                }
+            };
             let mut runtime = JobRuntime { files, ..JobRuntime::default() };
             if !job.state.is_terminal() {
-                let (film, emis) = restore_running(&blobs, &job.id, &job.spec, &runtime.files)?;
-                (runtime.film, runtime.emis) = (Some(film), emis);
+                match restore_running(&blobs, &job.id, &job.spec, &runtime.files) {
+                    Ok((film, emis)) => {
+                        (runtime.film, runtime.emis) = (film, emis);
+                        ids.push(job.id.clone());
+                    }
+                    Err(e) => broken.push((job.id.clone(), e)),
+                }
             }
             inner.jobs.insert(job.id.clone(), runtime);
             inner.model.restore(job);
@@ -189,16 +221,44 @@ impl JobService {
             blobs,
             scenes_dir: data_dir.join("scenes"),
             inner: Mutex::new(inner),
-            commits: Committer::new(store),
+            commits: committer(store),
             work: tokio::sync::Notify::new(),
             changed: tokio::sync::watch::channel(0).0,
         };
+        for (id, e) in broken {
+            svc.fail_job(&id, &format!("cannot resume the job after a restart: {e}"), now_ms)?;
+        }
         for id in ids {
-            svc.resume(&id, now_ms)?;
+            if let Err(e) = svc.resume(&id, now_ms) {
+                if e.is_storage() {
+                    return Err(e);
+                }
+                svc.fail_job(&id, &format!("cannot resume the job after a restart: {e}"), now_ms)?;
+            }
         }
         let ticket = svc.lock().ticket;
         svc.commits.wait(ticket)?;
         Ok(svc)
+    }
+
+    /// Fails `job` for an error outside the model (its data, its finish, its update): the job
+    /// ends with `error`, its memory is freed, and every other job goes on.
+    fn fail_job(&self, job: &str, error: &str, now_ms: u64) -> Result<(), ServiceError> {
+        let mut inner = self.lock();
+        self.fail_locked(&mut inner, job, error, now_ms)?;
+        self.sync(&inner)
+    }
+
+    /// [`JobService::fail_job`] under the lock (committed with the caller's next wait).
+    fn fail_locked(&self, inner: &mut Inner, job: &str, error: &str, now_ms: u64) -> Result<(), ServiceError> {
+        tracing::error!(job_id = %job, %error, "job failed");
+        let changes = inner.model.fail(job, error.to_string(), now_ms);
+        self.persist(inner, &changes, &[])?;
+        if let Some(r) = inner.jobs.get_mut(job) {
+            r.end();
+        }
+        self.work.notify_waiters();
+        Ok(())
     }
 
     /// Brings a job loaded from storage to where it stopped: merges the tiles accepted after
@@ -242,10 +302,54 @@ impl JobService {
         Ok(self.commits.wait(inner.ticket)?)
     }
 
+    /// Test hook: the commit after the next `n` fails.
+    #[cfg(test)]
+    pub(crate) fn fail_commits_after(&self, n: i64) {
+        self.commits.fail_after.store(n, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// The lease timeout.
     pub fn lease_timeout_ms(&self) -> u64 {
         self.cfg.lease_timeout_ms
     }
+}
+
+/// What is shown of a job whose rows do not decode: its id, failed, with the error.
+fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
+    super::model::Job {
+        id: id.to_string(),
+        seq: 0,
+        spec: JobSpec {
+            name: id.to_string(),
+            priority: 0,
+            settings: Default::default(),
+            width: 0,
+            height: 0,
+            full_frame: false,
+            bundle_digest: String::new(),
+            scene_path: String::new(),
+            filter: tessera_common::film::filter::FilterKind::Box,
+        },
+        state: JobState::Failed,
+        passes: Vec::new(),
+        tiles: Vec::new(),
+        merged: 0,
+        worker_failures: BTreeMap::new(),
+        error: Some(error),
+        created_ms: now_ms,
+        started_ms: None,
+        finished_ms: Some(now_ms),
+        slowest_ms_per_sample: None,
+    }
+}
+
+/// The commit queue: a failed commit stops the process, but in unit tests, which inject
+/// failures and then check what the service answers and what a restart finds.
+fn committer(store: Store) -> Committer {
+    #[cfg(not(test))]
+    return Committer::new(store);
+    #[cfg(test)]
+    Committer::with_on_failure(store, Box::new(|e| tracing::error!(error = %e, "commit failed (test: not stopping)")))
 }
 
 /// The film and EMIS state of an unfinished job: from its checkpoint, or empty.
@@ -254,10 +358,11 @@ fn restore_running(
     id: &str,
     spec: &JobSpec,
     files: &crate::serve::storage::JobFiles,
-) -> Result<(Film, Option<EmisJob>), ServiceError> {
+) -> Result<(Option<Film>, Option<EmisJob>), ServiceError> {
+    // without a checkpoint the film is made when the job's first tiles merge
     let (film, emis_bytes) = match &files.checkpoint {
-        Some(name) => blobs.get_checkpoint(name)?,
-        None => (Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter)), Vec::new()),
+        Some(name) => blobs.get_checkpoint(name).map(|(film, emis)| (Some(film), emis))?,
+        None => (None, Vec::new()),
     };
     let emis = match emis_bytes.is_empty() {
         true => EmisJob::new(spec),

@@ -1,0 +1,106 @@
+//! Faults that must end in bounded time, with real processes: a worker that heartbeats but
+//! never returns its tile loses it at the lease's lifetime; cancelling a job stops the render
+//! in progress within about one heartbeat; a restarted worker keeps its identity, and nobody
+//! else can take it.
+
+use super::*;
+use tessera_proto::v1 as pb;
+use tessera_proto::v1::worker_service_client::WorkerServiceClient;
+
+fn submit_cornell(c: &Coordinator, settings: Value) -> String {
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    job["id"].as_str().unwrap().to_string()
+}
+
+#[test]
+fn a_worker_that_heartbeats_but_never_returns_loses_its_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-max-floor", "1"]);
+    let id = submit_cornell(&c, json!({"integrator": "pt", "spp": 2, "seed": 9}));
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let started = std::time::Instant::now();
+    rt.block_on(async {
+        let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
+        let reg = pb::RegisterRequest { name: "stuck".into(), threads: 1, ..Default::default() };
+        let worker = client.register(reg).await.unwrap().into_inner().worker_id;
+        let req = pb::LeaseTileRequest { worker_id: worker.clone(), max_tiles: 1, wait_ms: 5000 };
+        let lease = client.lease_tile(req).await.unwrap().into_inner().leases.pop().unwrap().lease.unwrap();
+        // heartbeats every 200 ms, far within the 30 s lease timeout, but never a result
+        loop {
+            let req = pb::HeartbeatRequest { worker_id: worker.clone(), leases: vec![lease.clone()] };
+            if client.heartbeat(req).await.unwrap().into_inner().lost == [lease.clone()] {
+                break;
+            }
+            assert!(started.elapsed() < Duration::from_secs(20), "the stuck lease was never taken back");
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    });
+    let held = started.elapsed();
+    assert!(held >= Duration::from_secs(1), "taken back before its lifetime: {held:?}");
+    // a worker that does return them finishes the job, bit for bit as a local render
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let job = wait_done(&c, &id, None);
+    assert!(job["tiles_done"].as_u64().unwrap() > 0);
+    let farm = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, &id)), None, &farm);
+    assert_same_image(&farm, &local_render(dir.path(), &scene("cornell-box"), "pt", 2, 9));
+}
+
+/// One worker renders a tile that would take minutes; cancelling its job frees the worker
+/// for the next job within about a heartbeat (500 ms here), because the render stops.
+#[test]
+fn cancel_stops_the_render_in_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--lease-timeout", "2"]);
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let long = submit_cornell(&c, json!({"integrator": "pt", "spp": 100000, "seed": 1}));
+    wait_for(TIMEOUT, "the long job to be rendering", || {
+        let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
+        String::from_utf8(metrics).unwrap().contains("tessera_tiles_leased 1").then_some(())
+    });
+    let (ok, _, err) = tessera(&["cancel", &long, "--server", &c.url]);
+    assert!(ok, "{err}");
+    let cancelled = std::time::Instant::now();
+    let next = submit_cornell(&c, json!({"integrator": "pt", "spp": 1, "seed": 2}));
+    wait_done(&c, &next, None);
+    // a 64² tile at 100 000 spp on one thread takes minutes; the next job took seconds
+    let took = cancelled.elapsed();
+    assert!(took < Duration::from_secs(60), "the cancelled render went on: {took:?}");
+}
+
+#[test]
+fn a_restarted_worker_keeps_its_identity_and_nobody_else_can_take_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let workers = || -> Vec<String> {
+        let (_, list) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
+        list.as_array().unwrap().iter().map(|w| w["id"].as_str().unwrap().to_string()).collect()
+    };
+    let cache = dir.path().join("cache");
+    let mut w = Worker::start(&c.url, &cache, &[]);
+    let first = wait_for(TIMEOUT, "a worker", || workers().pop());
+    w.kill();
+    let _w = Worker::start(&c.url, &cache, &[]);
+    wait_for(TIMEOUT, "the worker to register again", || {
+        let log = std::fs::read_to_string(&c.log).unwrap();
+        (log.matches("worker registered").count() == 2).then_some(())
+    });
+    assert_eq!(workers(), [first.clone()], "the same id, not a second worker");
+    // its id without its secret is refused
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
+        let reg = pb::RegisterRequest {
+            name: "impostor".into(),
+            threads: 1,
+            worker_id: first.clone(),
+            worker_secret: "0123456789abcdef0123456789abcdef".into(),
+            ..Default::default()
+        };
+        let e = client.register(reg).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::FailedPrecondition, "{e:?}");
+        assert!(e.message().contains("another secret"), "{}", e.message());
+    });
+}
