@@ -32,6 +32,10 @@ pub struct Args {
     /// Where scene bundles are cached [default: the system temp folder].
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// MiB of unpacked scene bundles kept in the cache folder; the least recently used go
+    /// first, never the one a tile is being rendered from.
+    #[arg(long, value_name = "MIB", default_value_t = scene_cache::DEFAULT_CACHE_LIMIT_MIB)]
+    pub cache_limit: u64,
     /// Name shown by the coordinator [default: the host name].
     #[arg(long)]
     pub name: Option<String>,

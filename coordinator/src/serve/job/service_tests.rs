@@ -10,14 +10,15 @@ use tessera_common::integrator::TileRequest;
 use tessera_common::scene::Scene;
 use tessera_common::settings::{RenderSettings, Renderer};
 
-const CFG: ServiceConfig = ServiceConfig {
+pub(super) const CFG: ServiceConfig = ServiceConfig {
     lease_timeout_ms: 10_000,
     checkpoint_interval_ms: 3_600_000,
     texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
     max_pixels: super::service::DEFAULT_MAX_PIXELS,
+    retain_finished_ms: None,
 };
 
-fn cornell() -> (Bundle, Scene) {
+pub(super) fn cornell() -> (Bundle, Scene) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
     let xml = std::fs::read(&path).unwrap();
     let bundle = Bundle { scene_path: "scene.xml".into(), files: vec![("scene.xml".into(), xml)] };
@@ -25,7 +26,7 @@ fn cornell() -> (Bundle, Scene) {
 }
 
 /// Renders a lease's tile honestly and uploads it.
-fn upload(
+pub(super) fn upload(
     svc: &JobService,
     scene: &Scene,
     worker: &str,
@@ -132,7 +133,7 @@ fn hostile_submissions_are_refused_and_the_service_goes_on() {
 }
 
 /// The `<integer name="NAME" value="..."/>` element of `xml`.
-fn integer_element(xml: &str, name: &str) -> Option<String> {
+pub(super) fn integer_element(xml: &str, name: &str) -> Option<String> {
     let start = xml.find(&format!("<integer name=\"{name}\""))?;
     let end = start + xml[start..].find("/>")? + 2;
     Some(xml[start..end].to_string())
