@@ -463,12 +463,17 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
         settings.clone(),
     );
     assert_eq!(status, 413);
-    // cancel stops dispatch: a worker started afterwards gets nothing
+    // cancel stops dispatch: a worker started afterwards gets nothing; DELETE refuses the
+    // job while it is active
     let (status, job) = rest::submit(&c.url, ct, ("scene.xml", xml), vec![], settings);
     assert_eq!(status, 201, "{job}");
     let id = job["id"].as_str().unwrap();
-    let (status, cancelled) = rest::delete(&job_url(&c, id), ct);
+    let (status, body) = rest::delete(&job_url(&c, id), ct);
+    assert_eq!(status, 409, "{body}");
+    assert!(body["error"].as_str().unwrap().contains("cancel it"), "{body}");
+    let (status, cancelled) = rest::post(&format!("{}/cancel", job_url(&c, id)), ct);
     assert_eq!((status, cancelled["state"].as_str()), (200, Some("cancelled")));
+    assert_eq!(rest::post(&format!("{}/cancel", job_url(&c, "no-such-job")), ct).0, 404);
     let _w = Worker::start(&c.url, &dir.path().join("cache"), &["--token", wt]);
     wait_for(TIMEOUT, "worker to register", || {
         (rest::get_json(&format!("{}/api/v1/workers", c.url), ct).1.as_array().map_or(0, |a| a.len()) == 1)
@@ -481,6 +486,54 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
     assert!(String::from_utf8(metrics).unwrap().contains("tessera_tiles_leased 0"));
     assert_eq!(rest::get(&format!("{}/result.exr", job_url(&c, id)), ct).0, 409);
     assert_eq!(rest::get(&job_url(&c, "no-such-job"), ct).0, 404);
+}
+
+/// `DELETE` removes a done job with its outputs (404 afterwards); `--retain-finished` removes
+/// another on its own; `tessera delete` removes one over gRPC.
+#[test]
+fn rest_delete_and_retain_finished_remove_done_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let c = Coordinator::start(&data, "127.0.0.1:0", &["--retain-finished", "6s"]);
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let submit = |seed: u64| {
+        let settings = json!({"integrator": "pt", "spp": 1, "seed": seed});
+        let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml.clone()), vec![], settings);
+        assert_eq!(status, 201, "{job}");
+        let id = job["id"].as_str().unwrap().to_string();
+        wait_done(&c, &id, None);
+        id
+    };
+    let blobs = || {
+        let shards = std::fs::read_dir(data.join("blobs").join("cas")).unwrap();
+        shards.flat_map(|s| std::fs::read_dir(s.unwrap().path()).unwrap()).count()
+    };
+    // one job: its bundle, EXR and PNG
+    let deleted = submit(1);
+    assert_eq!(blobs(), 3);
+    let (status, body) = rest::delete(&job_url(&c, &deleted), None);
+    assert_eq!(status, 204, "{body}");
+    assert_eq!(rest::get(&job_url(&c, &deleted), None).0, 404);
+    assert_eq!(rest::get(&format!("{}/result.exr", job_url(&c, &deleted)), None).0, 404);
+    assert_eq!(rest::delete(&job_url(&c, &deleted), None).0, 404);
+    assert_eq!(blobs(), 0, "its bundle and outputs are gone");
+    // the next one expires by itself six seconds after it finished
+    let expiring = submit(2);
+    assert_eq!(rest::get(&job_url(&c, &expiring), None).0, 200);
+    wait_for(Duration::from_secs(30), "job to expire", || {
+        (rest::get(&job_url(&c, &expiring), None).0 == 404).then_some(())
+    });
+    let (_, jobs) = rest::get_json(&format!("{}/api/v1/jobs", c.url), None);
+    assert_eq!(jobs.as_array().map(Vec::len), Some(0), "{jobs}");
+    assert_eq!(blobs(), 0);
+    // over gRPC
+    let by_cli = submit(3);
+    let (ok, _, err) = tessera(&["delete", &by_cli, "--server", &c.url]);
+    assert!(ok, "{err}");
+    assert_eq!(rest::get(&job_url(&c, &by_cli), None).0, 404);
+    let (ok, _, err) = tessera(&["delete", &by_cli, "--server", &c.url]);
+    assert!(!ok && err.contains("NotFound"), "{err}");
 }
 
 #[test]

@@ -233,6 +233,14 @@ pub mod rest {
         })
     }
 
+    /// POST without a body, returning JSON.
+    pub fn post(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
+        rt().block_on(async {
+            let r = auth(reqwest::Client::new().post(url), token).send().await.expect("POST");
+            (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null))
+        })
+    }
+
     /// POST /api/v1/jobs with a scene, assets `(path, bytes)` and settings JSON.
     pub fn submit(
         base: &str,

@@ -35,6 +35,10 @@ pub struct Args {
     /// folder]. Workers sharing it each take an identity of their own.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// MiB of unpacked scene bundles kept in the cache folder; the least recently used go
+    /// first, never the one a tile is being rendered from.
+    #[arg(long, value_name = "MIB", default_value_t = scene_cache::DEFAULT_CACHE_LIMIT_MIB)]
+    pub cache_limit: u64,
     /// Name shown by the coordinator [default: the host name].
     #[arg(long)]
     pub name: Option<String>,

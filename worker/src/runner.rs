@@ -48,7 +48,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
     std::fs::create_dir_all(&cache_dir)?;
     let identity = crate::identity::Identity::keep(&cache_dir)?;
-    let mut cache = SceneCache::new(cache_dir, args.texture_budget);
+    let mut cache = SceneCache::new(cache_dir, args.texture_budget, args.cache_limit.saturating_mul(1 << 20));
     let name = args.name.clone().unwrap_or_else(|| std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into()));
     let max_tiles = args.max_tiles.unwrap_or(threads as u32).max(1);
     let (drain_tx, drain) = watch::channel(false);

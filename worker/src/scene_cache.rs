@@ -1,11 +1,18 @@
 //! Scene bundles cached on disk by digest (fetched once through `FetchBlob`, verified against
 //! their SHA-256, unpacked into `<cache>/<digest>/`) and loaded scenes kept in memory for the
 //! few most recent (bundle, defines) pairs; also the current EMIS merge mask (a blob too).
+//!
+//! The folder is kept under a size limit (`--cache-limit`): each use of a bundle touches its
+//! `.scene_path` marker, and after a new bundle is unpacked the least recently used others are
+//! deleted until the rest fit ([`evict`]). The bundle being loaded is never deleted; other
+//! bundles are not needed once their scene is loaded, since a scene is read into memory whole.
+//! The marker's time is the recency, so worker processes sharing a folder share one LRU order.
 
 use crate::client::Client;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::SystemTime;
 use tessera_common::bundle::{Bundle, safe_relative_path};
 use tessera_common::scene::{LoadOptions, Scene};
 use tessera_common::texture::TextureLimits;
@@ -15,12 +22,21 @@ use tokio_stream::StreamExt;
 /// Loaded scenes kept in memory.
 const KEEP_LOADED: usize = 4;
 
+/// `--cache-limit` unless given: MiB of unpacked bundles kept on disk.
+pub const DEFAULT_CACHE_LIMIT_MIB: u64 = 4096;
+
+/// The file in a bundle's folder naming its scene file; it is written last, so a folder with
+/// it is complete, and its modification time is the bundle's last use.
+const MARKER: &str = ".scene_path";
+
 /// A loaded scene's identity: bundle digest and sorted defines.
 type SceneKey = (String, Vec<(String, String)>);
 
 /// The cache.
 pub struct SceneCache {
     dir: PathBuf,
+    /// Bytes of unpacked bundles kept on disk.
+    limit_bytes: u64,
     loaded: Vec<(SceneKey, Arc<Scene>)>,
     /// The current EMIS merge mask.
     pub masks: MaskCache,
@@ -28,11 +44,15 @@ pub struct SceneCache {
 }
 
 impl SceneCache {
-    /// A cache under `dir`.
-    pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>) -> Self {
+    /// A cache under `dir` holding at most `limit_bytes` of unpacked bundles (besides the one
+    /// in use); trims what an earlier run left over the limit.
+    pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>, limit_bytes: u64) -> Self {
         let texture_limits =
             texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
-        SceneCache { dir, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
+        if let Err(e) = evict(&dir, limit_bytes, &HashSet::new()) {
+            tracing::warn!(error = %e, "cannot trim the scene cache");
+        }
+        SceneCache { dir, limit_bytes, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
     }
 
     /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
@@ -46,9 +66,11 @@ impl SceneCache {
         key_defines.sort();
         let key = (digest.to_string(), key_defines);
         if let Some((_, scene)) = self.loaded.iter().find(|(k, _)| *k == key) {
+            touch(&self.dir, digest);
             return Ok(scene.clone());
         }
         let scene_file = self.unpack(client, digest).await?;
+        touch(&self.dir, digest);
         // the scene may name only files of its own bundle, whatever the coordinator checked
         let options = LoadOptions {
             defines: defines.clone(),
@@ -70,15 +92,23 @@ impl SceneCache {
             anyhow::bail!("invalid bundle digest {digest:?}");
         }
         let dir = self.dir.join(digest);
-        let marker = dir.join(".scene_path");
-        if let Ok(p) = std::fs::read_to_string(&marker) {
+        if let Ok(p) = std::fs::read_to_string(dir.join(MARKER)) {
             return Ok(dir.join(p));
         }
         let bytes = fetch_verified(client, digest).await?;
         let bundle = tessera_proto::bundle::decode(&bytes)?;
-        let cache_dir = self.dir.clone();
+        let (cache_dir, limit) = (self.dir.clone(), self.limit_bytes);
         let digest = digest.to_string();
-        tokio::task::spawn_blocking(move || write_bundle(&cache_dir, &digest, &bundle)).await?
+        tokio::task::spawn_blocking(move || -> anyhow::Result<PathBuf> {
+            let scene = write_bundle(&cache_dir, &digest, &bundle)?;
+            match evict(&cache_dir, limit, &HashSet::from([digest.as_str()])) {
+                Ok(gone) if !gone.is_empty() => tracing::info!(bundles = gone.len(), "scene cache trimmed"),
+                Ok(_) => {}
+                Err(e) => tracing::warn!(error = %e, "cannot trim the scene cache"),
+            }
+            Ok(scene)
+        })
+        .await?
     }
 }
 
@@ -138,11 +168,145 @@ fn write_bundle(cache: &Path, digest: &str, bundle: &Bundle) -> anyhow::Result<P
         std::fs::write(&p, data)?;
     }
     safe_relative_path(&bundle.scene_path).ok_or_else(|| anyhow::anyhow!("unsafe scene path"))?;
-    std::fs::write(tmp.join(".scene_path"), &bundle.scene_path)?;
+    std::fs::write(tmp.join(MARKER), &bundle.scene_path)?;
     let dir = cache.join(digest);
     if std::fs::rename(&tmp, &dir).is_err() {
         // another worker process sharing the cache unpacked it first
         let _ = std::fs::remove_dir_all(&tmp);
     }
     Ok(dir.join(&bundle.scene_path))
+}
+
+/// An unpacked bundle in the cache folder.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CachedBundle {
+    /// Its digest (the folder's name).
+    pub digest: String,
+    /// Bytes of its files.
+    pub bytes: u64,
+    /// Its last use.
+    pub last_used: SystemTime,
+}
+
+/// The bundles to delete so that the others fit in `limit_bytes`: least recently used first,
+/// never one `in_use` (which may leave the cache over the limit).
+pub fn plan_eviction(mut bundles: Vec<CachedBundle>, limit_bytes: u64, in_use: &HashSet<&str>) -> Vec<String> {
+    let mut total: u64 = bundles.iter().map(|b| b.bytes).sum();
+    bundles.sort_by(|a, b| (a.last_used, &a.digest).cmp(&(b.last_used, &b.digest)));
+    let mut gone = Vec::new();
+    for b in bundles {
+        if total <= limit_bytes {
+            break;
+        }
+        if !in_use.contains(b.digest.as_str()) {
+            total -= b.bytes;
+            gone.push(b.digest);
+        }
+    }
+    gone
+}
+
+/// Deletes least recently used bundles under `dir` until the rest fit in `limit_bytes`,
+/// keeping those `in_use`; returns the deleted digests.
+pub fn evict(dir: &Path, limit_bytes: u64, in_use: &HashSet<&str>) -> std::io::Result<Vec<String>> {
+    let gone = plan_eviction(scan(dir)?, limit_bytes, in_use);
+    for digest in &gone {
+        // renamed away first: a folder with its marker is always complete for another process
+        let doomed = dir.join(format!(".evict.{digest}.{}", std::process::id()));
+        std::fs::rename(dir.join(digest), &doomed)?;
+        std::fs::remove_dir_all(&doomed)?;
+    }
+    Ok(gone)
+}
+
+/// The unpacked bundles under `dir`: folders named by a digest holding a marker.
+fn scan(dir: &Path) -> std::io::Result<Vec<CachedBundle>> {
+    let mut bundles = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let digest = entry.file_name().to_string_lossy().into_owned();
+        let Ok(marker) = std::fs::metadata(entry.path().join(MARKER)) else { continue };
+        if tessera_proto::is_blob_digest(&digest) {
+            let last_used = marker.modified()?;
+            bundles.push(CachedBundle { bytes: folder_bytes(&entry.path())?, digest, last_used });
+        }
+    }
+    Ok(bundles)
+}
+
+fn folder_bytes(dir: &Path) -> std::io::Result<u64> {
+    let mut total = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let meta = entry.metadata()?;
+        total += if meta.is_dir() { folder_bytes(&entry.path())? } else { meta.len() };
+    }
+    Ok(total)
+}
+
+/// Marks bundle `digest` as just used (best effort: a failure only makes it look older).
+fn touch(dir: &Path, digest: &str) {
+    let marked = std::fs::File::options()
+        .write(true)
+        .open(dir.join(digest).join(MARKER))
+        .and_then(|f| f.set_modified(SystemTime::now()));
+    if let Err(e) = marked {
+        tracing::debug!(bundle = digest, error = %e, "cannot mark a cached bundle as used");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn digest(i: u8) -> String {
+        tessera_proto::blob_digest(&[i])
+    }
+
+    fn bundle(i: u8, bytes: u64, age_s: u64) -> CachedBundle {
+        CachedBundle { digest: digest(i), bytes, last_used: SystemTime::UNIX_EPOCH + Duration::from_secs(1000 - age_s) }
+    }
+
+    #[test]
+    fn plan_eviction_drops_least_recently_used_first_and_never_one_in_use() {
+        let bundles = vec![bundle(0, 40, 10), bundle(1, 30, 300), bundle(2, 20, 200), bundle(3, 10, 100)];
+        // 100 bytes, limit 60: the two oldest go (1 then 2)
+        assert_eq!(plan_eviction(bundles.clone(), 60, &HashSet::new()), vec![digest(1), digest(2)]);
+        assert!(plan_eviction(bundles.clone(), 100, &HashSet::new()).is_empty());
+        // the oldest is in use: it stays, and the next ones go instead
+        let in_use = HashSet::from([digest(1)]);
+        let in_use: HashSet<&str> = in_use.iter().map(String::as_str).collect();
+        assert_eq!(plan_eviction(bundles.clone(), 60, &in_use), vec![digest(2), digest(3), digest(0)]);
+        // a limit of 0 keeps only what is in use
+        assert_eq!(plan_eviction(bundles, 0, &in_use).len(), 3);
+    }
+
+    #[test]
+    fn evict_deletes_the_least_recently_used_bundle_folders() {
+        let dir = tempfile::tempdir().unwrap();
+        let now = SystemTime::now();
+        for (i, age_s) in [(0u8, 30u64), (1, 10), (2, 20)] {
+            let b = dir.path().join(digest(i));
+            std::fs::create_dir_all(b.join("meshes")).unwrap();
+            std::fs::write(b.join("meshes").join("m.obj"), vec![0u8; 1000]).unwrap();
+            std::fs::write(b.join(MARKER), "scene.xml").unwrap();
+            let marker = std::fs::File::options().write(true).open(b.join(MARKER)).unwrap();
+            marker.set_modified(now - Duration::from_secs(age_s)).unwrap();
+        }
+        // an unfinished unpacking (no marker) is not a bundle
+        std::fs::create_dir_all(dir.path().join(format!(".{}.7", digest(9)))).unwrap();
+        let bytes = scan(dir.path()).unwrap().iter().map(|b| b.bytes).sum::<u64>();
+        assert_eq!(bytes, 3 * (1000 + "scene.xml".len() as u64));
+        // room for two: the oldest (0) goes
+        assert_eq!(evict(dir.path(), 2100, &HashSet::new()).unwrap(), vec![digest(0)]);
+        assert!(!dir.path().join(digest(0)).exists() && dir.path().join(digest(1)).exists());
+        // using 2 makes 1 the least recently used
+        touch(dir.path(), &digest(2));
+        assert_eq!(evict(dir.path(), 1100, &HashSet::new()).unwrap(), vec![digest(1)]);
+        // in use, it stays even over the limit
+        assert!(evict(dir.path(), 0, &HashSet::from([digest(2).as_str()])).unwrap().is_empty());
+        assert!(dir.path().join(digest(2)).join(MARKER).exists());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2, "no evicted leftovers");
+    }
 }

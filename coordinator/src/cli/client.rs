@@ -1,5 +1,5 @@
-//! The farm client: the connection to a coordinator shared by `submit`, `status` and
-//! `cancel`, and the `status` and `cancel` commands, all over gRPC.
+//! The farm client: the connection to a coordinator shared by `submit`, `status`, `cancel` and
+//! `delete`, and the `status`, `cancel` and `delete` commands, all over gRPC.
 
 use anyhow::{Context, bail};
 use tessera_proto::state_name;
@@ -73,6 +73,19 @@ pub struct CancelArgs {
     pub server: ServerArgs,
 }
 
+/// Arguments of `tessera delete`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DeleteArgs {
+    /// The job id.
+    pub job: String,
+    /// Cancel the job first if it is still active (otherwise an active job is refused).
+    #[arg(long)]
+    pub cancel: bool,
+    /// Coordinator.
+    #[command(flatten)]
+    pub server: ServerArgs,
+}
+
 /// A job as JSON (the REST shape's main fields).
 pub fn job_json(j: &pb::Job) -> serde_json::Value {
     serde_json::json!({
@@ -141,6 +154,19 @@ pub fn cancel_command(args: &CancelArgs) -> anyhow::Result<()> {
         if job.state != pb::JobState::Cancelled as i32 {
             bail!("job {} was already {}", job.id, state_name(job.state));
         }
+        Ok(())
+    })
+}
+
+/// Runs `tessera delete`.
+pub fn delete_command(args: &DeleteArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let mut c = Client::connect(&args.server).await?;
+        if args.cancel {
+            c.jobs.cancel_job(c.request(pb::CancelJobRequest { id: args.job.clone() })).await.map_err(status_error)?;
+        }
+        c.jobs.delete_job(c.request(pb::DeleteJobRequest { id: args.job.clone() })).await.map_err(status_error)?;
+        println!("{}: deleted", args.job);
         Ok(())
     })
 }

@@ -1,6 +1,6 @@
 //! The `tessera` command line: argument parsing and dispatch, `tessera render` (a local render
-//! with no setup) and the farm client commands `submit`, `status` and `cancel`, which talk to a
-//! coordinator only through `tessera-proto`. `tessera serve` hands over to [`crate::serve`] and
+//! with no setup) and the farm client commands `submit`, `status`, `cancel` and `delete`, which
+//! talk to a coordinator only through `tessera-proto`. `tessera serve` hands over to [`crate::serve`] and
 //! `tessera bench …` to [`crate::bench`].
 
 pub mod client;
@@ -31,6 +31,8 @@ pub enum Command {
     Status(client::StatusArgs),
     /// Cancel a job on a coordinator.
     Cancel(client::CancelArgs),
+    /// Delete an ended job (done, failed or cancelled) and all its data from a coordinator.
+    Delete(client::DeleteArgs),
     /// Measure: rendering speed, equal-time quality, EMIS overheads and decisions, the farm.
     #[command(subcommand)]
     Bench(crate::bench::BenchCommand),
@@ -44,6 +46,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Submit(args) => submit::submit_command(&args),
         Command::Status(args) => client::status_command(&args),
         Command::Cancel(args) => client::cancel_command(&args),
+        Command::Delete(args) => client::delete_command(&args),
         Command::Bench(command) => crate::bench::run(&command),
     }
 }

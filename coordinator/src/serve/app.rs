@@ -1,6 +1,7 @@
 //! `tessera serve`: wiring of the coordinator. Opens the data directory (resuming unfinished
 //! jobs), serves gRPC (`JobService`, `WorkerService`) and REST on one port behind bearer-token
-//! authentication, expires leases on a timer, and shuts down gracefully on SIGINT/SIGTERM.
+//! authentication, expires leases on a timer (and, with `--retain-finished`, deletes jobs that
+//! ended long enough ago on another), and shuts down gracefully on SIGINT/SIGTERM.
 
 use super::auth::Tokens;
 use super::config::ServeArgs;
@@ -63,6 +64,22 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             })
         };
+        let retention = svc.retain_finished_ms().map(|retain_ms| {
+            let svc = svc.clone();
+            // often enough that a job goes within about a quarter of its retention
+            let period = Duration::from_millis((retain_ms / 4).clamp(200, 60_000));
+            tokio::spawn(async move {
+                let mut tick = tokio::time::interval(period);
+                tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+                loop {
+                    tick.tick().await;
+                    let svc = svc.clone();
+                    if let Ok(Err(e)) = tokio::task::spawn_blocking(move || svc.expire_finished(now_ms())).await {
+                        tracing::error!(error = %e, "deleting expired jobs failed");
+                    }
+                }
+            })
+        });
         // graceful shutdown waits for requests in flight, but long polls and watch streams may
         // not end by themselves: give them DRAIN_TIMEOUT, then stop (every transition is
         // already persisted, so stopping is safe)
@@ -80,6 +97,9 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
             } => tracing::warn!("requests still open after the drain timeout; stopping anyway"),
         }
         ticker.abort();
+        if let Some(r) = retention {
+            r.abort();
+        }
         tracing::info!("coordinator stopped");
         Ok(())
     })

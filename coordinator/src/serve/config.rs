@@ -7,6 +7,7 @@ use super::job::service::{DEFAULT_MAX_PIXELS, LeaseLifetime, ServiceConfig};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera serve`.
@@ -58,6 +59,10 @@ pub struct ServeArgs {
     /// Largest film a job may have, in pixels (width × height).
     #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
     pub max_pixels: u64,
+    /// Delete finished, failed and cancelled jobs with all their data this long after they
+    /// ended (`90s`, `30m`, `24h`, `7d`, `1h30m`) [default: keep them until deleted].
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    pub retain_finished: Option<Duration>,
 }
 
 impl ServeArgs {
@@ -93,9 +98,37 @@ impl ServeArgs {
                 .texture_budget
                 .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
             max_pixels: self.max_pixels,
+            retain_finished_ms: self.retain_finished.map(|d| d.as_millis() as u64),
         };
         Ok((tokens, cfg))
     }
+}
+
+/// A duration as a sequence of numbers with units `ms`, `s`, `m`, `h` or `d`: `90s`, `1.5h`,
+/// `1h30m`, `7d`.
+pub fn parse_duration(text: &str) -> Result<Duration, String> {
+    let bad = || format!("invalid duration {text:?} (write e.g. 90s, 30m, 24h, 7d or 1h30m)");
+    let mut rest = text.trim();
+    if rest.is_empty() {
+        return Err(bad());
+    }
+    let mut total = 0.0;
+    while !rest.is_empty() {
+        let digits = rest.find(|c: char| !(c.is_ascii_digit() || c == '.')).ok_or_else(bad)?;
+        let unit_len = rest[digits..].find(|c: char| c.is_ascii_digit()).unwrap_or(rest.len() - digits);
+        let value: f64 = rest[..digits].parse().map_err(|_| bad())?;
+        let seconds = match &rest[digits..digits + unit_len] {
+            "ms" => 1e-3,
+            "s" => 1.0,
+            "m" => 60.0,
+            "h" => 3600.0,
+            "d" => 86_400.0,
+            _ => return Err(bad()),
+        };
+        total += value * seconds;
+        rest = &rest[digits + unit_len..];
+    }
+    Duration::try_from_secs_f64(total).map_err(|_| bad())
 }
 
 fn read_token(value: &Option<String>, file: &Option<PathBuf>) -> anyhow::Result<Option<String>> {
@@ -108,4 +141,24 @@ fn read_token(value: &Option<String>, file: &Option<PathBuf>) -> anyhow::Result<
         return Ok(Some(t));
     }
     Ok(value.clone().filter(|t| !t.is_empty()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_parse_with_units_and_bad_ones_are_refused() {
+        let secs = |t: &str| parse_duration(t).map(|d| d.as_secs_f64());
+        assert_eq!(secs("90s"), Ok(90.0));
+        assert_eq!(secs("30m"), Ok(1800.0));
+        assert_eq!(secs("24h"), Ok(86_400.0));
+        assert_eq!(secs("7d"), Ok(604_800.0));
+        assert_eq!(secs("1h30m"), Ok(5400.0));
+        assert_eq!(secs("1.5s"), Ok(1.5));
+        assert_eq!(secs("250ms"), Ok(0.25));
+        for bad in ["", "90", "s", "5x", "1h30", "-3s", "1..2s", "5 s"] {
+            assert!(parse_duration(bad).is_err(), "{bad:?} accepted");
+        }
+    }
 }

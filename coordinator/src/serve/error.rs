@@ -2,6 +2,7 @@
 //! exactly one HTTP status and one gRPC code. Client-facing messages name the field, file and
 //! line at fault; internal failures are logged in full once and reported without details.
 
+use crate::serve::job::model::TransitionError;
 use crate::serve::job::service::ServiceError;
 
 /// API error classes.
@@ -87,8 +88,10 @@ impl From<ServiceError> for ApiError {
     fn from(e: ServiceError) -> Self {
         let code = match &e {
             ServiceError::InvalidArgument(_) | ServiceError::InvalidResult(_) => ErrorCode::InvalidArgument,
-            ServiceError::NotFound(_) => ErrorCode::NotFound,
-            ServiceError::FailedPrecondition(_) => ErrorCode::FailedPrecondition,
+            ServiceError::NotFound(_) | ServiceError::Transition(TransitionError::UnknownJob(_)) => ErrorCode::NotFound,
+            ServiceError::FailedPrecondition(_) | ServiceError::Transition(TransitionError::Unfinished { .. }) => {
+                ErrorCode::FailedPrecondition
+            }
             ServiceError::Storage(_) | ServiceError::Io(_) | ServiceError::Output(_) => ErrorCode::Internal,
             #[allow(unreachable_patterns)]
             _ => ErrorCode::Internal,

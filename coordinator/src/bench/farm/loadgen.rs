@@ -448,6 +448,7 @@ mod tests {
             checkpoint_interval_ms: 0,
             texture_limits: Default::default(),
             max_pixels: DEFAULT_MAX_PIXELS,
+            retain_finished_ms: None,
         };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();
         let req = generated_job(integrator, width, height, spp, "t");

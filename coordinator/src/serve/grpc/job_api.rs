@@ -40,7 +40,14 @@ impl pb::job_service_server::JobService for JobApi {
     }
 
     async fn cancel_job(&self, req: Request<pb::CancelJobRequest>) -> Result<Response<pb::Job>, Status> {
-        Ok(Response::new(job_to_pb(&self.0.svc.cancel(&req.into_inner().id, now_ms())?)))
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(job_to_pb(&blocking(move || svc.cancel(&id, now_ms())).await?)))
+    }
+
+    async fn delete_job(&self, req: Request<pb::DeleteJobRequest>) -> Result<Response<pb::DeleteJobResponse>, Status> {
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        blocking(move || svc.delete(&id)).await?;
+        Ok(Response::new(pb::DeleteJobResponse {}))
     }
 
     type WatchJobStream = BoxStream<pb::Job>;

@@ -1,11 +1,13 @@
 //! Jobs: what a job renders ([`spec`]), the pure state machine ([`model`]), how jobs are cut into tiles and passes
-//! ([`plan`]), result validation ([`validate`]), the EMIS state and updates ([`emis`]) and the
-//! service that wraps them with storage and notifications ([`service`]).
+//! ([`plan`]), result validation ([`validate`]), the EMIS state and updates ([`emis`]), removal
+//! of ended jobs ([`retention`]) and the service that wraps them with storage and
+//! notifications ([`service`]).
 
 pub mod emis;
 pub mod leasing;
 pub mod model;
 pub mod plan;
+pub mod retention;
 pub mod service;
 pub mod spec;
 pub mod validate;
@@ -13,6 +15,8 @@ pub mod view;
 
 #[cfg(test)]
 mod fault_tests;
+#[cfg(test)]
+mod retention_tests;
 #[cfg(test)]
 mod service_tests;
 #[cfg(test)]

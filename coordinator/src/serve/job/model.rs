@@ -9,7 +9,8 @@
 //! merged in tile-index order only (see `plan.rs` for why), so `tiles[..merged]` is exactly the
 //! set of tiles in the film.
 //!
-//! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`.
+//! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`, then
+//! removed (by a client or the retention sweep, see `retention.rs`).
 
 use super::plan::{self, BarrierAction, PassPlan};
 pub use super::spec::{JobSpec, TileSpec};
@@ -286,6 +287,14 @@ pub enum TransitionError {
     /// The job is not waiting for the optimiser.
     #[error("job {0} is not at an optimisation barrier")]
     NotOptimizing(String),
+    /// Only a finished, failed or cancelled job can be removed.
+    #[error("job {job} is {state}: cancel it before deleting it")]
+    Unfinished {
+        /// The job.
+        job: String,
+        /// Its state.
+        state: &'static str,
+    },
 }
 
 /// All jobs.

@@ -16,6 +16,7 @@ pub(super) const CFG: ServiceConfig = ServiceConfig {
     checkpoint_interval_ms: 3_600_000,
     texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
     max_pixels: super::service::DEFAULT_MAX_PIXELS,
+    retain_finished_ms: None,
 };
 
 pub(super) fn cornell() -> (Bundle, Scene) {
@@ -133,7 +134,7 @@ fn hostile_submissions_are_refused_and_the_service_goes_on() {
 }
 
 /// The `<integer name="NAME" value="..."/>` element of `xml`.
-fn integer_element(xml: &str, name: &str) -> Option<String> {
+pub(super) fn integer_element(xml: &str, name: &str) -> Option<String> {
     let start = xml.find(&format!("<integer name=\"{name}\""))?;
     let end = start + xml[start..].find("/>")? + 2;
     Some(xml[start..end].to_string())

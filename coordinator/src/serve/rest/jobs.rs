@@ -87,9 +87,18 @@ pub async fn get_one(State(st): St, Path(id): Path<String>) -> Result<Json<JobDt
     Ok(Json(blocking(move || svc.get(&id, now_ms())).await?.into()))
 }
 
-/// `DELETE /api/v1/jobs/{id}`.
+/// `POST /api/v1/jobs/{id}/cancel`: the job stops and stays, `cancelled`.
 pub async fn cancel(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
-    Ok(Json(st.svc.cancel(&id, now_ms())?.into()))
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.cancel(&id, now_ms())).await?.into()))
+}
+
+/// `DELETE /api/v1/jobs/{id}`: removes an ended job and its data (204); an active one is a
+/// conflict (409) until it is cancelled.
+pub async fn delete(State(st): St, Path(id): Path<String>) -> Result<axum::http::StatusCode, ApiError> {
+    let svc = st.svc.clone();
+    blocking(move || svc.delete(&id)).await?;
+    Ok(axum::http::StatusCode::NO_CONTENT)
 }
 
 async fn output(st: Arc<AppState>, id: String, kind: OutputKind) -> Result<impl IntoResponse, ApiError> {

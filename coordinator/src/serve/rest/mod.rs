@@ -4,7 +4,8 @@
 //! |---|---|
 //! | `POST /api/v1/jobs` | multipart: `scene` file, asset files (`asset`, file name = path relative to the scene), `settings` JSON |
 //! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON |
-//! | `DELETE /api/v1/jobs/{id}` | cancel |
+//! | `POST /api/v1/jobs/{id}/cancel` | cancel: the job stops and stays, `cancelled` |
+//! | `DELETE /api/v1/jobs/{id}` | delete an ended job and all its data (204; 409 while it is active) |
 //! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job |
 //! | `GET /api/v1/workers` | registered workers |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
@@ -16,7 +17,7 @@ pub mod jobs;
 use crate::serve::state::AppState;
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
-use axum::routing::get;
+use axum::routing::{get, post};
 use std::sync::Arc;
 
 /// The REST router.
@@ -24,7 +25,8 @@ pub fn router(state: Arc<AppState>) -> Router {
     let limit = state.max_upload_bytes;
     Router::new()
         .route("/api/v1/jobs", get(jobs::list).post(jobs::submit))
-        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::cancel))
+        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::delete))
+        .route("/api/v1/jobs/{id}/cancel", post(jobs::cancel))
         .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
         .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
         .route("/api/v1/workers", get(jobs::workers))

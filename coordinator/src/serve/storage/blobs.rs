@@ -5,7 +5,12 @@
 //! done; a blob is checked against its digest whenever it is read. Accepted tile results live in the database
 //! (docs/decisions/0009-results-in-the-database.md); [`BlobStore::get_result`] reads the result
 //! files a data directory may still hold from before that.
+//!
+//! Files go when the database stops naming them: a deleted job's files after the commit that
+//! deletes its rows, and at start-up whatever a crash left between such a commit and the
+//! removal (or between writing a file and committing its name): [`BlobStore::sweep`].
 
+use std::collections::HashSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use tessera_common::film::Film;
@@ -54,11 +59,62 @@ impl BlobStore {
     /// Stores `bytes` content-addressed; returns the digest.
     pub fn put(&self, bytes: &[u8]) -> std::io::Result<String> {
         let digest = tessera_proto::blob_digest(bytes);
-        let path = self.cas_path(&digest).expect("invariant: blob_digest gives a valid digest");
+        self.put_digested(&digest, bytes)?;
+        Ok(digest)
+    }
+
+    /// Stores `bytes` under `digest`, which the caller computed with
+    /// [`tessera_proto::blob_digest`] (a bundle's digest is needed before it is stored).
+    pub fn put_digested(&self, digest: &str, bytes: &[u8]) -> std::io::Result<()> {
+        let path = self.cas_path(digest).ok_or_else(|| std::io::Error::other(format!("invalid digest {digest}")))?;
+        debug_assert_eq!(tessera_proto::blob_digest(bytes), digest, "invariant: the digest is the bytes'");
         if !path.exists() {
             self.write_atomic(&path, bytes)?;
         }
-        Ok(digest)
+        Ok(())
+    }
+
+    /// Deletes a content-addressed blob (nothing if it is not there).
+    pub fn remove(&self, digest: &str) -> std::io::Result<()> {
+        match self.cas_path(digest).map(std::fs::remove_file) {
+            Some(Err(e)) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+            _ => Ok(()),
+        }
+    }
+
+    /// Deletes the result files a job may hold from before results moved into the database.
+    pub fn remove_results(&self, job: &str) -> std::io::Result<()> {
+        remove_all(&self.root.join("results").join(job))
+    }
+
+    /// Deletes every file that `live` does not name: content-addressed blobs, checkpoints,
+    /// old result folders of jobs that are gone, and every temporary file (run at start-up,
+    /// before anything writes). Returns how many entries went.
+    pub fn sweep(&self, live: &Live) -> std::io::Result<usize> {
+        let mut removed = 0;
+        for shard in std::fs::read_dir(self.root.join("cas"))? {
+            let shard = shard?.path();
+            if !shard.is_dir() {
+                continue;
+            }
+            for blob in std::fs::read_dir(&shard)? {
+                let blob = blob?;
+                if !live.blobs.contains(&*blob.file_name().to_string_lossy()) {
+                    remove_all(&blob.path())?;
+                    removed += 1;
+                }
+            }
+        }
+        for (sub, keep) in [("checkpoints", &live.checkpoints), ("results", &live.jobs), ("tmp", &HashSet::new())] {
+            for entry in std::fs::read_dir(self.root.join(sub))? {
+                let entry = entry?;
+                if !keep.contains(&*entry.file_name().to_string_lossy()) {
+                    remove_all(&entry.path())?;
+                    removed += 1;
+                }
+            }
+        }
+        Ok(removed)
     }
 
     /// Where blob `digest` lives; `None` if `digest` is not a SHA-256 hex string.
@@ -177,6 +233,30 @@ impl BlobStore {
     }
 }
 
+/// What the database and the running jobs still name; [`BlobStore::sweep`] deletes the rest.
+#[derive(Clone, Debug, Default)]
+pub struct Live {
+    /// Digests of content-addressed blobs (bundles, outputs, current merge masks).
+    pub blobs: HashSet<String>,
+    /// Checkpoint file names.
+    pub checkpoints: HashSet<String>,
+    /// Job ids (their old result folders stay).
+    pub jobs: HashSet<String>,
+}
+
+/// Removes a file or a folder with its contents; nothing if it is not there.
+pub fn remove_all(path: &Path) -> std::io::Result<()> {
+    let removed = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
+        Ok(_) => std::fs::remove_file(path),
+        Err(e) => Err(e),
+    };
+    match removed {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
+}
+
 /// Syncs the folder holding `path`, so that a rename into it survives a crash.
 fn sync_parent(path: &Path) -> std::io::Result<()> {
     match path.parent() {
@@ -217,6 +297,36 @@ mod tests {
             let name = blobs.put_checkpoint("job", 2 * i + 1, &film, b"emis").unwrap();
             assert_eq!(blobs.get_checkpoint(&name).unwrap(), (film, b"emis".to_vec()));
         }
+    }
+
+    #[test]
+    fn sweep_keeps_what_is_live_and_deletes_the_rest() {
+        let dir = tempfile::tempdir().unwrap();
+        let blobs = BlobStore::open(dir.path()).unwrap();
+        let (kept, orphan) = (blobs.put(b"kept").unwrap(), blobs.put(b"orphan").unwrap());
+        let film = Film::for_filter(1, 1, &tessera_common::film::filter::Filter::BOX);
+        let (live_ck, old_ck) =
+            (blobs.put_checkpoint("a", 2, &film, &[]).unwrap(), blobs.put_checkpoint("a", 1, &film, &[]).unwrap());
+        for job in ["a", "gone"] {
+            std::fs::create_dir_all(dir.path().join("results").join(job)).unwrap();
+            std::fs::write(dir.path().join("results").join(job).join("0-0.bin"), b"r").unwrap();
+        }
+        std::fs::write(blobs.temp_path(".exr"), b"half-written").unwrap();
+        let live = Live {
+            blobs: [kept.clone()].into(),
+            checkpoints: [live_ck.clone()].into(),
+            jobs: ["a".to_string()].into(),
+        };
+        assert_eq!(blobs.sweep(&live).unwrap(), 4);
+        assert_eq!(blobs.get(&kept).unwrap().as_deref(), Some(&b"kept"[..]));
+        assert!(blobs.get(&orphan).unwrap().is_none());
+        assert!(blobs.get_checkpoint(&live_ck).is_ok() && blobs.get_checkpoint(&old_ck).is_err());
+        assert!(blobs.get_result("a", 0, 0).is_ok() && blobs.get_result("gone", 0, 0).is_err());
+        assert_eq!(std::fs::read_dir(dir.path().join("tmp")).unwrap().count(), 0);
+        assert_eq!(blobs.sweep(&live).unwrap(), 0, "nothing more to do");
+        blobs.remove(&kept).unwrap();
+        blobs.remove(&kept).unwrap();
+        assert!(blobs.get(&kept).unwrap().is_none());
     }
 
     #[test]

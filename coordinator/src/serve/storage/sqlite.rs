@@ -9,6 +9,10 @@
 //! `accepted` and merged again on start-up from their results, which the `results` table keeps
 //! (written in the transaction that accepts them, deleted in the one that records the
 //! checkpoint covering them: one commit per result, and no file per result).
+//!
+//! Deleting a job removes its job, tile and result rows in one transaction queued like any
+//! other batch (so it lands after every earlier change of the job); the space is given back by
+//! incremental auto-vacuum (see [`super::space`]).
 
 use crate::serve::job::model::{Changes, Job, JobSpec, JobState, JobsModel, Pass, Tile, TileSpec, TileState};
 use rusqlite::{Connection, OptionalExtension, params};
@@ -105,7 +109,7 @@ pub struct WorkerRow {
 
 /// The database.
 pub struct Store {
-    conn: Connection,
+    pub(super) conn: Connection,
 }
 
 const SCHEMA: &str = "
@@ -134,6 +138,8 @@ pub struct Batch {
     jobs: Vec<JobRow>,
     tiles: Vec<TileRow>,
     extras: Vec<Extra>,
+    /// Jobs whose rows go, after the rest of the batch.
+    deletes: Vec<String>,
 }
 
 #[derive(Clone, Debug)]
@@ -203,9 +209,14 @@ impl Batch {
         batch
     }
 
+    /// Deletes every row of `jobs` (job, tiles, results).
+    pub fn deleting(jobs: &[String]) -> Batch {
+        Batch { deletes: jobs.to_vec(), ..Batch::default() }
+    }
+
     /// Whether there is nothing to write.
     pub fn is_empty(&self) -> bool {
-        self.jobs.is_empty() && self.tiles.is_empty() && self.extras.is_empty()
+        self.jobs.is_empty() && self.tiles.is_empty() && self.extras.is_empty() && self.deletes.is_empty()
     }
 }
 
@@ -242,6 +253,8 @@ impl Store {
     /// Opens (creating) the database file.
     pub fn open(path: &Path) -> Result<Store, StoreError> {
         let conn = Connection::open(path)?;
+        // before the first table exists, or with a VACUUM for a database made without it
+        super::space::use_incremental_vacuum(&conn)?;
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
@@ -306,6 +319,15 @@ impl Store {
             }
             for extra in &batch.extras {
                 write_extra(&tx, extra)?;
+            }
+            for job in &batch.deletes {
+                for sql in [
+                    "DELETE FROM results WHERE job_id = ?1",
+                    "DELETE FROM tiles WHERE job_id = ?1",
+                    "DELETE FROM jobs WHERE id = ?1",
+                ] {
+                    tx.prepare_cached(sql)?.execute([job])?;
+                }
             }
         }
         tx.commit()?;

@@ -2,7 +2,9 @@
 //! uploads (validated, stored, accepted once for the current epoch, merged in tile order), and
 //! the timer's lease expiry.
 
+use super::runtime::JobRuntime;
 use super::{Inner, JobService, LeaseGrant, ServiceError};
+use crate::serve::job::emis::MergeSpec;
 use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
@@ -78,9 +80,16 @@ impl JobService {
             .into_iter()
             .map(|l| {
                 let job = &state.model.jobs[&l.job];
-                let strategy = match state.jobs.get_mut(&l.job).and_then(|r| r.emis.as_mut()) {
-                    Some(e) => Some(e.strategy(&self.blobs, job.collects(l.tile))?),
-                    None => None,
+                let runtime = state.jobs.get_mut(&l.job);
+                let strategy = match runtime {
+                    Some(JobRuntime { emis: Some(e), masks, .. }) => {
+                        let s = e.strategy(&self.blobs, job.collects(l.tile))?;
+                        if let MergeSpec::Mask(digest) = &s.merge {
+                            masks.insert(digest.clone());
+                        }
+                        Some(s)
+                    }
+                    _ => None,
                 };
                 Ok(LeaseGrant { tile: job.tiles[l.tile].spec.clone(), job: job.spec.clone(), lease: l, strategy })
             })

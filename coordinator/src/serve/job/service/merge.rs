@@ -241,8 +241,10 @@ impl JobService {
         if action == Some(BarrierAction::Finish) {
             self.record_outputs(&mut inner, &f.job, outputs, f.upto, &changes, Vec::new(), f.emis)?;
         } else {
-            // cancelled while the outputs were written
+            // cancelled (or cancelled and deleted) while the outputs were written: nothing will
+            // name them
             self.persist(&mut inner, &changes, &[])?;
+            self.remove_unused_blobs(&inner, [outputs.0, outputs.1].into());
         }
         self.sync(&inner)
     }

@@ -9,12 +9,13 @@
 //!
 //! Methods are synchronous and may do file IO; async callers run the heavy ones (submit,
 //! upload, results) on blocking threads. The calls are grouped by who makes them: clients
-//! ([`submit`], [`query`]), workers ([`leases`]), and the merge path ([`merge`]); what the
-//! service holds per job is one [`runtime::JobRuntime`].
+//! ([`submit`], [`query`], [`retention`] for deleting ended jobs), workers ([`leases`]), and the
+//! merge path ([`merge`]); what the service holds per job is one [`runtime::JobRuntime`].
 
 mod leases;
 mod merge;
 mod query;
+mod retention;
 mod runtime;
 mod submit;
 
@@ -50,6 +51,9 @@ pub struct ServiceConfig {
     /// The largest film a job may have, in pixels: the coordinator holds it (16 bytes a pixel,
     /// more under EMIS) from the job's first run to its end.
     pub max_pixels: u64,
+    /// Jobs that ended this long ago are deleted with all their data
+    /// ([`JobService::expire_finished`]); `None` keeps them until a client deletes them.
+    pub retain_finished_ms: Option<u64>,
 }
 
 /// [`ServiceConfig::max_pixels`] unless `tessera serve --max-pixels` says otherwise: 8192².
@@ -164,6 +168,9 @@ pub struct JobService {
     blobs: BlobStore,
     scenes_dir: PathBuf,
     inner: Mutex<Inner>,
+    /// Bundles being stored by submissions not yet in the model, by digest (with a count):
+    /// deleting a job must not take a bundle one of them is about to use.
+    submitting: Mutex<HashMap<String, usize>>,
     commits: Committer,
     /// Signalled when tiles become available (for long-polling workers).
     pub work: tokio::sync::Notify,
@@ -221,6 +228,7 @@ impl JobService {
             blobs,
             scenes_dir: data_dir.join("scenes"),
             inner: Mutex::new(inner),
+            submitting: Mutex::new(HashMap::new()),
             commits: committer(store),
             work: tokio::sync::Notify::new(),
             changed: tokio::sync::watch::channel(0).0,
@@ -238,6 +246,7 @@ impl JobService {
         }
         let ticket = svc.lock().ticket;
         svc.commits.wait(ticket)?;
+        svc.sweep_orphans()?;
         Ok(svc)
     }
 

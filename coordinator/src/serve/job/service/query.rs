@@ -1,5 +1,5 @@
-//! The calls clients make besides submission: job views, cancellation, finished outputs,
-//! blobs, the workers' list and the figures behind `/metrics`.
+//! The calls clients make besides submission and deletion: job views, cancellation, finished
+//! outputs, blobs, the workers' list and the figures behind `/metrics`.
 
 use super::{Counters, Inner, JobService, ServiceError};
 use crate::serve::job::model::{JobState, TileState};
@@ -39,7 +39,7 @@ impl JobService {
     /// Cancels a job.
     pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         let mut inner = self.lock();
-        let changes = inner.model.cancel(job, now_ms)?;
+        let changes = inner.model.cancel(job, now_ms).map_err(super::retention::refused)?;
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
         inner.job(job).end();

@@ -6,7 +6,7 @@
 use super::super::emis::EmisJob;
 use super::super::view::StrategyView;
 use crate::serve::storage::JobFiles;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use tessera_common::emis::PilotData;
 use tessera_common::film::{Film, TileAccum};
 
@@ -35,6 +35,9 @@ pub(super) struct JobRuntime {
     pub(super) held: BTreeMap<usize, HeldResult>,
     /// Its checkpoint and outputs.
     pub(super) files: JobFiles,
+    /// EMIS: digests of the merge masks it stored (deleted with the job; not persisted, so
+    /// after a restart those of earlier passes go with the start-up sweep instead).
+    pub(super) masks: BTreeSet<String>,
     /// The last checkpoint's time and cost; `None` until the first merge after submission or
     /// a restart, which starts the clock.
     pub(super) checkpoint: Option<CheckpointState>,
@@ -49,7 +52,7 @@ impl JobRuntime {
         }
     }
 
-    /// Drops what only a running job needs, keeping its decisions and files.
+    /// Drops what only a running job needs, keeping its decisions and files (masks included).
     pub(super) fn end(&mut self) {
         if let Some(view) = self.emis.take().and_then(|e| e.view()) {
             self.decisions = Some(view);

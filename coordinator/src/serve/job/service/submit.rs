@@ -22,7 +22,47 @@ impl JobService {
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let (digest, scene) = self.store_bundle(&bundle, &settings)?;
+        let encoded = tessera_proto::bundle::encode(&bundle);
+        let digest = tessera_proto::blob_digest(&encoded);
+        // pinned until the job is in the model, so that a delete of another job with this
+        // bundle leaves it alone meanwhile
+        let pin = self.pin_bundle(&digest);
+        let spec = self.store_bundle(&bundle, &encoded, &digest, settings, priority, name);
+        drop(encoded);
+        let spec = match spec {
+            Ok(spec) => spec,
+            Err(e) => {
+                // a refused scene leaves no files behind (unless a job or submission uses them)
+                drop(pin);
+                self.remove_unused_blobs(&self.lock(), [digest].into());
+                return Err(e);
+            }
+        };
+        let id = uuid::Uuid::new_v4().to_string();
+        let mut inner = self.lock();
+        let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
+        drop(pin);
+        let runtime = inner.job(&id);
+        runtime.emis = EmisJob::new(&spec);
+        self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
+        tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
+        self.work.notify_waiters();
+        Ok(self.view(&inner, &id, now_ms))
+    }
+
+    /// Stores and loads the bundle (see [`JobService::unpack_and_load`]) and checks the scene
+    /// against the settings and limits: the job's description.
+    fn store_bundle(
+        &self,
+        bundle: &Bundle,
+        encoded: &[u8],
+        digest: &str,
+        settings: RenderSettings,
+        priority: i32,
+        name: Option<String>,
+    ) -> Result<JobSpec, ServiceError> {
+        let scene = self.unpack_and_load(bundle, encoded, digest, &settings)?;
         let (w, h) = (scene.camera.width, scene.camera.height);
         if u64::from(w) * u64::from(h) > self.cfg.max_pixels {
             return Err(ServiceError::InvalidArgument(format!(
@@ -33,32 +73,29 @@ impl JobService {
         }
         let integrator_settings = settings.resolved(&scene);
         integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let spec = JobSpec {
+        Ok(JobSpec {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
             priority,
             full_frame: integrator_settings.integrator.full_frame(),
             settings: integrator_settings,
             width: scene.camera.width,
             height: scene.camera.height,
-            bundle_digest: digest,
+            bundle_digest: digest.to_string(),
             scene_path: bundle.scene_path.clone(),
             filter: scene.film.filter.kind,
-        };
-        let id = uuid::Uuid::new_v4().to_string();
-        let mut inner = self.lock();
-        let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
-        let runtime = inner.job(&id);
-        runtime.emis = EmisJob::new(&spec);
-        self.persist(&mut inner, &changes, &[])?;
-        self.sync(&inner)?;
-        tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
-        self.work.notify_waiters();
-        Ok(self.view(&inner, &id, now_ms))
+        })
     }
 
-    /// Stores the bundle blob, unpacks it and loads the scene from it to validate it. Scene
-    /// errors name the file inside the bundle, its line and column.
-    fn store_bundle(&self, bundle: &Bundle, settings: &RenderSettings) -> Result<(String, Scene), ServiceError> {
+    /// Stores the bundle blob (`encoded`, whose digest is `digest`), unpacks it and loads the
+    /// scene from it to validate it. Scene errors name the file inside the bundle, its line and
+    /// column.
+    fn unpack_and_load(
+        &self,
+        bundle: &Bundle,
+        encoded: &[u8],
+        digest: &str,
+        settings: &RenderSettings,
+    ) -> Result<Scene, ServiceError> {
         let invalid = ServiceError::InvalidArgument;
         if tessera_common::bundle::safe_relative_path(&bundle.scene_path).is_none() {
             return Err(invalid(format!("bundle scene path \"{}\" is not a relative path", bundle.scene_path)));
@@ -71,8 +108,8 @@ impl JobService {
                 return Err(invalid(format!("bundle file path \"{path}\" must be relative without \"..\"")));
             }
         }
-        let digest = self.blobs.put(&tessera_proto::bundle::encode(bundle))?;
-        let dir = self.scenes_dir.join(&digest);
+        self.blobs.put_digested(digest, encoded)?;
+        let dir = self.scenes_dir.join(digest);
         if !dir.exists() {
             let tmp = self.scenes_dir.join(format!("{digest}.{}", uuid::Uuid::new_v4()));
             for (path, data) in &bundle.files {
@@ -94,7 +131,7 @@ impl JobService {
             let prefix = format!("{}/", dir.display());
             invalid(e.to_string().replace(&prefix, ""))
         })?;
-        Ok((digest, scene))
+        Ok(scene)
     }
 }
 
