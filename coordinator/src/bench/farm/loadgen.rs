@@ -196,6 +196,10 @@ pub struct IngestReport {
     pub coordinator_cores: f64,
     /// Tiles per coordinator CPU-second: the rate one fully used core sustains.
     pub tiles_per_cpu_s: f64,
+    /// `GET /healthz` latency while the case ran, 99th percentile and worst (see `probe.rs`).
+    pub healthz_p99_ms: f64,
+    /// Worst `/healthz` latency.
+    pub healthz_max_ms: f64,
     /// Mean upload-to-response latency.
     pub latency_mean_ms: f64,
     /// CPU cores the load generator (this process) used meanwhile.
@@ -258,11 +262,14 @@ pub async fn run_case(
         let id = register(&mut c, &format!("sim-{i}")).await?;
         tasks.push(tokio::spawn(sim_worker(c, id, batch, start.clone(), stop.clone())));
     }
+    let probe = tokio::spawn(super::probe::healthz(serve.url.clone(), stop.clone()));
     start.wait().await;
     let (t0, cpu0, gen0) = (Instant::now(), serve.cpu_seconds()?, crate::bench::cpu_seconds());
     let [(seconds, cpu1), (end, cpu2)] = watch(serve, &mut client, &ids, t0).await?;
     let generator_cores = (crate::bench::cpu_seconds() - gen0) / end;
     stop.store(true, Ordering::Relaxed);
+    let mut healthz = probe.await?;
+    healthz.sort_by(f64::total_cmp);
     let (mut samples, mut not_accepted) = (Vec::new(), 0);
     for t in tasks {
         let (s, r) = t.await??;
@@ -270,7 +277,14 @@ pub async fn run_case(
         not_accepted += r;
     }
     let report = summarise(case, &samples, not_accepted, seconds, cpu1 - cpu0);
-    Ok(IngestReport { generator_cores, finish_s: end - seconds, finish_cpu_s: cpu2 - cpu1, ..report })
+    Ok(IngestReport {
+        generator_cores,
+        finish_s: end - seconds,
+        finish_cpu_s: cpu2 - cpu1,
+        healthz_p99_ms: quantile(&healthz, 0.99),
+        healthz_max_ms: healthz.last().copied().unwrap_or(0.0),
+        ..report
+    })
 }
 
 fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cpu: f64) -> IngestReport {
@@ -300,6 +314,8 @@ fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cp
         coordinator_cpu_s: cpu,
         coordinator_cores: cpu / seconds,
         tiles_per_cpu_s: tiles as f64 / cpu.max(1e-9),
+        healthz_p99_ms: 0.0,
+        healthz_max_ms: 0.0,
         finish_s: 0.0,
         finish_cpu_s: 0.0,
         latency_mean_ms: lat.iter().sum::<f64>() / lat.len().max(1) as f64,
@@ -325,11 +341,13 @@ fn print_report(r: &IngestReport, json: bool) {
         if r.not_accepted > 0 { format!(", {} not accepted", r.not_accepted) } else { String::new() }
     );
     println!(
-        "{:<28} then {:.2} s ({:.2} coordinator CPU-s) for the last {:.0} % of the tiles and the outputs",
+        "{:<28} then {:.2} s ({:.2} coordinator CPU-s) for the last {:.0} % of the tiles and the outputs; /healthz p99 {:.1} ms, worst {:.1} ms",
         "",
         r.finish_s,
         r.finish_cpu_s,
-        (1.0 - STEADY_FRACTION) * 100.0
+        (1.0 - STEADY_FRACTION) * 100.0,
+        r.healthz_p99_ms,
+        r.healthz_max_ms
     );
     if json {
         println!("{}", serde_json::json!(r));

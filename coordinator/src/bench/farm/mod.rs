@@ -16,6 +16,7 @@
 
 pub mod calibrate;
 pub mod loadgen;
+pub mod probe;
 pub mod scaling;
 pub mod serve;
 pub mod wire;

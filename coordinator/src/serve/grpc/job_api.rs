@@ -55,7 +55,10 @@ impl pb::job_service_server::JobService for JobApi {
     async fn watch_job(&self, req: Request<pb::GetJobRequest>) -> Result<Response<Self::WatchJobStream>, Status> {
         let id = req.into_inner().id;
         let svc = self.0.svc.clone();
-        let first = svc.get(&id, now_ms())?;
+        let first = {
+            let (svc, id) = (svc.clone(), id.clone());
+            blocking(move || svc.get(&id, now_ms())).await?
+        };
         let mut changes = svc.changed.subscribe();
         let (tx, rx) = tokio::sync::mpsc::channel(16);
         tokio::spawn(async move {
@@ -66,7 +69,8 @@ impl pb::job_service_server::JobService for JobApi {
                 }
                 // wake on changes, and at least every second so the ETA stays fresh
                 let _ = tokio::time::timeout(std::time::Duration::from_secs(1), changes.changed()).await;
-                match svc.get(&id, now_ms()) {
+                let (s, i) = (svc.clone(), id.clone());
+                match blocking(move || s.get(&i, now_ms())).await {
                     Ok(v) => view = v,
                     Err(e) => {
                         let _ = tx.send(Err(e.into())).await;

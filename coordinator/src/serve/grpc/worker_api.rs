@@ -39,7 +39,8 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
     async fn heartbeat(&self, req: Request<pb::HeartbeatRequest>) -> Result<Response<pb::HeartbeatResponse>, Status> {
         let req = req.into_inner();
         let leases = req.leases.into_iter().map(|l| lease_from_pb(Some(l))).collect::<Result<Vec<_>, _>>()?;
-        let lost = self.0.svc.heartbeat(&req.worker_id, &leases, now_ms())?;
+        let svc = self.0.svc.clone();
+        let lost = blocking(move || svc.heartbeat(&req.worker_id, &leases, now_ms())).await?;
         Ok(Response::new(pb::HeartbeatResponse { lost: lost.iter().map(lease_to_pb).collect() }))
     }
 
@@ -53,7 +54,8 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
             tokio::pin!(notified);
             notified.as_mut().enable();
             let started = std::time::Instant::now();
-            let grants = self.0.svc.lease(&req.worker_id, max, now_ms())?;
+            let (svc, worker) = (self.0.svc.clone(), req.worker_id.clone());
+            let grants = blocking(move || svc.lease(&worker, max, now_ms())).await?;
             self.0.telemetry.lease_seconds.observe(started.elapsed().as_secs_f64());
             if !grants.is_empty() || tokio::time::Instant::now() >= deadline {
                 return Ok(Response::new(pb::LeaseTileResponse { leases: grants.iter().map(grant_to_pb).collect() }));
@@ -130,7 +132,8 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
     ) -> Result<Response<pb::ReportFailureResponse>, Status> {
         let req = req.into_inner();
         let lease = lease_from_pb(req.lease)?;
-        self.0.svc.report_failure(&req.worker_id, &lease, &req.message, now_ms())?;
+        let svc = self.0.svc.clone();
+        blocking(move || svc.report_failure(&req.worker_id, &lease, &req.message, now_ms())).await?;
         Ok(Response::new(pb::ReportFailureResponse {}))
     }
 

@@ -119,8 +119,10 @@ pub async fn preview_png(State(st): St, Path(id): Path<String>) -> Result<impl I
 }
 
 /// `GET /api/v1/workers`.
-pub async fn workers(State(st): St) -> Json<Vec<WorkerDto>> {
-    Json(st.svc.workers(now_ms()).into_iter().map(WorkerDto::from).collect())
+pub async fn workers(State(st): St) -> Result<Json<Vec<WorkerDto>>, ApiError> {
+    let svc = st.svc.clone();
+    let workers = blocking(move || Ok(svc.workers(now_ms()))).await?;
+    Ok(Json(workers.into_iter().map(WorkerDto::from).collect()))
 }
 
 /// `GET /metrics`: the OpenMetrics text format, which Prometheus reads.
