@@ -556,3 +556,4 @@ fn image_comparison_notices_a_different_seed() {
 mod bad_results;
 mod faults;
 mod hostile;
+mod scale;

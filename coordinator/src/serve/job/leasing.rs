@@ -3,6 +3,8 @@
 //! and its lifetime (heartbeats that go on without a result, bounded by what the job's tiles
 //! measurably take), plus the postponement of every lease when the coordinator stalled.
 
+use std::collections::BTreeSet;
+
 use super::model::{
     BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, touch,
 };
@@ -29,6 +31,43 @@ impl LeaseLifetime {
     }
 }
 
+/// Which tiles of a job are queued and which leased: what leasing, expiry and the workers'
+/// status read, so that none of them scans a job's tiles. Derived from the tiles' states
+/// (never stored): kept by [`Job::set_tile_state`], rebuilt by [`Job::reindex`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileIndex {
+    /// Tiles waiting for a worker.
+    pub queued: BTreeSet<usize>,
+    /// Tiles held by a worker.
+    pub leased: BTreeSet<usize>,
+}
+
+impl Job {
+    /// Sets tile `i`'s state, keeping the index.
+    pub fn set_tile_state(&mut self, i: usize, state: TileState) {
+        self.index.queued.remove(&i);
+        self.index.leased.remove(&i);
+        match state {
+            TileState::Queued => self.index.queued.insert(i),
+            TileState::Leased { .. } => self.index.leased.insert(i),
+            TileState::Accepted | TileState::Merged => false,
+        };
+        self.tiles[i].state = state;
+    }
+
+    /// Rebuilds the index from the tiles (after loading them).
+    pub fn reindex(&mut self) {
+        self.index = TileIndex::default();
+        for (i, t) in self.tiles.iter().enumerate() {
+            match t.state {
+                TileState::Queued => self.index.queued.insert(i),
+                TileState::Leased { .. } => self.index.leased.insert(i),
+                _ => false,
+            };
+        }
+    }
+}
+
 impl JobsModel {
     /// Leases up to `max_tiles` queued tiles of the most urgent job `worker` may render
     /// (highest priority, then oldest). Full-frame jobs hand out one tile at a time.
@@ -39,24 +78,20 @@ impl JobsModel {
             .values()
             .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
             .filter(|j| !j.is_blocklisted(worker))
-            .filter(|j| j.tiles[j.leasable()].iter().any(|t| t.state == TileState::Queued))
+            .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
             .map(|j| j.id.clone());
         let Some(id) = candidate else { return (Vec::new(), changes) };
         let job = self.jobs.get_mut(&id).expect("invariant: candidate job exists");
         let max = if job.spec.full_frame { 1 } else { max_tiles.max(1) };
         let mut leases = Vec::new();
-        let leasable = job.leasable();
-        for (i, tile) in job.tiles.iter_mut().enumerate().skip(leasable.start).take(leasable.len()) {
-            if leases.len() == max {
-                break;
-            }
-            if tile.state == TileState::Queued {
-                tile.state =
-                    TileState::Leased { worker: worker.to_string(), deadline_ms: now_ms + ttl_ms, since_ms: now_ms };
-                leases.push(LeaseRef { job: id.clone(), tile: i, epoch: tile.epoch });
-                touch(&mut changes, &id, Some(i));
-            }
+        let ready: Vec<usize> = job.index.queued.range(job.leasable()).take(max).copied().collect();
+        for i in ready {
+            let state =
+                TileState::Leased { worker: worker.to_string(), deadline_ms: now_ms + ttl_ms, since_ms: now_ms };
+            job.set_tile_state(i, state);
+            leases.push(LeaseRef { job: id.clone(), tile: i, epoch: job.tiles[i].epoch });
+            touch(&mut changes, &id, Some(i));
         }
         if job.state == JobState::Queued {
             job.state = match job.passes.last().map(|p| p.kind) {
@@ -94,7 +129,7 @@ impl JobsModel {
     pub fn expire(&mut self, now_ms: u64, lifetime: &LeaseLifetime) -> Changes {
         let mut changes = Changes::new();
         for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
-            for i in 0..job.tiles.len() {
+            for i in job.index.leased.clone() {
                 let TileState::Leased { worker, deadline_ms, since_ms } = &job.tiles[i].state else { continue };
                 let limit = lifetime.of(job, i);
                 let reason = if *deadline_ms <= now_ms {
@@ -120,7 +155,7 @@ impl JobsModel {
             .jobs
             .values()
             .filter(|j| !j.state.is_terminal() && !live.is_empty())
-            .filter(|j| j.tiles.iter().any(|t| t.state == TileState::Queued))
+            .filter(|j| !j.index.queued.is_empty())
             .filter(|j| live.iter().all(|w| j.is_blocklisted(w)))
             .map(|j| j.id.clone())
             .collect();
@@ -138,8 +173,8 @@ impl JobsModel {
     /// heartbeat or upload meanwhile, so every lease's clock moves on by as much.
     pub fn postpone_leases(&mut self, by_ms: u64) {
         for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
-            for tile in &mut job.tiles {
-                if let TileState::Leased { deadline_ms, since_ms, .. } = &mut tile.state {
+            for &i in &job.index.leased {
+                if let TileState::Leased { deadline_ms, since_ms, .. } = &mut job.tiles[i].state {
                     *deadline_ms += by_ms;
                     *since_ms += by_ms;
                 }
@@ -147,16 +182,29 @@ impl JobsModel {
         }
     }
 
-    /// Current leases of `worker`.
+    /// Current leases of `worker` (in jobs that have not ended).
     pub fn leases_of(&self, worker: &str) -> Vec<LeaseRef> {
         let mut out = Vec::new();
-        for job in self.jobs.values() {
-            for (i, t) in job.tiles.iter().enumerate() {
-                if matches!(&t.state, TileState::Leased { worker: w, .. } if w == worker) {
-                    out.push(LeaseRef { job: job.id.clone(), tile: i, epoch: t.epoch });
+        for job in self.jobs.values().filter(|j| !j.state.is_terminal()) {
+            for &i in &job.index.leased {
+                if matches!(&job.tiles[i].state, TileState::Leased { worker: w, .. } if w == worker) {
+                    out.push(LeaseRef { job: job.id.clone(), tile: i, epoch: job.tiles[i].epoch });
                 }
             }
         }
         out
+    }
+
+    /// How many tiles each worker holds, by worker id (in jobs that have not ended).
+    pub fn lease_counts(&self) -> std::collections::HashMap<&str, usize> {
+        let mut counts = std::collections::HashMap::new();
+        for job in self.jobs.values().filter(|j| !j.state.is_terminal()) {
+            for &i in &job.index.leased {
+                if let TileState::Leased { worker, .. } = &job.tiles[i].state {
+                    *counts.entry(worker.as_str()).or_default() += 1;
+                }
+            }
+        }
+        counts
     }
 }

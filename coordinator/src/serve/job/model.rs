@@ -12,6 +12,7 @@
 //! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`, then
 //! removed (by a client or the retention sweep, see `retention.rs`).
 
+pub use super::leasing::TileIndex;
 use super::plan::{self, BarrierAction, PassPlan};
 pub use super::spec::{JobSpec, TileSpec};
 use serde::{Deserialize, Serialize};
@@ -153,6 +154,8 @@ pub struct Job {
     /// The slowest rate any accepted result of this job was rendered at, from lease to
     /// result, per pixel sample: what bounds a lease's lifetime. Measured again after a restart.
     pub slowest_ms_per_sample: Option<f64>,
+    /// Its queued and leased tiles (derived from `tiles`).
+    pub index: TileIndex,
 }
 
 /// Results that arrive ahead of the merge frontier wait in memory: a job leases no further
@@ -207,7 +210,7 @@ impl Job {
 
     /// Tiles accepted or merged.
     pub fn tiles_done(&self) -> usize {
-        self.tiles.iter().filter(|t| matches!(t.state, TileState::Accepted | TileState::Merged)).count()
+        self.tiles.len() - self.index.queued.len() - self.index.leased.len()
     }
 
     /// The pass `tile` belongs to.
@@ -229,6 +232,7 @@ impl Job {
             failures: 0,
         }));
         let range = start..self.tiles.len();
+        self.index.queued.extend(range.clone());
         self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart });
         range
     }
@@ -326,6 +330,7 @@ impl JobsModel {
             started_ms: None,
             finished_ms: None,
             slowest_ms_per_sample: None,
+            index: TileIndex::default(),
         };
         let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
         let range = job.append_pass(kind, first, false);
@@ -336,7 +341,8 @@ impl JobsModel {
     }
 
     /// Adds a job rebuilt from storage as it was.
-    pub fn restore(&mut self, job: Job) {
+    pub fn restore(&mut self, mut job: Job) {
+        job.reindex();
         self.jobs.insert(job.id.clone(), job);
     }
 
@@ -375,7 +381,7 @@ impl JobsModel {
                     let rate = now_ms.saturating_sub(since_ms) as f64 / job.tiles[i].spec.pixel_samples().max(1) as f64;
                     job.slowest_ms_per_sample = Some(job.slowest_ms_per_sample.map_or(rate, |r| r.max(rate)));
                 }
-                job.tiles[i].state = TileState::Accepted;
+                job.set_tile_state(i, TileState::Accepted);
                 (ResultOutcome::Accepted, changes)
             }
             Err(reason) => {
@@ -496,8 +502,8 @@ impl JobsModel {
 /// (blocklisting it for the job after [`BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile
 /// has failed [`MAX_TILE_FAILURES`] times.
 pub(super) fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now_ms: u64) {
+    job.set_tile_state(i, TileState::Queued);
     let tile = &mut job.tiles[i];
-    tile.state = TileState::Queued;
     tile.epoch += 1;
     tile.failures += 1;
     *job.worker_failures.entry(worker.to_string()).or_default() += 1;

@@ -359,6 +359,9 @@ proptest! {
                 prop_assert_eq!(t.state == TileState::Merged, i < job.merged);
             }
             epochs = job.tiles.iter().map(|t| t.epoch).collect();
+            let mut rebuilt = job.clone();
+            rebuilt.reindex();
+            prop_assert_eq!(&rebuilt.index, &job.index, "the ready-tile index drifted");
             prop_assert!(accepted.values().all(|&n| n == 1), "a tile was accepted twice");
             prop_assert!(merges.iter().all(|&n| n <= 1), "a tile was merged twice");
         }

@@ -5,9 +5,9 @@ use crate::serve::error::{ApiError, ErrorCode};
 use crate::serve::job::service::{Bundle, OutputKind};
 use crate::serve::state::{AppState, blocking, now_ms};
 use axum::Json;
-use axum::extract::{Multipart, Path, State};
+use axum::extract::{Multipart, Path, Query, State};
 use axum::http::header;
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
 use tessera_common::settings::RenderSettings;
 
@@ -74,11 +74,38 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 
-/// `GET /api/v1/jobs`.
-pub async fn list(State(st): St) -> Result<Json<Vec<JobDto>>, ApiError> {
+/// A page of `GET /api/v1/jobs`.
+#[derive(serde::Deserialize)]
+pub struct Page {
+    /// Jobs per page: [`DEFAULT_PAGE`] unless given, at most [`MAX_PAGE`].
+    limit: Option<usize>,
+    /// Jobs to skip, newest first.
+    offset: Option<usize>,
+}
+
+/// Jobs per page of `GET /api/v1/jobs` unless `limit` says otherwise ...
+pub const DEFAULT_PAGE: usize = 100;
+/// ... and at most.
+pub const MAX_PAGE: usize = 1000;
+
+/// `GET /api/v1/jobs?limit=N&offset=M`: newest first, one page; `X-Total-Count` says how many
+/// jobs there are and a `Link: <...>; rel="next"` header where the next page is.
+pub async fn list(State(st): St, Query(page): Query<Page>) -> Result<Response, ApiError> {
+    let limit = page.limit.unwrap_or(DEFAULT_PAGE);
+    if !(1..=MAX_PAGE).contains(&limit) {
+        return Err(ApiError::new(ErrorCode::InvalidArgument, format!("limit must be 1 to {MAX_PAGE}, got {limit}")));
+    }
+    let offset = page.offset.unwrap_or(0);
     let svc = st.svc.clone();
-    let jobs = blocking(move || svc.list(now_ms())).await?;
-    Ok(Json(jobs.into_iter().map(JobDto::from).collect()))
+    let (jobs, total) = blocking(move || svc.list_page(now_ms(), offset, limit)).await?;
+    let mut response = Json(jobs.into_iter().map(JobDto::from).collect::<Vec<_>>()).into_response();
+    let headers = response.headers_mut();
+    headers.insert("x-total-count", total.into());
+    if offset + limit < total {
+        let next = format!("</api/v1/jobs?limit={limit}&offset={}>; rel=\"next\"", offset + limit);
+        headers.insert(header::LINK, next.parse().expect("invariant: ASCII header"));
+    }
+    Ok(response)
 }
 
 /// `GET /api/v1/jobs/{id}`.

@@ -416,7 +416,10 @@ impl Store {
                 started_ms: started.map(|t| t as u64),
                 finished_ms: finished.map(|t| t as u64),
                 slowest_ms_per_sample: None,
+                index: Default::default(),
             };
+            let mut job = job;
+            job.reindex();
             Ok((job, files))
         }
     }

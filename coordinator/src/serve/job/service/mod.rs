@@ -349,6 +349,7 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
         started_ms: None,
         finished_ms: Some(now_ms),
         slowest_ms_per_sample: None,
+        index: Default::default(),
     }
 }
 

@@ -2,7 +2,7 @@
 //! outputs, blobs, the workers' list and the figures behind `/metrics`.
 
 use super::{Counters, Inner, JobService, ServiceError};
-use crate::serve::job::model::{JobState, TileState};
+use crate::serve::job::model::JobState;
 use crate::serve::job::view::{JobView, WorkerView};
 use std::collections::BTreeMap;
 
@@ -64,14 +64,21 @@ impl JobService {
 
     /// Every job, newest first (committed state, as [`JobService::get`]).
     pub fn list(&self, now_ms: u64) -> Result<Vec<JobView>, ServiceError> {
+        Ok(self.list_page(now_ms, 0, usize::MAX)?.0)
+    }
+
+    /// Up to `limit` jobs from the `offset`-th, newest first, and how many jobs there are:
+    /// only the page's views are built.
+    pub fn list_page(&self, now_ms: u64, offset: usize, limit: usize) -> Result<(Vec<JobView>, usize), ServiceError> {
         let inner = self.lock();
-        let mut jobs: Vec<_> = inner.model.jobs.values().collect();
-        jobs.sort_by_key(|j| std::cmp::Reverse(j.seq));
-        let views = jobs.into_iter().map(|j| self.view(&inner, &j.id, now_ms)).collect();
+        let mut jobs: Vec<_> = inner.model.jobs.values().map(|j| (j.seq, &j.id)).collect();
+        jobs.sort_unstable_by_key(|&(seq, _)| std::cmp::Reverse(seq));
+        let total = jobs.len();
+        let views = jobs.into_iter().skip(offset).take(limit).map(|(_, id)| self.view(&inner, id, now_ms)).collect();
         let ticket = inner.ticket;
         drop(inner);
         self.commits.wait(ticket)?;
-        Ok(views)
+        Ok((views, total))
     }
 
     /// A finished job's EXR or PNG.
@@ -100,6 +107,7 @@ impl JobService {
     /// Registered workers with their current leases.
     pub fn workers(&self, now_ms: u64) -> Vec<WorkerView> {
         let inner = self.lock();
+        let leases = inner.model.lease_counts();
         inner
             .workers
             .values()
@@ -108,7 +116,7 @@ impl JobService {
                 name: w.name.clone(),
                 threads: w.threads,
                 last_seen_s_ago: now_ms.saturating_sub(w.last_seen_ms) as f64 / 1000.0,
-                leases: inner.model.leases_of(&w.id).len(),
+                leases: leases.get(w.id.as_str()).copied().unwrap_or(0),
             })
             .collect()
     }
@@ -120,8 +128,8 @@ impl JobService {
         for j in inner.model.jobs.values() {
             *metrics.jobs_by_state.entry(j.state.as_str()).or_default() += 1;
             if !j.state.is_terminal() {
-                metrics.tiles_queued += j.tiles.iter().filter(|t| t.state == TileState::Queued).count();
-                metrics.tiles_leased += j.tiles.iter().filter(|t| matches!(t.state, TileState::Leased { .. })).count();
+                metrics.tiles_queued += j.index.queued.len();
+                metrics.tiles_leased += j.index.leased.len();
             }
         }
         metrics
