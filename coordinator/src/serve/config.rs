@@ -3,7 +3,7 @@
 //! service's settings and the API tokens.
 
 use super::auth::Tokens;
-use super::job::service::{DEFAULT_MAX_PIXELS, LeaseLifetime, ServiceConfig};
+use super::job::service::{DEFAULT_MAX_PIXELS, DEFAULT_MAX_TILES, LeaseLifetime, ServiceConfig};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -56,6 +56,9 @@ pub struct ServeArgs {
     /// coordinator validates it, in MiB [default: 1024 per image, 4096 in all].
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
+    /// Most tiles a job may plan (vcm, bdpt and lt plan one per iteration of the spp).
+    #[arg(long, default_value_t = DEFAULT_MAX_TILES)]
+    pub max_tiles: u64,
     /// Largest film a job may have, in pixels (width × height).
     #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
     pub max_pixels: u64,
@@ -98,6 +101,7 @@ impl ServeArgs {
                 .texture_budget
                 .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
             max_pixels: self.max_pixels,
+            max_tiles: self.max_tiles,
             retain_finished_ms: self.retain_finished.map(|d| d.as_millis() as u64),
         };
         Ok((tokens, cfg))

@@ -466,6 +466,7 @@ mod tests {
             checkpoint_interval_ms: 0,
             texture_limits: Default::default(),
             max_pixels: DEFAULT_MAX_PIXELS,
+            max_tiles: u64::MAX,
             retain_finished_ms: None,
         };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();

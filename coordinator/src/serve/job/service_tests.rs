@@ -16,6 +16,7 @@ pub(super) const CFG: ServiceConfig = ServiceConfig {
     checkpoint_interval_ms: 3_600_000,
     texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
     max_pixels: super::service::DEFAULT_MAX_PIXELS,
+    max_tiles: 1_000,
     retain_finished_ms: None,
 };
 
@@ -129,6 +130,19 @@ fn hostile_submissions_are_refused_and_the_service_goes_on() {
             assert!(m.contains("65535×65535") && m.contains("--max-pixels"), "{m}")
         }
         other => panic!("a 65535² film accepted: {other:?}"),
+    }
+    // four billion vcm iterations would plan four billion tiles up front
+    let bundle = Bundle { scene_path: "scene.xml".into(), files: vec![("scene.xml".into(), xml.clone().into_bytes())] };
+    let endless = RenderSettings {
+        integrator: tessera_common::settings::IntegratorName::Vcm,
+        spp: Some(4_000_000_000),
+        ..Default::default()
+    };
+    match svc.submit(bundle, endless, 0, None, 1_000) {
+        Err(ServiceError::InvalidArgument(m)) => {
+            assert!(m.contains("4000000000 tiles") && m.contains("--max-tiles"), "{m}")
+        }
+        other => panic!("4·10⁹ iterations accepted: {other:?}"),
     }
     assert!(submit(xml).is_ok(), "the service still takes jobs");
 }

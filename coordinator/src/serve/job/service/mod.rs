@@ -54,7 +54,13 @@ pub struct ServiceConfig {
     /// Jobs that ended this long ago are deleted with all their data
     /// ([`JobService::expire_finished`]); `None` keeps them until a client deletes them.
     pub retain_finished_ms: Option<u64>,
+    /// The most tiles a job may plan (a full-frame integrator's sample budget plans one per
+    /// iteration, each a row in memory and in the database).
+    pub max_tiles: u64,
 }
+
+/// [`ServiceConfig::max_tiles`] unless `tessera serve --max-tiles` says otherwise.
+pub const DEFAULT_MAX_TILES: u64 = 1_000_000;
 
 /// [`ServiceConfig::max_pixels`] unless `tessera serve --max-pixels` says otherwise: 8192².
 pub const DEFAULT_MAX_PIXELS: u64 = 8192 * 8192;

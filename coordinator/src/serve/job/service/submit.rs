@@ -5,6 +5,7 @@
 use super::{Bundle, JobService, ServiceError};
 use crate::serve::job::emis::EmisJob;
 use crate::serve::job::model::JobSpec;
+use crate::serve::job::plan::TILE_SIZE;
 use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::scene::{LoadOptions, Scene};
@@ -73,10 +74,25 @@ impl JobService {
         }
         let integrator_settings = settings.resolved(&scene);
         integrator_settings.make_renderer(&scene).map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        // every tile of a sample budget's pass is planned (and stored) when the pass starts:
+        // full-frame integrators plan a tile per iteration
+        let full_frame = integrator_settings.integrator.full_frame();
+        let tiles = match (full_frame, integrator_settings.spp) {
+            (true, Some(spp)) => u64::from(spp),
+            _ => u64::from(w.div_ceil(TILE_SIZE)) * u64::from(h.div_ceil(TILE_SIZE)),
+        };
+        if tiles > self.cfg.max_tiles {
+            return Err(ServiceError::InvalidArgument(format!(
+                "{} spp plans {tiles} tiles ({}), over this coordinator's limit of {} per job (tessera serve --max-tiles)",
+                integrator_settings.spp.unwrap_or(0),
+                if full_frame { "one full frame per iteration" } else { "64² rectangles" },
+                self.cfg.max_tiles
+            )));
+        }
         Ok(JobSpec {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
             priority,
-            full_frame: integrator_settings.integrator.full_frame(),
+            full_frame,
             settings: integrator_settings,
             width: scene.camera.width,
             height: scene.camera.height,
