@@ -209,3 +209,27 @@ fn a_coordinator_stall_is_not_held_against_its_workers() {
     assert!(now >= 61_000 + CFG.lease_timeout_ms, "expired before its deadline");
     assert_eq!(svc.heartbeat(&w, std::slice::from_ref(&lease), now).unwrap(), vec![lease]);
 }
+
+/// A queued EMIS job holds no moment buffers (hundreds of bytes a pixel): they are made at its
+/// first lease, and again after a restart only when it runs on.
+#[test]
+fn emis_state_is_made_when_the_job_first_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bundle, _) = cornell();
+    let settings = RenderSettings {
+        integrator: tessera_common::settings::IntegratorName::EmisVcm,
+        spp: Some(2),
+        ..Default::default()
+    };
+    let job = {
+        let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
+        let job = svc.submit(bundle, settings, 0, None, 1_000).unwrap().id;
+        assert!(!svc.holds_emis_state(&job), "a queued job's moments allocated");
+        job
+    };
+    let svc = JobService::open(dir.path(), CFG, 2_000).unwrap();
+    assert!(!svc.holds_emis_state(&job), "allocated again at a restart");
+    let w = svc.register("w", 1, None, 2_000).unwrap();
+    assert_eq!(svc.lease(&w, 1, 2_000).unwrap().len(), 1);
+    assert!(svc.holds_emis_state(&job));
+}

@@ -74,6 +74,10 @@ impl JobService {
         let mut inner = self.lock();
         self.seen(&mut inner, worker, now_ms)?;
         let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
+        if let Some(l) = leases.first() {
+            // an EMIS job's state is made at its first lease (all leases are of one job)
+            inner.emis(&l.job);
+        }
         self.persist(&mut inner, &changes, &[])?;
         let state = &mut *inner;
         let grants = leases

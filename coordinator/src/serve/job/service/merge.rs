@@ -51,7 +51,7 @@ impl JobService {
         let layout = self.lock().model.jobs.get(job).map(|j| j.spec.layout(tile.rect)).ok_or("the job is gone")?;
         let accum = validate_result(tile, layout, claim, image)?;
         // megabytes of pilot data are decoded without holding the service's lock
-        let shape = self.lock().jobs.get(job).and_then(|r| r.emis.as_ref()).map(EmisJob::shape);
+        let shape = self.lock().emis(job).map(|e| e.shape());
         let pilot = match shape {
             Some(shape) => shape.decode(tile, collect, pilot)?,
             None if pilot.is_empty() => None,
@@ -66,6 +66,7 @@ impl JobService {
     pub(super) fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let iterations = inner.model.jobs[job].spp_merged();
         let filter = Filter::new(inner.model.jobs[job].spec.filter);
+        inner.emis(job);
         let runtime = inner.job(job);
         let (Some(film), Some(emis)) = (runtime.film.as_mut(), runtime.emis.as_mut()) else {
             let changes = inner.model.fail(job, "the EMIS state of this job is missing".into(), now_ms);
@@ -288,6 +289,8 @@ impl JobService {
         range: std::ops::Range<usize>,
         film: &mut Film,
     ) -> Result<(), ServiceError> {
+        // after a restart the EMIS state may not be made yet: stored pilot data needs it
+        inner.emis(job);
         let mut results = Vec::with_capacity(range.len());
         for i in range.clone() {
             let read = match inner.job(job).held.remove(&i) {

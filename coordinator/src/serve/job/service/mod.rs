@@ -166,6 +166,18 @@ impl Inner {
     fn job(&mut self, job: &str) -> &mut JobRuntime {
         self.jobs.entry(job.to_string()).or_default()
     }
+
+    /// The EMIS state of an unfinished EMIS job, made when first needed (its first lease, or
+    /// its first merge after a restart): its moment buffers take hundreds of bytes a pixel,
+    /// which queued jobs must not hold.
+    fn emis(&mut self, job: &str) -> Option<&mut EmisJob> {
+        let j = self.model.jobs.get(job)?;
+        let runtime = self.jobs.entry(job.to_string()).or_default();
+        if runtime.emis.is_none() && !j.state.is_terminal() {
+            runtime.emis = EmisJob::new(&j.spec);
+        }
+        runtime.emis.as_mut()
+    }
 }
 
 /// The job service.
@@ -317,6 +329,12 @@ impl JobService {
         Ok(self.commits.wait(inner.ticket)?)
     }
 
+    /// Test hook: whether the service holds `job`'s EMIS state (moments, guides).
+    #[cfg(test)]
+    pub(crate) fn holds_emis_state(&self, job: &str) -> bool {
+        self.lock().jobs.get(job).is_some_and(|r| r.emis.is_some())
+    }
+
     /// Test hook: the commit after the next `n` fails.
     #[cfg(test)]
     pub(crate) fn fail_commits_after(&self, n: i64) {
@@ -380,8 +398,9 @@ fn restore_running(
         Some(name) => blobs.get_checkpoint(name).map(|(film, emis)| (Some(film), emis))?,
         None => (None, Vec::new()),
     };
+    // without EMIS bytes the state is made when first needed (`Inner::emis`)
     let emis = match emis_bytes.is_empty() {
-        true => EmisJob::new(spec),
+        true => None,
         false => Some(
             EmisJob::restore(spec, &emis_bytes)
                 .map_err(|message| ServiceError::Corrupt { what: format!("EMIS checkpoint of job {id}"), message })?,

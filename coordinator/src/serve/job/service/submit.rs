@@ -3,7 +3,6 @@
 //! and the job is queued.
 
 use super::{Bundle, JobService, ServiceError};
-use crate::serve::job::emis::EmisJob;
 use crate::serve::job::model::JobSpec;
 use crate::serve::job::plan::TILE_SIZE;
 use crate::serve::job::view::JobView;
@@ -43,8 +42,6 @@ impl JobService {
         let mut inner = self.lock();
         let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
         drop(pin);
-        let runtime = inner.job(&id);
-        runtime.emis = EmisJob::new(&spec);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
         tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
