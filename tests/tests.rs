@@ -489,6 +489,7 @@ fn serve_refuses_a_public_address_without_tokens() {
     let data = dir.path().join("data");
     let (ok, _, err) = tessera(&["serve", "--listen", "0.0.0.0:0", "--data-dir", data.to_str().unwrap()]);
     assert!(!ok && err.contains("refusing to listen on 0.0.0.0:0") && err.contains("--insecure"), "{err}");
+    assert!(err.contains("without TLS (--tls-cert, --tls-key) and tokens"), "{err}");
 }
 
 #[test]
@@ -502,3 +503,4 @@ fn image_comparison_notices_a_different_seed() {
 
 mod bad_results;
 mod hostile;
+mod tls;
