@@ -18,7 +18,7 @@ fn jobs_are_listed_in_pages_newest_first() {
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     let page = |query: &str| {
         rt.block_on(async {
-            let r = reqwest::get(format!("{}/api/v1/jobs{query}", c.url)).await.unwrap();
+            let r = rest::client(None).get(format!("{}/api/v1/jobs{query}", c.url)).send().await.unwrap();
             let header = |name: &str| r.headers().get(name).map(|v| v.to_str().unwrap().to_string());
             let (total, link) = (header("x-total-count"), header("link"));
             (r.status().as_u16(), total, link, r.json::<Value>().await.unwrap_or(Value::Null))

@@ -542,6 +542,7 @@ fn serve_refuses_a_public_address_without_tokens() {
     let data = dir.path().join("data");
     let (ok, _, err) = tessera(&["serve", "--listen", "0.0.0.0:0", "--data-dir", data.to_str().unwrap()]);
     assert!(!ok && err.contains("refusing to listen on 0.0.0.0:0") && err.contains("--insecure"), "{err}");
+    assert!(err.contains("without TLS (--tls-cert, --tls-key) and tokens"), "{err}");
 }
 
 #[test]
@@ -557,3 +558,4 @@ mod bad_results;
 mod faults;
 mod hostile;
 mod scale;
+mod tls;

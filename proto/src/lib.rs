@@ -6,7 +6,8 @@
 //!   heartbeat, lease tiles (long poll), upload tile sums and fetch scene bundles by digest.
 //!
 //! The crate holds generated code plus what both ends must agree on: payload layouts and
-//! constants here, conversions to the renderer's settings and rectangles in [`convert`].
+//! constants here, conversions to the renderer's settings and rectangles in [`convert`], and
+//! how clients reach a coordinator over `http://` or `https://` in [`connect`].
 //!
 //! ```no_run
 //! use tessera_proto::v1::job_service_client::JobServiceClient;
@@ -20,6 +21,7 @@
 #![deny(missing_docs)]
 
 pub mod bundle;
+pub mod connect;
 pub mod convert;
 pub mod payload;
 

@@ -33,7 +33,7 @@ pub fn scene(name: &str) -> PathBuf {
 pub struct Coordinator {
     /// The process.
     pub child: Child,
-    /// `http://127.0.0.1:PORT`.
+    /// `http://127.0.0.1:PORT`, or `https://` when it serves TLS.
     pub url: String,
     /// Its log file (stderr).
     pub log: PathBuf,
@@ -60,7 +60,7 @@ impl Coordinator {
             .trim()
             .rsplit(' ')
             .next()
-            .filter(|u| u.starts_with("http://"))
+            .filter(|u| u.starts_with("http://") || u.starts_with("https://"))
             .unwrap_or_else(|| {
                 panic!(
                     "no address from tessera serve ({line:?}), log: {}",
@@ -199,46 +199,91 @@ pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<
 /// Blocking helpers over reqwest for the REST API.
 pub mod rest {
     use reqwest::multipart::{Form, Part};
+    use reqwest::{Method, RequestBuilder};
+
+    /// What a request carries beyond its URL and token: headers (a browser's `Origin`), and
+    /// the PEM certificate an `https://` server's certificate chains to.
+    #[derive(Clone, Copy, Default)]
+    pub struct Extra<'a> {
+        /// Extra headers.
+        pub headers: &'a [(&'a str, &'a str)],
+        /// The CA to trust (only it) for `https://` URLs.
+        pub ca_pem: Option<&'a [u8]>,
+    }
 
     fn rt() -> tokio::runtime::Runtime {
         tokio::runtime::Builder::new_current_thread().enable_all().build().expect("runtime")
     }
 
-    fn auth(req: reqwest::RequestBuilder, token: Option<&str>) -> reqwest::RequestBuilder {
-        match token {
-            Some(t) => req.bearer_auth(t),
-            None => req,
+    /// A client for plain URLs, or for https:// ones whose certificate chains to `ca_pem`
+    /// (HTTP/1.1: the gRPC tests cover HTTP/2).
+    pub fn client(ca_pem: Option<&[u8]>) -> reqwest::Client {
+        // reqwest is built without a crypto provider of its own (its default, aws-lc-rs, needs
+        // cmake); an error means one is installed already
+        let _ = rustls::crypto::ring::default_provider().install_default();
+        let Some(pem) = ca_pem else { return reqwest::Client::new() };
+        use rustls_pki_types::pem::PemObject;
+        let mut roots = rustls::RootCertStore::empty();
+        for cert in rustls_pki_types::CertificateDer::pem_slice_iter(pem) {
+            roots.add(cert.expect("CA PEM")).expect("CA certificate");
         }
+        let provider = std::sync::Arc::new(rustls::crypto::ring::default_provider());
+        let mut config = rustls::ClientConfig::builder_with_provider(provider)
+            .with_safe_default_protocol_versions()
+            .expect("TLS versions")
+            .with_root_certificates(roots)
+            .with_no_client_auth();
+        config.alpn_protocols = vec![b"http/1.1".to_vec()];
+        reqwest::Client::builder().tls_backend_preconfigured(config).build().expect("https client")
     }
 
-    /// GET, returning (status, body bytes).
-    pub fn get(url: &str, token: Option<&str>) -> (u16, Vec<u8>) {
+    /// Sends a request built by `build` from a client for `extra`, with the token and headers;
+    /// returns (status, body bytes).
+    pub fn send(
+        token: Option<&str>,
+        extra: Extra,
+        build: impl FnOnce(&reqwest::Client) -> RequestBuilder,
+    ) -> (u16, Vec<u8>) {
         rt().block_on(async {
-            let r = auth(reqwest::Client::new().get(url), token).send().await.expect("GET");
+            let mut req = build(&client(extra.ca_pem));
+            if let Some(t) = token {
+                req = req.bearer_auth(t);
+            }
+            for (name, value) in extra.headers {
+                req = req.header(*name, *value);
+            }
+            let r = req.send().await.unwrap_or_else(|e| panic!("request failed: {e:?}"));
             (r.status().as_u16(), r.bytes().await.expect("body").to_vec())
         })
     }
 
+    fn json(status_body: (u16, Vec<u8>)) -> (u16, serde_json::Value) {
+        (status_body.0, serde_json::from_slice(&status_body.1).unwrap_or(serde_json::Value::Null))
+    }
+
+    /// GET, returning (status, body bytes).
+    pub fn get(url: &str, token: Option<&str>) -> (u16, Vec<u8>) {
+        send(token, Extra::default(), |c| c.get(url))
+    }
+
     /// GET JSON.
     pub fn get_json(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
-        let (s, b) = get(url, token);
-        (s, serde_json::from_slice(&b).unwrap_or(serde_json::Value::Null))
+        json(get(url, token))
     }
 
     /// DELETE JSON.
     pub fn delete(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
-        rt().block_on(async {
-            let r = auth(reqwest::Client::new().delete(url), token).send().await.expect("DELETE");
-            (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null))
-        })
+        delete_with(url, token, Extra::default())
+    }
+
+    /// DELETE JSON with `extra`.
+    pub fn delete_with(url: &str, token: Option<&str>, extra: Extra) -> (u16, serde_json::Value) {
+        json(send(token, extra, |c| c.request(Method::DELETE, url)))
     }
 
     /// POST without a body, returning JSON.
     pub fn post(url: &str, token: Option<&str>) -> (u16, serde_json::Value) {
-        rt().block_on(async {
-            let r = auth(reqwest::Client::new().post(url), token).send().await.expect("POST");
-            (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null))
-        })
+        json(send(token, Extra::default(), |c| c.request(Method::POST, url)))
     }
 
     /// POST /api/v1/jobs with a scene, assets `(path, bytes)` and settings JSON.
@@ -249,18 +294,24 @@ pub mod rest {
         assets: Vec<(String, Vec<u8>)>,
         settings: serde_json::Value,
     ) -> (u16, serde_json::Value) {
-        rt().block_on(async {
-            let mut form = Form::new()
-                .part("scene", Part::bytes(scene.1).file_name(scene.0.to_string()))
-                .text("settings", settings.to_string());
-            for (path, bytes) in assets {
-                form = form.part("asset", Part::bytes(bytes).file_name(path));
-            }
-            let req = auth(reqwest::Client::new().post(format!("{base}/api/v1/jobs")).multipart(form), token);
-            match req.send().await {
-                Ok(r) => (r.status().as_u16(), r.json().await.unwrap_or(serde_json::Value::Null)),
-                Err(e) => panic!("POST failed: {e}"),
-            }
-        })
+        submit_with(base, token, Extra::default(), scene, assets, settings)
+    }
+
+    /// [`submit`] with `extra`.
+    pub fn submit_with(
+        base: &str,
+        token: Option<&str>,
+        extra: Extra,
+        scene: (&str, Vec<u8>),
+        assets: Vec<(String, Vec<u8>)>,
+        settings: serde_json::Value,
+    ) -> (u16, serde_json::Value) {
+        let mut form = Form::new()
+            .part("scene", Part::bytes(scene.1).file_name(scene.0.to_string()))
+            .text("settings", settings.to_string());
+        for (path, bytes) in assets {
+            form = form.part("asset", Part::bytes(bytes).file_name(path));
+        }
+        json(send(token, extra, |c| c.post(format!("{base}/api/v1/jobs")).multipart(form)))
     }
 }

@@ -1,5 +1,5 @@
-//! The worker's gRPC client: connection with bearer token, and exponential backoff for
-//! reconnecting and retrying.
+//! The worker's gRPC client: connection (http or https) with bearer token, and exponential
+//! backoff for reconnecting and retrying.
 
 use std::time::Duration;
 use tessera_proto::v1::worker_service_client::WorkerServiceClient;
@@ -14,13 +14,9 @@ pub struct Client {
 }
 
 impl Client {
-    /// Connects to `url`.
-    pub async fn connect(url: &str, token: Option<String>) -> Result<Client, tonic::transport::Error> {
-        let channel = Endpoint::from_shared(url.to_string())?
-            .connect_timeout(Duration::from_secs(5))
-            .tcp_nodelay(true)
-            .connect()
-            .await?;
+    /// Connects to the coordinator at `endpoint` (see [`tessera_proto::connect::endpoint`]).
+    pub async fn connect(endpoint: &Endpoint, token: Option<String>) -> Result<Client, tonic::transport::Error> {
+        let channel = endpoint.clone().connect_timeout(Duration::from_secs(5)).tcp_nodelay(true).connect().await?;
         let inner = WorkerServiceClient::new(channel)
             .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
             .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);

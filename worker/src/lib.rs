@@ -6,7 +6,7 @@
 //! when their leases expire or the worker registers again.
 //!
 //! ```text
-//! tessera-worker --coordinator http://farm:7878 --threads 16 --token $TOKEN
+//! tessera-worker --coordinator https://farm:7878 --ca-cert farm-ca.pem --threads 16 --token $TOKEN
 //! ```
 
 pub mod client;
@@ -22,9 +22,13 @@ use std::path::PathBuf;
 #[derive(clap::Parser, Debug, Clone)]
 #[command(name = "tessera-worker", version, about = "Render worker for a Tessera coordinator")]
 pub struct Args {
-    /// Coordinator URL.
+    /// Coordinator URL (`https://` when it serves TLS).
     #[arg(long, env = "TESSERA_COORDINATOR")]
     pub coordinator: String,
+    /// PEM file of the CA (or self-signed certificate) an https:// coordinator's certificate
+    /// chains to, trusted besides the system's roots.
+    #[arg(long, env = "TESSERA_CA_CERT", value_name = "PEM")]
+    pub ca_cert: Option<PathBuf>,
     /// Render threads [default: all cores].
     #[arg(long)]
     pub threads: Option<usize>,

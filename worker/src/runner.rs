@@ -43,6 +43,8 @@ fn key(l: &pb::LeaseRef) -> (String, u32, u64) {
 
 /// Runs until drained.
 pub async fn run(args: Args) -> anyhow::Result<()> {
+    // a bad URL or CA file is fatal at once; only connecting is retried
+    let endpoint = tessera_proto::connect::endpoint(&args.coordinator, args.ca_cert.as_deref())?;
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?);
     let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
@@ -60,7 +62,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     let mut backoff = Backoff::default();
     while !*drain.borrow() {
         let session = async {
-            let mut client = Client::connect(&args.coordinator, args.token.clone()).await?;
+            let mut client = Client::connect(&endpoint, args.token.clone()).await?;
             let reg = client
                 .inner
                 .register(client.request(pb::RegisterRequest {

@@ -17,6 +17,24 @@ fn zero_threads_is_refused_with_one_line() {
 }
 
 #[test]
+fn a_bad_ca_certificate_is_refused_at_once_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing-ca.pem");
+    let out = worker()
+        .args(["--coordinator", "https://127.0.0.1:9", "--threads", "1", "--ca-cert"])
+        .arg(&missing)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot read CA certificate") && err.contains("missing-ca.pem"), "{err}");
+    // a CA for a plain-text URL would silently do nothing
+    let out = worker().args(["--coordinator", "http://127.0.0.1:9", "--ca-cert"]).arg(&missing).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("needs an https:// coordinator URL"), "{err}");
+}
+
+#[test]
 fn sigterm_stops_a_worker_that_is_retrying_a_dead_coordinator() {
     // a port nobody listens on
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();

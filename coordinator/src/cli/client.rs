@@ -10,9 +10,13 @@ use tonic::transport::Channel;
 /// Connection options shared by the client commands.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ServerArgs {
-    /// Coordinator URL.
+    /// Coordinator URL (`https://` when it serves TLS).
     #[arg(long, env = "TESSERA_SERVER", default_value = "http://127.0.0.1:7878")]
     pub server: String,
+    /// PEM file of the CA (or self-signed certificate) an https:// coordinator's certificate
+    /// chains to, trusted besides the system's roots.
+    #[arg(long, env = "TESSERA_CA_CERT", value_name = "PEM")]
+    pub ca_cert: Option<std::path::PathBuf>,
     /// Client bearer token.
     #[arg(long, env = "TESSERA_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
@@ -28,8 +32,7 @@ pub struct Client {
 impl Client {
     /// Connects to the coordinator.
     pub async fn connect(args: &ServerArgs) -> anyhow::Result<Client> {
-        let channel = Channel::from_shared(args.server.clone())
-            .with_context(|| format!("invalid --server URL {}", args.server))?
+        let channel = tessera_proto::connect::endpoint(&args.server, args.ca_cert.as_deref())?
             .connect()
             .await
             .with_context(|| format!("cannot connect to {}", args.server))?;

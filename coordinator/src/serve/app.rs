@@ -1,33 +1,40 @@
 //! `tessera serve`: wiring of the coordinator. Opens the data directory (resuming unfinished
-//! jobs), serves gRPC (`JobService`, `WorkerService`) and REST on one port behind bearer-token
-//! authentication, expires leases on a timer (and, with `--retain-finished`, deletes jobs that
-//! ended long enough ago on another), and shuts down gracefully on SIGINT/SIGTERM.
+//! jobs), serves gRPC (`JobService`, `WorkerService`) and REST on one port, over TLS when given
+//! a certificate, behind the cross-origin guard and bearer-token authentication, expires leases
+//! on a timer (and, with `--retain-finished`, deletes jobs that ended long enough ago on
+//! another), and shuts down gracefully on SIGINT/SIGTERM.
 
 use super::auth::Tokens;
-use super::config::ServeArgs;
+use super::config::{Resolved, ServeArgs};
 use super::error::{ApiError, ErrorCode};
 use super::job::service::JobService;
+use super::origin::Scheme;
 use super::state::{AppState, now_ms};
+use super::tls::TlsListener;
 use anyhow::Context;
+use axum::serve::Listener;
 use std::sync::Arc;
 use std::time::Duration;
 
 /// How long a graceful shutdown waits for open requests (long polls, watch streams).
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// The whole HTTP surface: gRPC and REST on one router, behind authentication.
-pub fn router(state: Arc<AppState>, tokens: Tokens) -> axum::Router {
+/// The whole HTTP surface: gRPC and REST on one router, behind the cross-origin guard (first,
+/// so that a foreign page is refused with or without a token) and authentication. `scheme` is
+/// the one the server is reached by, part of its origin.
+pub fn router(state: Arc<AppState>, tokens: Tokens, scheme: Scheme) -> axum::Router {
     crate::serve::grpc::router(state.clone())
         .merge(crate::serve::rest::router(state))
         // tonic's routes answer unknown paths with 200 + grpc-status 12 unless a fallback is set
         .fallback(|| async { ApiError::new(ErrorCode::NotFound, "no such route") })
         .layer(axum::middleware::from_fn_with_state(Arc::new(tokens), crate::serve::auth::require_token))
+        .layer(axum::middleware::from_fn_with_state(scheme, crate::serve::origin::refuse_foreign_origins))
         .layer(tower_http::trace::TraceLayer::new_for_http())
 }
 
 /// Runs `tessera serve`.
 pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
-    let (tokens, cfg) = args.resolve()?;
+    let Resolved { tokens, service: cfg, tls } = args.resolve()?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async {
         let data_dir = args.data_dir.clone();
@@ -47,9 +54,10 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 tracing::warn!(error = %e, "cannot set TCP_NODELAY");
             }
         });
+        let scheme = if tls.is_some() { Scheme::Https } else { Scheme::Http };
         // the one line of stdout: scripts and tests read the address from it
-        println!("tessera serve: listening on http://{addr}");
-        tracing::info!(%addr, data_dir = %args.data_dir.display(), "coordinator started");
+        println!("tessera serve: listening on {}://{addr}", scheme.as_str());
+        tracing::info!(%addr, scheme = scheme.as_str(), data_dir = %args.data_dir.display(), "coordinator started");
         let ticker = {
             let svc = svc.clone();
             let period = Duration::from_millis(svc.expiry_period_ms());
@@ -80,21 +88,10 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             })
         });
-        // graceful shutdown waits for requests in flight, but long polls and watch streams may
-        // not end by themselves: give them DRAIN_TIMEOUT, then stop (every transition is
-        // already persisted, so stopping is safe)
-        let (stopping_tx, mut stopping) = tokio::sync::watch::channel(false);
-        let server = axum::serve(listener, router(state, tokens)).with_graceful_shutdown(async move {
-            shutdown_signal().await;
-            tracing::info!("shutting down");
-            let _ = stopping_tx.send(true);
-        });
-        tokio::select! {
-            r = server => r?,
-            _ = async {
-                let _ = stopping.wait_for(|s| *s).await;
-                tokio::time::sleep(DRAIN_TIMEOUT).await;
-            } => tracing::warn!("requests still open after the drain timeout; stopping anyway"),
+        let app = router(state, tokens, scheme);
+        match tls {
+            Some(config) => serve_until_stopped(TlsListener::new(listener, config), app).await?,
+            None => serve_until_stopped(listener, app).await?,
         }
         ticker.abort();
         if let Some(r) = retention {
@@ -103,6 +100,30 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
         tracing::info!("coordinator stopped");
         Ok(())
     })
+}
+
+/// Serves `app` on `listener` until SIGINT/SIGTERM. Graceful shutdown waits for requests in
+/// flight, but long polls and watch streams may not end by themselves: they get DRAIN_TIMEOUT,
+/// then the server stops (every transition is already persisted, so stopping is safe).
+async fn serve_until_stopped<L>(listener: L, app: axum::Router) -> std::io::Result<()>
+where
+    L: Listener,
+    L::Addr: std::fmt::Debug,
+{
+    let (stopping_tx, mut stopping) = tokio::sync::watch::channel(false);
+    let server = axum::serve(listener, app).with_graceful_shutdown(async move {
+        shutdown_signal().await;
+        tracing::info!("shutting down");
+        let _ = stopping_tx.send(true);
+    });
+    tokio::select! {
+        r = server => r?,
+        _ = async {
+            let _ = stopping.wait_for(|s| *s).await;
+            tokio::time::sleep(DRAIN_TIMEOUT).await;
+        } => tracing::warn!("requests still open after the drain timeout; stopping anyway"),
+    }
+    Ok(())
 }
 
 /// Resolves on SIGINT or SIGTERM.

@@ -1,7 +1,7 @@
 //! Bearer-token authentication for every endpoint but `/healthz` and the dashboard page: the worker token guards
 //! `WorkerService`, the client token guards `JobService` and the REST API. A missing or wrong
 //! token gets HTTP 401, or gRPC `UNAUTHENTICATED` on gRPC paths. Without tokens configured,
-//! everything is open (the server refuses to listen beyond loopback then, see `app.rs`).
+//! everything is open (the server refuses to listen beyond loopback then, see `config.rs`).
 
 use axum::extract::{Request, State};
 use axum::middleware::Next;

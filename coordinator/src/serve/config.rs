@@ -1,12 +1,13 @@
 //! The coordinator's configuration: the flags of `tessera serve` (each also read from a
 //! `TESSERA_*` environment variable where a secret is concerned), checked and turned into the
-//! service's settings and the API tokens.
+//! service's settings, the API tokens and the TLS configuration.
 
 use super::auth::Tokens;
 use super::job::service::{DEFAULT_MAX_PIXELS, DEFAULT_MAX_TILES, LeaseLifetime, ServiceConfig};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 use tessera_common::texture::TextureLimits;
 
@@ -31,7 +32,14 @@ pub struct ServeArgs {
     /// File holding the client token.
     #[arg(long, conflicts_with = "client_token")]
     pub client_token_file: Option<PathBuf>,
-    /// Allow a non-loopback address without tokens.
+    /// Serve gRPC, REST and the dashboard over TLS with this certificate chain (PEM, the
+    /// server's certificate first).
+    #[arg(long, value_name = "PEM", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key of --tls-cert (PEM: PKCS#8, PKCS#1 or SEC1).
+    #[arg(long, value_name = "PEM", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// Allow a non-loopback address without TLS or without tokens.
     #[arg(long)]
     pub insecure: bool,
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
@@ -68,17 +76,40 @@ pub struct ServeArgs {
     pub retain_finished: Option<Duration>,
 }
 
+/// The checked configuration.
+pub struct Resolved {
+    /// The API tokens.
+    pub tokens: Tokens,
+    /// The service's settings.
+    pub service: ServiceConfig,
+    /// The TLS configuration, when serving over TLS.
+    pub tls: Option<Arc<rustls::ServerConfig>>,
+}
+
 impl ServeArgs {
-    /// Checks the flags and reads the token files: the API tokens and the service settings.
-    pub fn resolve(&self) -> anyhow::Result<(Tokens, ServiceConfig)> {
+    /// Checks the flags and reads the token, certificate and key files.
+    pub fn resolve(&self) -> anyhow::Result<Resolved> {
         let tokens = Tokens {
             worker: read_token(&self.worker_token, &self.worker_token_file)?,
             client: read_token(&self.client_token, &self.client_token_file)?,
         };
-        if !self.listen.ip().is_loopback() && (tokens.worker.is_none() || tokens.client.is_none()) && !self.insecure {
+        let tls = match (&self.tls_cert, &self.tls_key) {
+            (Some(cert), Some(key)) => Some(super::tls::server_config(cert, key)?),
+            _ => None,
+        };
+        // beyond loopback, tokens would cross the network in the clear without TLS
+        let missing: Vec<&str> = [
+            (tls.is_none(), "TLS (--tls-cert, --tls-key)"),
+            (tokens.worker.is_none() || tokens.client.is_none(), "tokens (--worker-token, --client-token)"),
+        ]
+        .into_iter()
+        .filter_map(|(missing, what)| missing.then_some(what))
+        .collect();
+        if !self.listen.ip().is_loopback() && !missing.is_empty() && !self.insecure {
             bail!(
-                "refusing to listen on {} without --worker-token and --client-token (pass --insecure to allow it)",
-                self.listen
+                "refusing to listen on {} without {} (pass --insecure to allow it)",
+                self.listen,
+                missing.join(" and ")
             );
         }
         if !(self.lease_timeout > 0.0 && self.lease_timeout.is_finite()) {
@@ -104,7 +135,7 @@ impl ServeArgs {
             max_tiles: self.max_tiles,
             retain_finished_ms: self.retain_finished.map(|d| d.as_millis() as u64),
         };
-        Ok((tokens, cfg))
+        Ok(Resolved { tokens, service: cfg, tls })
     }
 }
 
@@ -164,5 +195,55 @@ mod tests {
         for bad in ["", "90", "s", "5x", "1h30", "-3s", "1..2s", "5 s"] {
             assert!(parse_duration(bad).is_err(), "{bad:?} accepted");
         }
+    }
+
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        serve: ServeArgs,
+    }
+
+    fn resolve(args: &[&str]) -> anyhow::Result<Resolved> {
+        Cli::try_parse_from(std::iter::once("serve").chain(args.iter().copied()))?.serve.resolve()
+    }
+
+    /// A certificate and key for localhost in `dir`.
+    fn pair(dir: &std::path::Path) -> (String, String) {
+        let made = rcgen::generate_simple_self_signed(vec!["localhost".to_string()]).unwrap();
+        let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
+        std::fs::write(&cert, made.cert.pem()).unwrap();
+        std::fs::write(&key, made.signing_key.serialize_pem()).unwrap();
+        (cert.to_str().unwrap().to_string(), key.to_str().unwrap().to_string())
+    }
+
+    #[test]
+    fn resolve_requires_tls_and_tokens_beyond_loopback() {
+        let dir = tempfile::tempdir().unwrap();
+        let (cert, key) = pair(dir.path());
+        let tokens = ["--worker-token", "w", "--client-token", "c"];
+        let tls = ["--tls-cert", cert.as_str(), "--tls-key", key.as_str()];
+        let public = ["--listen", "0.0.0.0:7878"];
+        let e = format!("{:#}", resolve(&public).err().unwrap());
+        assert!(e.contains("without TLS (--tls-cert, --tls-key) and tokens") && e.contains("--insecure"), "{e}");
+        let e = format!("{:#}", resolve(&[&public[..], &tokens[..]].concat()).err().unwrap());
+        assert!(e.contains("without TLS") && !e.contains("tokens"), "{e}");
+        let e = format!("{:#}", resolve(&[&public[..], &tls[..]].concat()).err().unwrap());
+        assert!(e.contains("without tokens") && !e.contains("TLS"), "{e}");
+        let ok = resolve(&[&public[..], &tls[..], &tokens[..]].concat()).unwrap();
+        assert!(ok.tls.is_some() && ok.tokens.client.is_some());
+        assert!(resolve(&[&public[..], &["--insecure"][..]].concat()).unwrap().tls.is_none());
+        assert!(resolve(&[]).is_ok(), "loopback needs neither");
+    }
+
+    #[test]
+    fn resolve_needs_both_tls_files_and_names_a_bad_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let (cert, _) = pair(dir.path());
+        assert!(resolve(&["--tls-cert", &cert]).is_err(), "--tls-cert without --tls-key");
+        let missing = dir.path().join("nokey.pem");
+        let e = format!("{:#}", resolve(&["--tls-cert", &cert, "--tls-key", missing.to_str().unwrap()]).err().unwrap());
+        assert!(e.contains("nokey.pem"), "{e}");
     }
 }

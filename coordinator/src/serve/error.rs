@@ -15,6 +15,8 @@ pub enum ErrorCode {
     NotFound,
     /// Missing or wrong bearer token.
     Unauthenticated,
+    /// A browser page of another origin tried to change state.
+    PermissionDenied,
     /// The request does not fit the job's state.
     FailedPrecondition,
     /// The upload is larger than the server accepts.
@@ -31,6 +33,7 @@ impl ErrorCode {
             ErrorCode::InvalidArgument => S::BAD_REQUEST,
             ErrorCode::NotFound => S::NOT_FOUND,
             ErrorCode::Unauthenticated => S::UNAUTHORIZED,
+            ErrorCode::PermissionDenied => S::FORBIDDEN,
             ErrorCode::FailedPrecondition => S::CONFLICT,
             ErrorCode::PayloadTooLarge => S::PAYLOAD_TOO_LARGE,
             ErrorCode::Internal => S::INTERNAL_SERVER_ERROR,
@@ -44,6 +47,7 @@ impl ErrorCode {
             ErrorCode::InvalidArgument => C::InvalidArgument,
             ErrorCode::NotFound => C::NotFound,
             ErrorCode::Unauthenticated => C::Unauthenticated,
+            ErrorCode::PermissionDenied => C::PermissionDenied,
             ErrorCode::FailedPrecondition => C::FailedPrecondition,
             ErrorCode::PayloadTooLarge => C::ResourceExhausted,
             ErrorCode::Internal => C::Internal,
@@ -56,6 +60,7 @@ impl ErrorCode {
             ErrorCode::InvalidArgument => "invalid_argument",
             ErrorCode::NotFound => "not_found",
             ErrorCode::Unauthenticated => "unauthenticated",
+            ErrorCode::PermissionDenied => "permission_denied",
             ErrorCode::FailedPrecondition => "failed_precondition",
             ErrorCode::PayloadTooLarge => "payload_too_large",
             ErrorCode::Internal => "internal",
@@ -125,6 +130,8 @@ mod tests {
         assert_eq!(ErrorCode::InvalidArgument.http(), 400);
         assert_eq!(ErrorCode::Unauthenticated.grpc(), tonic::Code::Unauthenticated);
         assert_eq!(ErrorCode::PayloadTooLarge.http(), 413);
+        assert_eq!(ErrorCode::PermissionDenied.http(), 403);
+        assert_eq!(ErrorCode::PermissionDenied.grpc(), tonic::Code::PermissionDenied);
         let e = ApiError::from(ServiceError::InvalidArgument("scene.xml:3:5: bad".into()));
         assert_eq!(e.to_status().code(), tonic::Code::InvalidArgument);
         let e = ApiError::from(ServiceError::Io(std::io::Error::other("disk /secret/path full")));

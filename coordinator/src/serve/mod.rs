@@ -1,7 +1,8 @@
 //! The coordinator service, `tessera serve`: the pure job state machine and the service that
 //! persists and merges around it ([`job`]), durable storage ([`storage`]), the gRPC and REST
-//! APIs ([`grpc`], [`rest`]) over the state they share ([`state`]), authentication, the error
-//! table, metrics ([`metrics`]) and logging, and the wiring ([`app`]) configured by [`config`].
+//! APIs ([`grpc`], [`rest`]) over the state they share ([`state`]), authentication, the
+//! cross-origin guard ([`origin`]), TLS ([`tls`]), the error table, metrics ([`metrics`]) and
+//! logging, and the wiring ([`app`]) configured by [`config`].
 //!
 //! Nothing here imports the command line or the benchmarks.
 
@@ -12,7 +13,9 @@ pub mod error;
 pub mod grpc;
 pub mod job;
 pub mod metrics;
+pub mod origin;
 pub mod rest;
 pub mod state;
 pub mod storage;
 pub mod telemetry;
+pub mod tls;
