@@ -30,8 +30,16 @@ pid=$!
 until grep -q http "$work/out" 2>/dev/null; do sleep 0.1; done
 url=$(grep -o 'http://[0-9.:]*' "$work/out" | head -1)
 echo "baseline $(grep VmHWM /proc/$pid/status)"
+submit() { # NAME SCENE SETTINGS
+    answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -F "scene=@$2;filename=scene.xml" \
+        -F "settings=$3" "$url/api/v1/jobs")
+    echo "$1: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
+}
 for name in devzero outside include film65535 defaults nodes; do
-    answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -F "scene=@$work/$name.xml;filename=scene.xml" \
-        -F 'settings={"integrator":"pt","spp":1}' "$url/api/v1/jobs")
-    echo "$name: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
+    submit "$name" "$work/$name.xml" '{"integrator":"pt","spp":1}'
 done
+submit vcm4e9 scenes/cornell-box/scene.xml '{"integrator":"vcm","spp":4000000000}'
+# a page on another origin posting a form
+answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -H "Origin: http://evil.example" \
+    -F "scene=@scenes/cornell-box/scene.xml;filename=scene.xml" -F 'settings={"spp":1}' "$url/api/v1/jobs")
+echo "cross-origin: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
