@@ -78,19 +78,7 @@ fn a_scene_reaching_a_sibling_folder_renders_on_the_farm_as_locally() {
     let path = project.join("scene/scene.xml");
     std::fs::write(&path, xml).unwrap();
     let out = dir.path().join("farm.exr");
-    let (ok, _, stderr) = tessera(&[
-        "submit",
-        path.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--spp",
-        "2",
-        "--seed",
-        "9",
-        "--wait",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let (ok, _, stderr) = submit_and_wait(&c.url, &path, ("pt", 2, 9), &out, &[]);
     assert!(ok, "submit failed: {stderr}\nlog: {}", c.log.display());
     assert_same_image(&out, &local_render(dir.path(), &path, "pt", 2, 9));
 }

@@ -7,7 +7,8 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Duration;
 use tessera_tests::{
-    Coordinator, Worker, assert_same_image, farm, local_render, local_render_with, rest, scene, tessera, wait_for,
+    Coordinator, Worker, assert_same_image, farm, local_render, local_render_with, rest, scene, submit_and_wait,
+    tessera, wait_for,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -47,21 +48,7 @@ fn grpc_submit_pt_with_two_workers_equals_local_render() {
     let (c, _w) = farm(dir.path(), 2);
     let out = dir.path().join("farm.exr");
     let box_scene = scene("cornell-box");
-    let (ok, stdout, stderr) = tessera(&[
-        "submit",
-        box_scene.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--integrator",
-        "pt",
-        "--spp",
-        "3",
-        "--seed",
-        "5",
-        "--wait",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let (ok, stdout, stderr) = submit_and_wait(&c.url, &box_scene, ("pt", 3, 5), &out, &[]);
     assert!(ok, "submit failed: {stderr}\nlog: {}", c.log.display());
     assert!(out.with_extension("png").exists());
     let id = stdout.lines().next().unwrap().trim().to_string();
@@ -90,21 +77,7 @@ fn a_gaussian_filter_and_a_crop_window_render_on_the_farm_as_locally() {
     let (c, _w) = farm(dir.path(), 2);
     for integrator in ["pt", "bdpt"] {
         let out = dir.path().join(format!("farm-{integrator}.exr"));
-        let (ok, _, stderr) = tessera(&[
-            "submit",
-            path.to_str().unwrap(),
-            "--server",
-            &c.url,
-            "--integrator",
-            integrator,
-            "--spp",
-            "2",
-            "--seed",
-            "9",
-            "--wait",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+        let (ok, _, stderr) = submit_and_wait(&c.url, &path, (integrator, 2, 9), &out, &[]);
         assert!(ok, "submit failed: {stderr}\nlog: {}", c.log.display());
         let local = local_render(dir.path(), &path, integrator, 2, 9);
         assert_eq!(tessera_common::film::exr::read_rgb(&local).unwrap().width, 150);
@@ -127,21 +100,7 @@ fn environment_maps_textures_and_includes_render_on_the_farm_as_locally() {
         std::fs::create_dir_all(&sub).unwrap();
         let out = sub.join("farm.exr");
         let path = scene(name);
-        let (ok, _, stderr) = tessera(&[
-            "submit",
-            path.to_str().unwrap(),
-            "--server",
-            &c.url,
-            "--integrator",
-            integrator,
-            "--spp",
-            "2",
-            "--seed",
-            "4",
-            "--wait",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+        let (ok, _, stderr) = submit_and_wait(&c.url, &path, (integrator, 2, 4), &out, &[]);
         assert!(ok, "{name} {integrator}: submit failed: {stderr}\nlog: {}", c.log.display());
         assert_same_image(&out, &local_render(&sub, &path, integrator, 2, 4));
     }

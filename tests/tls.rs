@@ -35,23 +35,7 @@ fn tls_end_to_end_with_a_self_signed_certificate_made_in_the_test() {
     let _untrusting = Worker::start(&c.url, &cache, &["--name", "untrusting"]);
     let out = dir.path().join("farm.exr");
     let box_scene = scene("cornell-box");
-    let (ok, stdout, stderr) = tessera(&[
-        "submit",
-        box_scene.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--ca-cert",
-        cert_arg,
-        "--integrator",
-        "pt",
-        "--spp",
-        "2",
-        "--seed",
-        "6",
-        "--wait",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let (ok, stdout, stderr) = submit_and_wait(&c.url, &box_scene, ("pt", 2, 6), &out, &["--ca-cert", cert_arg]);
     assert!(ok, "submit over https failed: {stderr}\nlog: {}", c.log.display());
     assert_same_image(&out, &local_render(dir.path(), &box_scene, "pt", 2, 6));
     let id = stdout.lines().next().unwrap().trim().to_string();

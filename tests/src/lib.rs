@@ -130,6 +130,22 @@ pub fn farm(dir: &Path, workers: usize) -> (Coordinator, Vec<Worker>) {
     (c, w)
 }
 
+/// `tessera submit SCENE --server URL --integrator I --spp N --seed S --wait -o OUT EXTRA...`:
+/// a farm render written to `out`; returns (success, stdout, stderr).
+pub fn submit_and_wait(
+    url: &str,
+    scene: &Path,
+    (integrator, spp, seed): (&str, u32, u64),
+    out: &Path,
+    extra: &[&str],
+) -> (bool, String, String) {
+    let (spp, seed) = (spp.to_string(), seed.to_string());
+    let mut args = vec!["submit", scene.to_str().unwrap(), "--server", url, "--integrator", integrator];
+    args.extend(["--spp", &spp, "--seed", &seed, "--wait", "-o", out.to_str().unwrap()]);
+    args.extend(extra);
+    tessera(&args)
+}
+
 /// Runs `tessera ARGS` and returns (success, stdout, stderr).
 pub fn tessera(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(bin("tessera")).args(args).output().expect("run tessera");
