@@ -188,17 +188,7 @@ mod tests {
     use tessera_common::settings::{IntegratorName, RenderSettings};
 
     fn spec() -> JobSpec {
-        JobSpec {
-            name: "j".into(),
-            priority: 0,
-            settings: RenderSettings { integrator: IntegratorName::EmisVcm, spp: Some(8), ..Default::default() },
-            width: 4,
-            height: 2,
-            full_frame: true,
-            bundle_digest: "d".into(),
-            scene_path: "scene.xml".into(),
-            filter: tessera_common::film::filter::FilterKind::Box,
-        }
+        JobSpec::bare("j", IntegratorName::EmisVcm, Some(8), 4, 2)
     }
 
     fn pilot(job: &EmisJob, iterations: u32) -> PilotData {

@@ -40,20 +40,10 @@ impl JobsModel {
 mod tests {
     use super::super::model::{JobSpec, JobState};
     use super::*;
-    use tessera_common::settings::{IntegratorName, RenderSettings};
+    use tessera_common::settings::IntegratorName;
 
     fn spec() -> JobSpec {
-        JobSpec {
-            name: "j".into(),
-            priority: 0,
-            settings: RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), ..Default::default() },
-            width: 64,
-            height: 64,
-            full_frame: false,
-            bundle_digest: "d".into(),
-            scene_path: "scene.xml".into(),
-            filter: tessera_common::film::filter::FilterKind::Box,
-        }
+        JobSpec::bare("j", IntegratorName::Pt, Some(1), 64, 64)
     }
 
     #[test]

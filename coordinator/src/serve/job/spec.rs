@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use tessera_common::film::filter::{Filter, FilterKind};
 use tessera_common::film::{Layout, Rect};
-use tessera_common::settings::RenderSettings;
+use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// The immutable description of a job, fixed at submission.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -37,6 +37,23 @@ fn box_filter() -> FilterKind {
 }
 
 impl JobSpec {
+    /// A job of `integrator` with `spp` samples over a `width`×`height` box-filtered film and a
+    /// placeholder bundle: what tests build jobs from, and what is shown of a job whose stored
+    /// description is lost.
+    pub fn bare(name: &str, integrator: IntegratorName, spp: Option<u32>, width: u32, height: u32) -> JobSpec {
+        JobSpec {
+            name: name.to_string(),
+            priority: 0,
+            settings: RenderSettings { integrator, spp, ..Default::default() },
+            width,
+            height,
+            full_frame: integrator.full_frame(),
+            bundle_digest: "d".into(),
+            scene_path: "scene.xml".into(),
+            filter: FilterKind::Box,
+        }
+    }
+
     /// The channels and pixels of the sums of a tile over `rect`.
     pub fn layout(&self, rect: Rect) -> Layout {
         Layout::of(rect, self.width, self.height, &Filter::new(self.filter))

@@ -52,20 +52,10 @@ mod tests {
     use crate::serve::job::model::{Changes, JobSpec, JobsModel};
     use crate::serve::storage::Extra;
     use crate::serve::storage::sqlite::Batch;
-    use tessera_common::settings::{IntegratorName, RenderSettings};
+    use tessera_common::settings::IntegratorName;
 
     fn spec() -> JobSpec {
-        JobSpec {
-            name: "n".into(),
-            priority: 0,
-            settings: RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), ..Default::default() },
-            width: 256,
-            height: 256,
-            full_frame: false,
-            bundle_digest: "d".into(),
-            scene_path: "scene.xml".into(),
-            filter: tessera_common::film::filter::FilterKind::Box,
-        }
+        JobSpec::bare("n", IntegratorName::Pt, Some(1), 256, 256)
     }
 
     fn count(store: &Store, table: &str, job: &str) -> i64 {

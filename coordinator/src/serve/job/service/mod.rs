@@ -352,17 +352,7 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
     super::model::Job {
         id: id.to_string(),
         seq: 0,
-        spec: JobSpec {
-            name: id.to_string(),
-            priority: 0,
-            settings: Default::default(),
-            width: 0,
-            height: 0,
-            full_frame: false,
-            bundle_digest: String::new(),
-            scene_path: String::new(),
-            filter: tessera_common::film::filter::FilterKind::Box,
-        },
+        spec: JobSpec::bare(id, Default::default(), None, 0, 0),
         state: JobState::Failed,
         passes: Vec::new(),
         tiles: Vec::new(),
