@@ -33,3 +33,68 @@ pub fn chunk_stream(
         .collect();
     tokio_stream::iter(chunks)
 }
+
+/// Streams a blob from disk in [`tessera_proto::CHUNK_BYTES`] chunks, a few chunks ahead of
+/// the client at most, hashing as it reads: bytes that no longer match `digest` end the
+/// stream with `DATA_LOSS` (a worker checks the digest too, and drops what it got).
+pub fn stream_blob(
+    file: std::fs::File,
+    digest: String,
+) -> impl tokio_stream::Stream<Item = Result<tessera_proto::v1::Chunk, tonic::Status>> {
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tokio::task::spawn_blocking(move || {
+        use sha2::Digest;
+        use std::io::Read;
+        let (mut file, mut hash) = (file, sha2::Sha256::new());
+        loop {
+            let mut chunk = Vec::with_capacity(tessera_proto::CHUNK_BYTES);
+            let read = (&mut file).take(tessera_proto::CHUNK_BYTES as u64).read_to_end(&mut chunk);
+            let item = match read {
+                Ok(0) if hex::encode(hash.finalize_reset()) == digest => return,
+                Ok(0) => Err(tonic::Status::data_loss(format!("blob {digest} is corrupt on disk"))),
+                Ok(_) => {
+                    hash.update(&chunk);
+                    Ok(tessera_proto::v1::Chunk { data: chunk.into() })
+                }
+                Err(e) => Err(tonic::Status::internal(format!("reading blob {digest}: {e}"))),
+            };
+            let last = item.is_err();
+            if tx.blocking_send(item).is_err() || last {
+                return;
+            }
+        }
+    });
+    tokio_stream::wrappers::ReceiverStream::new(rx)
+}
+
+#[cfg(test)]
+mod tests {
+    use tokio_stream::StreamExt;
+
+    async fn fetch(bytes: &[u8], digest: &str) -> (Vec<u8>, Option<tonic::Status>) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("blob");
+        std::fs::write(&path, bytes).unwrap();
+        let mut stream = Box::pin(super::stream_blob(std::fs::File::open(&path).unwrap(), digest.to_string()));
+        let (mut got, mut error) = (Vec::new(), None);
+        while let Some(item) = stream.next().await {
+            match item {
+                Ok(chunk) => got.extend_from_slice(&chunk.data),
+                Err(e) => error = Some(e),
+            }
+        }
+        (got, error)
+    }
+
+    #[tokio::test]
+    async fn blobs_stream_in_chunks_and_corruption_ends_the_stream() {
+        let bytes: Vec<u8> = (0..(2 * tessera_proto::CHUNK_BYTES + 17)).map(|i| (i % 251) as u8).collect();
+        let digest = tessera_proto::blob_digest(&bytes);
+        let (got, error) = fetch(&bytes, &digest).await;
+        assert!(got == bytes && error.is_none(), "{error:?}");
+        let mut corrupt = bytes.clone();
+        corrupt[tessera_proto::CHUNK_BYTES + 5] ^= 1;
+        let (_, error) = fetch(&corrupt, &digest).await;
+        assert_eq!(error.map(|e| e.code()), Some(tonic::Code::DataLoss));
+    }
+}

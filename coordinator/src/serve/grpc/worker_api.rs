@@ -142,7 +142,8 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
     async fn fetch_blob(&self, req: Request<pb::FetchBlobRequest>) -> Result<Response<Self::FetchBlobStream>, Status> {
         let svc = self.0.svc.clone();
         let digest = req.into_inner().digest;
-        let bytes = blocking(move || svc.blob(&digest)).await?;
-        Ok(Response::new(Box::pin(super::chunk_stream(bytes))))
+        let d = digest.clone();
+        let file = blocking(move || svc.blob_file(&d)).await?;
+        Ok(Response::new(Box::pin(super::stream_blob(file, digest))))
     }
 }

@@ -122,6 +122,17 @@ impl BlobStore {
         tessera_proto::is_blob_digest(digest).then(|| self.root.join("cas").join(&digest[..2]).join(digest))
     }
 
+    /// A content-addressed blob opened for reading (`Ok(None)` when there is no such blob); the
+    /// reader checks the bytes against the digest (see `grpc::stream_blob`).
+    pub fn open_blob(&self, digest: &str) -> std::io::Result<Option<std::fs::File>> {
+        let Some(path) = self.cas_path(digest) else { return Ok(None) };
+        match std::fs::File::open(path) {
+            Ok(f) => Ok(Some(f)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
     /// A content-addressed blob; `Ok(None)` when there is no such blob, an error when the bytes
     /// on disk no longer match their digest.
     pub fn get(&self, digest: &str) -> std::io::Result<Option<Vec<u8>>> {

@@ -100,6 +100,11 @@ impl JobService {
     }
 
     /// A content-addressed blob.
+    pub fn blob_file(&self, digest: &str) -> Result<std::fs::File, ServiceError> {
+        self.blobs.open_blob(digest)?.ok_or_else(|| ServiceError::NotFound(format!("blob {digest} not found")))
+    }
+
+    /// A blob's bytes, read whole and checked against the digest.
     pub fn blob(&self, digest: &str) -> Result<Vec<u8>, ServiceError> {
         self.blobs.get(digest)?.ok_or_else(|| ServiceError::NotFound(format!("blob {digest} not found")))
     }
