@@ -161,11 +161,12 @@ impl StatisticsSums {
 
     /// Adds another worker's sums.
     pub fn merge(&mut self, o: &StatisticsSums) {
-        self.iterations += o.iterations;
-        self.camera_vertices += o.camera_vertices;
-        self.light_paths += o.light_paths;
-        self.light_vertices += o.light_vertices;
-        self.merge_queries += o.merge_queries;
+        // saturating: sums of sent counts must not wrap (the coordinator bounds each as well)
+        self.iterations = self.iterations.saturating_add(o.iterations);
+        self.camera_vertices = self.camera_vertices.saturating_add(o.camera_vertices);
+        self.light_paths = self.light_paths.saturating_add(o.light_paths);
+        self.light_vertices = self.light_vertices.saturating_add(o.light_vertices);
+        self.merge_queries = self.merge_queries.saturating_add(o.merge_queries);
         self.photons_per_path += o.photons_per_path;
     }
 

@@ -51,6 +51,10 @@ pub struct PilotShape {
     pub nu: f32,
 }
 
+/// No path statistics count (vertices, light paths, merge queries) is this many times the
+/// pixels × iterations of its tile: far above any render, far below overflowing the sums.
+const MAX_COUNT_PER_SAMPLE: u64 = 1 << 16;
+
 impl PilotShape {
     /// Decodes and checks the pilot data of a result for `tile`: present exactly when the
     /// tile collects (in a collecting pass and [`collects_moments`]), the job's size and
@@ -70,6 +74,14 @@ impl PilotShape {
                 "pilot data covers {} iterations ({} in the statistics), the tile {iterations}",
                 pilot.moments.iterations, pilot.statistics.iterations
             ));
+        }
+        // counts no render can reach would overflow the job's sums and skew its costs
+        let most = u64::from(iterations) * u64::from(self.width) * u64::from(self.height) * MAX_COUNT_PER_SAMPLE;
+        let s = &pilot.statistics;
+        if let Some(c) =
+            [s.camera_vertices, s.light_paths, s.light_vertices, s.merge_queries].into_iter().find(|&c| c > most)
+        {
+            return Err(format!("path statistics count {c} is over {MAX_COUNT_PER_SAMPLE} per pixel and iteration"));
         }
         Ok(Some(pilot))
     }
@@ -229,6 +241,12 @@ mod tests {
         let two = pilot(&job, 2).encode();
         assert!(job.decode_pilot(&tile, true, &two).unwrap_err().contains("covers 2 iterations"));
         assert!(job.decode_pilot(&tile, true, &good[..good.len() - 4]).is_err());
+        // a hostile worker's statistics that would overflow the job's sums
+        let mut absurd = pilot(&job, 1);
+        absurd.statistics.camera_vertices = u64::MAX;
+        assert!(job.decode_pilot(&tile, true, &absurd.encode()).unwrap_err().contains("path statistics count"));
+        absurd.statistics.camera_vertices = 8 << 16;
+        assert!(job.decode_pilot(&tile, true, &absurd.encode()).is_ok(), "the bound itself is allowed");
         // with path tracing as the strategy only iteration 0 and those ≡ 2 mod 4 record moments
         let mut pt = EmisJob::new(&spec()).unwrap();
         pt.state.strategy.nu = 0.0;
