@@ -142,8 +142,8 @@ impl JobService {
             }
         };
         if let Err(e) = self.merge_range(inner, job, range.clone(), &mut film) {
-            // nothing was merged (see `merge_range`) and the accepted result is kept; a result
-            // that cannot be read back or absorbed fails its job, since no retry can merge it
+            // a result that cannot be read back or absorbed fails its job, since no retry can
+            // merge it (and `merge_range` may have merged part of the range then)
             inner.job(job).film = Some(film);
             self.persist(inner, &pending, &extras)?;
             if !matches!(e, ServiceError::Corrupt { .. } | ServiceError::Emis { .. }) {
@@ -280,8 +280,9 @@ impl JobService {
         Ok(())
     }
 
-    /// Merges `range` into `film` and the EMIS moments, all or nothing: every result is read
-    /// and checked first, and on an error the film is untouched and the held results are kept.
+    /// Merges `range` into `film` and the EMIS moments, all or nothing: every result is checked
+    /// first (a stored one read back and dropped, so that a long range after a restart is not
+    /// held in memory at once), and on an error the film is untouched.
     fn merge_range(
         &self,
         inner: &mut Inner,
@@ -291,29 +292,27 @@ impl JobService {
     ) -> Result<(), ServiceError> {
         // after a restart the EMIS state may not be made yet: stored pilot data needs it
         inner.emis(job);
-        let mut results = Vec::with_capacity(range.len());
+        let emis_error = |message| ServiceError::Emis { job: job.to_string(), message };
         for i in range.clone() {
-            let read = match inner.job(job).held.remove(&i) {
-                Some(r) => Ok(r),
-                None => self.stored_result(inner, job, i),
+            let runtime = inner.job(job);
+            let pilot = match runtime.held.get(&i) {
+                Some((_, pilot)) => pilot.as_ref().map(|p| runtime.emis.as_ref().map(|e| e.check(p))),
+                None => {
+                    let (_, pilot) = self.stored_result(inner, job, i)?;
+                    pilot.map(|p| inner.job(job).emis.as_ref().map(|e| e.check(&p)))
+                }
             };
-            match read {
-                Ok(r) => results.push((i, r)),
-                Err(e) => {
-                    let held = &mut inner.job(job).held;
-                    held.extend(results);
-                    return Err(e);
-                }
-            }
+            pilot.flatten().transpose().map_err(emis_error)?;
         }
-        if let Some(e) = inner.job(job).emis.as_ref() {
-            for (_, (_, pilot)) in &results {
-                if let Some(p) = pilot {
-                    e.check(p).map_err(|message| ServiceError::Emis { job: job.to_string(), message })?;
-                }
-            }
-        }
-        for (_, (accum, pilot)) in results {
+        for i in range {
+            let (accum, pilot) = match inner.job(job).held.remove(&i) {
+                Some(r) => r,
+                // read a moment ago: failing now leaves a partly merged film, so the job fails
+                None => self.stored_result(inner, job, i).map_err(|e| ServiceError::Corrupt {
+                    what: format!("stored result of job {job} tile {i}"),
+                    message: format!("read back once, then not: {e}"),
+                })?,
+            };
             film.merge_tile(&accum);
             if let (Some(p), Some(e)) = (pilot, inner.job(job).emis.as_mut()) {
                 e.absorb(&p).expect("invariant: pilot data checked before the merge");
