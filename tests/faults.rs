@@ -1,7 +1,8 @@
 //! Faults that must end in bounded time, with real processes: a worker that heartbeats but
 //! never returns its tile loses it at the lease's lifetime; cancelling a job stops the render
 //! in progress within about one heartbeat; a restarted worker keeps its identity, and nobody
-//! else can take it.
+//! else can take it; a failed database commit stops the coordinator, and a restart finishes the
+//! job.
 
 use super::*;
 use tessera_proto::v1 as pb;
@@ -103,4 +104,58 @@ fn a_restarted_worker_keeps_its_identity_and_nobody_else_can_take_it() {
         assert_eq!(e.code(), tonic::Code::FailedPrecondition, "{e:?}");
         assert!(e.message().contains("another secret"), "{}", e.message());
     });
+}
+
+/// A real storage fault: the coordinator may not write files past 3 MiB (`RLIMIT_FSIZE`, with
+/// `SIGXFSZ` ignored so that the write fails instead of killing it), so the database commit
+/// that grows its log past that fails. The coordinator stops with exit code 70; restarted
+/// without the limit on the same data folder, it finishes the job bit for bit as a local render.
+#[test]
+fn a_failed_commit_stops_the_coordinator_and_a_restart_finishes_the_job() {
+    use std::os::unix::process::CommandExt;
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    // 64 tiles of 64² whose results (112 KiB each) stay in the database without checkpoints
+    let xml = std::fs::read_to_string(scene("cornell-box")).unwrap().replace("value=\"256\"", "value=\"512\"");
+    let path = dir.path().join("scene.xml");
+    std::fs::write(&path, &xml).unwrap();
+    let flags = ["--checkpoint-interval", "100000"];
+    let mut c = Coordinator::start_with(&data, "127.0.0.1:0", &flags, |command| {
+        // SAFETY: only async-signal-safe calls between fork and exec
+        unsafe {
+            command.pre_exec(|| {
+                let limit = libc::rlimit { rlim_cur: 3 << 20, rlim_max: 3 << 20 };
+                libc::setrlimit(libc::RLIMIT_FSIZE, &limit);
+                libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+    });
+    let (status, job) = rest::submit(
+        &c.url,
+        None,
+        ("scene.xml", xml.into_bytes()),
+        vec![],
+        json!({"integrator": "pt", "spp": 2, "seed": 5}),
+    );
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap().to_string();
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let exit = wait_for(TIMEOUT, "the coordinator to stop", || c.child.try_wait().unwrap());
+    let log = std::fs::read_to_string(&c.log).unwrap();
+    assert_eq!(exit.code(), Some(70), "{log}");
+    assert!(log.contains("database commit failed"), "{log}");
+    let listen = format!("127.0.0.1:{}", c.port());
+    let c = wait_for(Duration::from_secs(20), "port to be free", || {
+        std::net::TcpListener::bind(&listen).ok().map(drop)?;
+        Some(Coordinator::start(&data, &listen, &flags))
+    });
+    let (_, resumed) = rest::get_json(&job_url(&c, &id), None);
+    let before = resumed["tiles_done"].as_u64().unwrap();
+    assert!((1..64).contains(&before), "the fault should come mid-job: {resumed}");
+    let done = wait_done(&c, &id, None);
+    assert_eq!(done["samples_done"], 512 * 512 * 2, "every sample merged once: {done}");
+    let farm = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, &id)), None, &farm);
+    assert_same_image(&farm, &local_render(dir.path(), &path, "pt", 2, 5));
 }

@@ -514,6 +514,7 @@ fn image_comparison_notices_a_different_seed() {
 }
 
 mod bad_results;
+mod bounded_memory;
 mod faults;
 mod hostile;
 mod scale;

@@ -42,18 +42,29 @@ pub struct Coordinator {
 impl Coordinator {
     /// Starts `tessera serve` on `listen` (e.g. `127.0.0.1:0`) with `data_dir` and extra flags.
     pub fn start(data_dir: &Path, listen: &str, extra: &[&str]) -> Coordinator {
+        Coordinator::start_with(data_dir, listen, extra, |_| {})
+    }
+
+    /// [`Coordinator::start`] with the command adjusted by `configure` first (limits, env).
+    pub fn start_with(
+        data_dir: &Path,
+        listen: &str,
+        extra: &[&str],
+        configure: impl FnOnce(&mut Command),
+    ) -> Coordinator {
         static STARTS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let n = STARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let log = data_dir.with_extension(format!("coordinator-{n}.log"));
-        let mut child = Command::new(bin("tessera"))
+        let mut command = Command::new(bin("tessera"));
+        command
             .args(["serve", "--listen", listen, "--data-dir"])
             .arg(data_dir)
             .args(extra)
             .env("RUST_LOG", "tessera_coordinator=debug,warn")
             .stdout(Stdio::piped())
-            .stderr(std::fs::File::create(&log).expect("log file"))
-            .spawn()
-            .expect("start tessera serve");
+            .stderr(std::fs::File::create(&log).expect("log file"));
+        configure(&mut command);
+        let mut child = command.spawn().expect("start tessera serve");
         let mut line = String::new();
         BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("read address");
         let url = line

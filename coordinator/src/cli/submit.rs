@@ -42,13 +42,14 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
-        let req = pb::SubmitJobRequest {
+        let header = pb::SubmitJobRequest {
             settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
-            bundle: Some(tessera_proto::bundle::to_pb(&bundle)),
+            bundle: Some(pb::SceneBundle { scene_path: bundle.scene_path.clone(), files: vec![] }),
             priority: args.priority,
             name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),
         };
-        let job = c.jobs.submit_job(c.request(req)).await.map_err(status_error)?.into_inner();
+        let parts = tokio_stream::iter(submission_parts(header, bundle));
+        let job = c.jobs.submit_job_stream(c.request(parts)).await.map_err(status_error)?.into_inner();
         println!("{}", job.id);
         if !args.wait {
             return Ok(());
@@ -67,6 +68,22 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         eprintln!("{}: done -> {}", job.id, output.display());
         Ok(())
     })
+}
+
+/// A streamed submission: the header, then each file in chunks, its first chunk naming it.
+fn submission_parts(header: pb::SubmitJobRequest, bundle: tessera_common::bundle::Bundle) -> Vec<pb::SubmitJobPart> {
+    let mut parts = vec![pb::SubmitJobPart { header: Some(header), ..Default::default() }];
+    for (path, data) in bundle.files {
+        let data = prost::bytes::Bytes::from(data);
+        // an empty file still gets its one part, which names it
+        let starts = (0..data.len().max(1)).step_by(tessera_proto::CHUNK_BYTES);
+        for (i, start) in starts.enumerate() {
+            let end = data.len().min(start + tessera_proto::CHUNK_BYTES);
+            let path = if i == 0 { path.clone() } else { String::new() };
+            parts.push(pb::SubmitJobPart { header: None, path, data: data.slice(start..end) });
+        }
+    }
+    parts
 }
 
 /// Watches a job with a progress bar until it ends; returns its last state.

@@ -93,6 +93,7 @@ impl From<ServiceError> for ApiError {
     fn from(e: ServiceError) -> Self {
         let code = match &e {
             ServiceError::InvalidArgument(_) | ServiceError::InvalidResult(_) => ErrorCode::InvalidArgument,
+            ServiceError::TooLarge(_) => ErrorCode::PayloadTooLarge,
             ServiceError::NotFound(_) | ServiceError::Transition(TransitionError::UnknownJob(_)) => ErrorCode::NotFound,
             ServiceError::FailedPrecondition(_) | ServiceError::Transition(TransitionError::Unfinished { .. }) => {
                 ErrorCode::FailedPrecondition

@@ -1,13 +1,15 @@
 //! The coordinator service, `tessera serve`: the pure job state machine and the service that
-//! persists and merges around it ([`job`]), durable storage ([`storage`]), the gRPC and REST
-//! APIs ([`grpc`], [`rest`]) over the state they share ([`state`]), authentication, the
-//! cross-origin guard ([`origin`]), TLS ([`tls`]), the error table, metrics ([`metrics`]) and
-//! logging, and the wiring ([`app`]) configured by [`config`].
+//! persists and merges around it ([`job`]), bundles received in pieces ([`bundle_stream`]),
+//! durable storage ([`storage`]), the gRPC and REST APIs ([`grpc`], [`rest`]) over the state
+//! they share ([`state`]), authentication, the cross-origin guard ([`origin`]), TLS ([`tls`]),
+//! the error table, metrics ([`metrics`]) and logging, and the wiring ([`app`]) configured by
+//! [`config`].
 //!
 //! Nothing here imports the command line or the benchmarks.
 
 pub mod app;
 pub mod auth;
+pub mod bundle_stream;
 pub mod config;
 pub mod error;
 pub mod grpc;

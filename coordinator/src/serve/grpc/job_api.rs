@@ -2,13 +2,14 @@
 //! → encode.
 
 use super::convert::{job_to_pb, settings_from_pb};
+use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::job::service::OutputKind;
 use crate::serve::state::{AppState, blocking, now_ms};
 use std::pin::Pin;
 use std::sync::Arc;
 use tessera_proto::v1 as pb;
 use tokio_stream::Stream;
-use tonic::{Request, Response, Status};
+use tonic::{Request, Response, Status, Streaming};
 
 /// The service implementation.
 pub struct JobApi(pub Arc<AppState>);
@@ -21,10 +22,34 @@ impl pb::job_service_server::JobService for JobApi {
         let req = req.into_inner();
         let settings = settings_from_pb(req.settings)?;
         let b = req.bundle.ok_or_else(|| Status::invalid_argument("field \"bundle\" is missing"))?;
-        let bundle = tessera_proto::bundle::from_pb(b);
-        let svc = self.0.svc.clone();
-        let name = Some(req.name);
-        let view = blocking(move || svc.submit(bundle, settings, req.priority, name, now_ms())).await?;
+        let mut bundle = StreamedBundle::begin(self.0.svc.clone(), self.0.max_upload_bytes as u64).await?;
+        for file in b.files {
+            bundle.start_file(file.path).await?;
+            bundle.write(&file.data).await?;
+        }
+        let view = bundle.submit(b.scene_path, settings, req.priority, Some(req.name)).await?;
+        Ok(Response::new(job_to_pb(&view)))
+    }
+
+    async fn submit_job_stream(&self, req: Request<Streaming<pb::SubmitJobPart>>) -> Result<Response<pb::Job>, Status> {
+        let mut parts = req.into_inner();
+        let header =
+            parts.message().await?.and_then(|p| p.header).ok_or_else(|| {
+                Status::invalid_argument("the first part of a streamed submission must carry the header")
+            })?;
+        let settings = settings_from_pb(header.settings)?;
+        let scene_path = header.bundle.map(|b| b.scene_path).unwrap_or_default();
+        let mut bundle = StreamedBundle::begin(self.0.svc.clone(), self.0.max_upload_bytes as u64).await?;
+        while let Some(part) = parts.message().await? {
+            if part.header.is_some() {
+                return Err(Status::invalid_argument("a streamed submission carries one header, in its first part"));
+            }
+            if !part.path.is_empty() {
+                bundle.start_file(part.path).await?;
+            }
+            bundle.write(&part.data).await?;
+        }
+        let view = bundle.submit(scene_path, settings, header.priority, Some(header.name)).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
 

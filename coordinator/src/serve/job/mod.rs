@@ -18,6 +18,6 @@ mod fault_tests;
 #[cfg(test)]
 mod retention_tests;
 #[cfg(test)]
-mod service_tests;
+pub(crate) mod service_tests;
 #[cfg(test)]
 mod tests;

@@ -1,8 +1,9 @@
 //! REST handlers: decode → call the job service → encode.
 
 use super::dto::{JobDto, WorkerDto};
+use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::error::{ApiError, ErrorCode};
-use crate::serve::job::service::{Bundle, OutputKind};
+use crate::serve::job::service::OutputKind;
 use crate::serve::state::{AppState, blocking, now_ms};
 use axum::Json;
 use axum::extract::{Multipart, Path, Query, State};
@@ -42,35 +43,46 @@ fn parse_settings(text: &str) -> Result<(RenderSettings, i32, Option<String>), A
     Ok((settings, priority, name))
 }
 
-/// `POST /api/v1/jobs`.
+/// Most bytes the `settings` part may have.
+const MAX_SETTINGS_BYTES: usize = 1 << 20;
+
+/// `POST /api/v1/jobs`: a multipart form with a `settings` JSON part, the `scene` part and a
+/// part per further file (its file name the path in the bundle). Files are written to disk as
+/// they arrive.
 pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoResponse, ApiError> {
-    let mut bundle = Bundle::default();
+    let mut bundle = StreamedBundle::begin(st.svc.clone(), st.max_upload_bytes as u64).await?;
+    let mut scene_path = None;
     let mut settings = (RenderSettings::default(), 0, None);
-    while let Some(field) = form.next_field().await.map_err(multipart_error)? {
+    while let Some(mut field) = form.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
         let file_name = field.file_name().map(str::to_string);
-        let data = field.bytes().await.map_err(multipart_error)?;
-        match name.as_str() {
-            "settings" => {
-                settings =
-                    parse_settings(std::str::from_utf8(&data).map_err(|_| invalid("field \"settings\" is not UTF-8"))?)?
+        if name == "settings" {
+            let mut data = Vec::new();
+            while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+                data.extend_from_slice(&chunk);
+                if data.len() > MAX_SETTINGS_BYTES {
+                    return Err(invalid(format!("field \"settings\" is over {MAX_SETTINGS_BYTES} bytes")));
+                }
             }
-            "scene" => {
-                bundle.scene_path = file_name.unwrap_or_else(|| "scene.xml".into());
-                bundle.files.push((bundle.scene_path.clone(), data.to_vec()));
-            }
-            _ => {
-                let path = file_name.ok_or_else(|| invalid(format!("part \"{name}\" needs a file name (its path)")))?;
-                bundle.files.push((path, data.to_vec()));
-            }
+            let text = std::str::from_utf8(&data).map_err(|_| invalid("field \"settings\" is not UTF-8"))?;
+            settings = parse_settings(text)?;
+            continue;
+        }
+        let path = if name == "scene" {
+            let path = file_name.unwrap_or_else(|| "scene.xml".into());
+            scene_path = Some(path.clone());
+            path
+        } else {
+            file_name.ok_or_else(|| invalid(format!("part \"{name}\" needs a file name (its path)")))?
+        };
+        bundle.start_file(path).await?;
+        while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+            bundle.write(&chunk).await?;
         }
     }
-    if bundle.scene_path.is_empty() {
-        return Err(invalid("field \"scene\" is missing (the scene XML file)"));
-    }
-    let svc = st.svc.clone();
+    let scene_path = scene_path.ok_or_else(|| invalid("field \"scene\" is missing (the scene XML file)"))?;
     let (settings, priority, name) = settings;
-    let view = blocking(move || svc.submit(bundle, settings, priority, name, now_ms())).await?;
+    let view = bundle.submit(scene_path, settings, priority, name).await?;
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 

@@ -228,8 +228,18 @@ impl BlobStore {
 
     /// Stores the file at `path` content-addressed, moving it into place; returns the digest.
     pub fn put_file(&self, path: &Path) -> std::io::Result<String> {
-        let digest = tessera_proto::blob_digest(&std::fs::read(path)?);
-        let target = self.cas_path(&digest).expect("invariant: blob_digest gives a valid digest");
+        use sha2::Digest;
+        let mut hash = sha2::Sha256::new();
+        std::io::copy(&mut std::fs::File::open(path)?, &mut hash)?;
+        let digest = hex::encode(hash.finalize());
+        self.put_file_digested(path, &digest)?;
+        Ok(digest)
+    }
+
+    /// Stores the file at `path`, whose digest the caller computed as it wrote the file, under
+    /// that digest, moving it into place (or removing it when the blob is there already).
+    pub fn put_file_digested(&self, path: &Path, digest: &str) -> std::io::Result<()> {
+        let target = self.cas_path(digest).ok_or_else(|| std::io::Error::other(format!("invalid digest {digest}")))?;
         if target.exists() {
             std::fs::remove_file(path)?;
         } else {
@@ -240,7 +250,7 @@ impl BlobStore {
             std::fs::rename(path, &target)?;
             sync_parent(&target)?;
         }
-        Ok(digest)
+        Ok(())
     }
 }
 

@@ -18,6 +18,7 @@ mod query;
 mod retention;
 mod runtime;
 mod submit;
+mod upload;
 
 use super::emis::{EmisJob, TileStrategy};
 pub use super::leasing::LeaseLifetime;
@@ -34,6 +35,7 @@ pub use super::view::{JobView, StrategyView, WorkerView};
 pub use merge::CHECKPOINT_SPACING;
 pub use query::{Metrics, OutputKind};
 pub use tessera_common::bundle::Bundle;
+pub use upload::BundleUpload;
 
 /// Tunables of the service.
 #[derive(Clone, Debug)]
@@ -80,6 +82,9 @@ pub enum ServiceError {
     /// Bad input from the caller: settings, scene, bundle.
     #[error("{0}")]
     InvalidArgument(String),
+    /// An upload (a scene bundle) is over the coordinator's limit.
+    #[error("{0}")]
+    TooLarge(String),
     /// A tile result failed validation; the tile was re-queued.
     #[error("tile result refused: {0}")]
     InvalidResult(String),

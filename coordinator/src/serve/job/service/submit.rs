@@ -1,7 +1,8 @@
-//! Submission: a scene bundle and settings are checked, the bundle is stored as a blob and
+//! Submission: a received scene bundle (see [`super::upload`]) is stored as a blob and kept
 //! unpacked, the scene is loaded from it to refuse a bad one with its file, line and column,
-//! and the job is queued.
+//! settings and limits are checked, and the job is queued.
 
+use super::upload::BundleUpload;
 use super::{Bundle, JobService, ServiceError};
 use crate::serve::job::model::JobSpec;
 use crate::serve::job::plan::TILE_SIZE;
@@ -11,8 +12,8 @@ use tessera_common::scene::{LoadOptions, Scene};
 use tessera_common::settings::RenderSettings;
 
 impl JobService {
-    /// Validates and stores a scene bundle and settings, and queues the job.
-    #[tracing::instrument(skip_all, fields(scene = %bundle.scene_path))]
+    /// Validates and stores a scene bundle held in memory, and queues the job: the bundle goes
+    /// through [`JobService::submit_upload`] like a streamed one.
     pub fn submit(
         &self,
         bundle: Bundle,
@@ -21,18 +22,50 @@ impl JobService {
         name: Option<String>,
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
+        let mut upload = self.begin_upload(u64::MAX)?;
+        for (path, data) in &bundle.files {
+            upload.start_file(path)?;
+            upload.write(data)?;
+        }
+        drop(bundle.files);
+        self.submit_upload(upload, &bundle.scene_path, settings, priority, name, now_ms)
+    }
+
+    /// Validates and stores a received bundle (its scene at `scene_path`) and settings, and
+    /// queues the job.
+    #[tracing::instrument(skip_all, fields(scene = %scene_path))]
+    pub fn submit_upload(
+        &self,
+        mut upload: BundleUpload,
+        scene_path: &str,
+        settings: RenderSettings,
+        priority: i32,
+        name: Option<String>,
+        now_ms: u64,
+    ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let encoded = tessera_proto::bundle::encode(&bundle);
-        let digest = tessera_proto::blob_digest(&encoded);
+        let blob = self.blobs.temp_path(".bundle");
+        let digest = match upload.finish(scene_path, &blob) {
+            Ok(digest) => digest,
+            Err(e) => {
+                let _ = std::fs::remove_file(&blob);
+                return Err(e);
+            }
+        };
         // pinned until the job is in the model, so that a delete of another job with this
         // bundle leaves it alone meanwhile
         let pin = self.pin_bundle(&digest);
-        let spec = self.store_bundle(&bundle, &encoded, &digest, settings, priority, name);
-        drop(encoded);
+        let stored = self
+            .blobs
+            .put_file_digested(&blob, &digest)
+            .map_err(ServiceError::from)
+            .and_then(|()| upload.unpack_to(&self.scenes_dir.join(&digest)));
+        let spec = stored.and_then(|()| self.check_scene(scene_path, &digest, settings, priority, name));
         let spec = match spec {
             Ok(spec) => spec,
             Err(e) => {
                 // a refused scene leaves no files behind (unless a job or submission uses them)
+                let _ = std::fs::remove_file(&blob);
                 drop(pin);
                 self.remove_unused_blobs(&self.lock(), [digest].into());
                 return Err(e);
@@ -49,18 +82,17 @@ impl JobService {
         Ok(self.view(&inner, &id, now_ms))
     }
 
-    /// Stores and loads the bundle (see [`JobService::unpack_and_load`]) and checks the scene
-    /// against the settings and limits: the job's description.
-    fn store_bundle(
+    /// Loads the stored bundle's scene (see [`JobService::load_unpacked`]) and checks it against
+    /// the settings and limits: the job's description.
+    fn check_scene(
         &self,
-        bundle: &Bundle,
-        encoded: &[u8],
+        scene_path: &str,
         digest: &str,
         settings: RenderSettings,
         priority: i32,
         name: Option<String>,
     ) -> Result<JobSpec, ServiceError> {
-        let scene = self.unpack_and_load(bundle, encoded, digest, &settings)?;
+        let scene = self.load_unpacked(scene_path, digest, &settings)?;
         let (w, h) = (scene.camera.width, scene.camera.height);
         if u64::from(w) * u64::from(h) > self.cfg.max_pixels {
             return Err(ServiceError::InvalidArgument(format!(
@@ -87,64 +119,31 @@ impl JobService {
             )));
         }
         Ok(JobSpec {
-            name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(&bundle.scene_path)),
+            name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(scene_path)),
             priority,
             full_frame,
             settings: integrator_settings,
             width: scene.camera.width,
             height: scene.camera.height,
             bundle_digest: digest.to_string(),
-            scene_path: bundle.scene_path.clone(),
+            scene_path: scene_path.to_string(),
             filter: scene.film.filter.kind,
         })
     }
 
-    /// Stores the bundle blob (`encoded`, whose digest is `digest`), unpacks it and loads the
-    /// scene from it to validate it. Scene errors name the file inside the bundle, its line and
-    /// column.
-    fn unpack_and_load(
-        &self,
-        bundle: &Bundle,
-        encoded: &[u8],
-        digest: &str,
-        settings: &RenderSettings,
-    ) -> Result<Scene, ServiceError> {
-        let invalid = ServiceError::InvalidArgument;
-        if tessera_common::bundle::safe_relative_path(&bundle.scene_path).is_none() {
-            return Err(invalid(format!("bundle scene path \"{}\" is not a relative path", bundle.scene_path)));
-        }
-        if !bundle.files.iter().any(|(p, _)| *p == bundle.scene_path) {
-            return Err(invalid(format!("bundle has no file \"{}\" (the scene)", bundle.scene_path)));
-        }
-        for (path, _) in &bundle.files {
-            if tessera_common::bundle::safe_relative_path(path).is_none() {
-                return Err(invalid(format!("bundle file path \"{path}\" must be relative without \"..\"")));
-            }
-        }
-        self.blobs.put_digested(digest, encoded)?;
+    /// Loads the scene from the unpacked bundle `digest`, confined to it, to validate it.
+    /// Scene errors name the file inside the bundle, its line and column.
+    fn load_unpacked(&self, scene_path: &str, digest: &str, settings: &RenderSettings) -> Result<Scene, ServiceError> {
         let dir = self.scenes_dir.join(digest);
-        if !dir.exists() {
-            let tmp = self.scenes_dir.join(format!("{digest}.{}", uuid::Uuid::new_v4()));
-            for (path, data) in &bundle.files {
-                let p = tmp.join(tessera_common::bundle::safe_relative_path(path).expect("invariant: checked above"));
-                std::fs::create_dir_all(p.parent().expect("invariant: joined path has a parent"))?;
-                std::fs::write(&p, data)?;
-            }
-            if std::fs::rename(&tmp, &dir).is_err() {
-                // another submission unpacked the same bundle first
-                let _ = std::fs::remove_dir_all(&tmp);
-            }
-        }
         let options = LoadOptions {
             defines: settings.define_map(),
             texture_limits: self.cfg.texture_limits,
             confine_to: Some(dir.clone()),
         };
-        let scene = Scene::load_options(&dir.join(&bundle.scene_path), &options).map_err(|e| {
+        Scene::load_options(&dir.join(scene_path), &options).map_err(|e| {
             let prefix = format!("{}/", dir.display());
-            invalid(e.to_string().replace(&prefix, ""))
-        })?;
-        Ok(scene)
+            ServiceError::InvalidArgument(e.to_string().replace(&prefix, ""))
+        })
     }
 }
 
