@@ -206,3 +206,26 @@ fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
     merged.merge(&guides(1..2)).unwrap();
     assert_eq!(merged, guides(0..2), "guides of two calls add up to one call's, bit for bit");
 }
+
+/// Issue 21, fault 1: once path tracing wins with a merge mask (ν = 0, χ > 0 somewhere), a
+/// collecting iteration traces no light paths, so it must neither build a photon map nor
+/// count merge queries: queries against an empty map would be counted with no photons found
+/// and dilute φ (photons per query and light path), making merging look cheaper at the next
+/// update than it is.
+#[test]
+fn path_tracing_with_a_merge_mask_counts_no_merge_queries() {
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    use tessera_common::integrator::path::merge::MergeMask;
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let settings = PathSettings::from_scene(&scene, None);
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    let merging_pt = Strategy { nu: 0.0, connections: 0, merge: Some(MergeMask::Constant(1.0)) };
+    let (image, data) = render_iterations(&scene, settings, &config, &merging_pt, 3, 2..3, Some(CandidateSet::Full));
+    let statistics = data.expect("iteration 2 records").statistics;
+    assert_eq!((statistics.light_paths, statistics.merge_queries), (0, 0), "{statistics:?}");
+    assert!(statistics.camera_vertices > 0);
+    // the samples drawn for merging are drawn all the same: the image is that of χ = 0
+    let plain = Strategy { merge: Some(MergeMask::Constant(0.0)), ..merging_pt };
+    let (same, _) = render_iterations(&scene, settings, &config, &plain, 3, 2..3, Some(CandidateSet::Full));
+    assert_eq!(image.sum, same.sum);
+}

@@ -235,6 +235,13 @@ impl CostTerms {
         CostTerms { fixed, build: k.build * ll * nu * log, merge: query + shade }
     }
 
+    /// The terms of each of `candidates` as the optimiser prices them: the photon map is built
+    /// for a candidate that merges and for no other (as the calibration fits it), so BDPT's
+    /// candidates, and VCM's non-merging ones, pay nothing for it.
+    pub fn of_candidates(k: &CostConstants, s: &PathStatistics, candidates: &[Candidate], pixels: u32) -> Vec<Self> {
+        candidates.iter().map(|c| CostTerms::new(k, s, c, c.merge, pixels)).collect()
+    }
+
     /// The cost at merge probability `chi`.
     #[inline]
     pub fn at(&self, chi: f64) -> f64 {

@@ -274,11 +274,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     }
     let filtered: Vec<Image> =
         planes.par_iter().map(|plane| order.filter(plane, &norm, input.filters.moment_box)).collect();
-    let costs: Vec<CostTerms> = input
-        .candidates
-        .iter()
-        .map(|c| CostTerms::new(&input.constants, &input.statistics, c, !c.is_path_tracing(), pixels))
-        .collect();
+    let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);
     // ---- pixel level: the merge bit of the best full candidate ----
     let pixel_mask = match input.merge_scope {
         MergeScope::PerPixel => Some(pixel_level(input, &filtered, &costs)),

@@ -273,10 +273,16 @@ impl<O: SampleObserver> Bidir<O> {
                 }
             }
             // ---- merging (vcm), never at the primary vertex ----
-            if let (Some(m), Some(photons)) = (&self.merge, &it.photons) {
+            if let Some(m) = &self.merge {
+                // drawn whether or not there is a map, so the samples that follow stay the same
                 let u = sampler.next_1d();
                 let chi = m.mask.at(pixel);
-                if depth >= 2 && chi > 0.0 && u < chi && material.has_smooth_lobe() {
+                if let Some(photons) = &it.photons
+                    && depth >= 2
+                    && chi > 0.0
+                    && u < chi
+                    && material.has_smooth_lobe()
+                {
                     let (value, found) = merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
                     total += value;
                     counters.merge_queries += 1;
@@ -357,7 +363,14 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 self.settings.rr_depth,
             );
             let radius_max = merge_radius_max(scene);
-            let photons = self.merge.as_ref().map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
+            // no map without light paths or without a pixel that merges: queries against an
+            // empty map would only cost time, and would count as merges that found nothing
+            // (diluting φ, photons per query and light path)
+            let photons = self
+                .merge
+                .as_ref()
+                .filter(|m| n > 0 && m.mask.may_merge())
+                .map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
             let start = IterationStart {
                 iteration,
                 light_paths: n,

@@ -340,7 +340,7 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
         let statistics = snapshots[0].1.statistics(pixels);
         let costs: Vec<f64> = candidates
             .iter()
-            .map(|c| pixel_cost(&constants, &statistics, c, c.merge as u8 as f64, !c.is_path_tracing(), pixels))
+            .map(|c| pixel_cost(&constants, &statistics, c, c.merge as u8 as f64, c.merge, pixels))
             .collect();
         let measured = measure_candidates(&s, &candidates, k, &pool);
         let by_order: Vec<Vec<f64>> =

@@ -91,11 +91,11 @@ fn merging_that_wins_in_a_disk_gives_a_dilated_blurred_disk() {
 fn a_two_times_lower_moment_at_equal_cost_wins_and_scaling_changes_nothing() {
     let candidates = CandidateConfig::bdpt().candidates();
     let target = Candidate { nu: 0.5, connections: 2, merge: false };
-    let cost_target = pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, true, 32 * 32);
+    let cost_target = pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, false, 32 * 32);
     // every candidate's moment × cost equals 1, except the target's, which is 0.5
     let m = |_: u32, c: &Candidate| {
         let cc =
-            pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, !c.is_path_tracing(), 32 * 32);
+            pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, c.merge, 32 * 32);
         if *c == target { 0.5 / cost_target } else { 1.0 / cc }
     };
     let img = Image::filled(32, 32, 0.7);
@@ -115,7 +115,7 @@ fn global_merge_scope_scores_every_candidate_and_gives_a_constant_mask() {
     let stats = PathStatistics::default();
     let cost = |c: &Candidate| {
         let chi = if c.merge { 1.0 } else { 0.0 };
-        pixel_cost(&CostConstants::default(), &stats, c, chi, !c.is_path_tracing(), w * h)
+        pixel_cost(&CostConstants::default(), &stats, c, chi, c.merge, w * h)
     };
     let img = Image::filled(w as usize, h as usize, 0.5);
     for target in [
@@ -158,7 +158,7 @@ fn rare_samples_every_candidate_shares_do_not_decide() {
     let (w, h) = (64u32, 64u32);
     let target = Candidate { nu: 1.0, connections: 1, merge: false };
     let stats = PathStatistics::default();
-    let cost = |c: &Candidate| pixel_cost(&CostConstants::default(), &stats, c, 0.0, !c.is_path_tracing(), w * h);
+    let cost = |c: &Candidate| pixel_cost(&CostConstants::default(), &stats, c, 0.0, c.merge, w * h);
     // moment × cost is 1 for every candidate, 0.8 for the target; three pixels got a
     // sample worth 2e4 relative moment in every candidate
     let spikes = [w * 10 + 10, w * 30 + 40, w * 50 + 20];
@@ -190,4 +190,36 @@ fn candidates_that_cannot_sample_never_win() {
         );
     let d = run(&candidates, &b, &Image::filled(16, 16, 1.0));
     assert!(d.nu > 0.0, "a bidirectional candidate is chosen: {d:?}");
+}
+
+/// Issue 21, fault 2: emis-bdpt never builds a photon map, so the optimiser must not charge
+/// its candidates for one (it matters with the reference cost model, whose map build has a
+/// cost). Every candidate's moment × (map-free) cost is 1 but that of ν = 1, c = 1, which is
+/// 0.85: it must win. Charged for a map, it would cost more than 1 / 0.85 times as much and lose.
+#[test]
+fn bdpt_candidates_pay_nothing_for_a_photon_map() {
+    let candidates = CandidateConfig::bdpt().candidates();
+    let target = Candidate { nu: 1.0, connections: 1, merge: false };
+    let (k, stats) = (CostConstants::reference(), PathStatistics::default());
+    let with_map = pixel_cost(&k, &stats, &target, 0.0, true, 32 * 32);
+    let without = pixel_cost(&k, &stats, &target, 0.0, false, 32 * 32);
+    assert!(with_map / without > 1.0 / 0.85, "the test needs a map that matters: {with_map} vs {without}");
+    let m = |_: u32, c: &Candidate| {
+        let cost = pixel_cost(&k, &stats, c, 0.0, false, 32 * 32);
+        if *c == target { 0.85 / cost } else { 1.0 / cost }
+    };
+    let d = optimize(&OptimizerInput {
+        candidates: &candidates,
+        moments: &buffer(32, 32, &candidates, m),
+        image: &Image::filled(32, 32, 0.7),
+        statistics: stats,
+        constants: k,
+        filters: FilterSettings::default(),
+        merge_scope: MergeScope::PerPixel,
+    });
+    assert_eq!((d.nu, d.connections), (1.0, 1));
+    let terms = CostTerms::of_candidates(&k, &stats, &candidates, 32 * 32);
+    for (c, t) in candidates.iter().zip(&terms) {
+        assert_eq!(*t, CostTerms::new(&k, &stats, c, false, 32 * 32), "{c:?} pays for a map");
+    }
 }

@@ -41,6 +41,14 @@ impl MergeMask {
             MergeMask::PerPixel(m) => m.get(pixel as usize).copied().unwrap_or(0.0),
         }
     }
+
+    /// Whether any pixel merges (χ > 0 somewhere).
+    pub fn may_merge(&self) -> bool {
+        match self {
+            MergeMask::Constant(c) => *c > 0.0,
+            MergeMask::PerPixel(m) => m.iter().any(|&c| c > 0.0),
+        }
+    }
 }
 
 /// Merging settings.
