@@ -30,6 +30,17 @@ pid=$!
 until grep -q http "$work/out" 2>/dev/null; do sleep 0.1; done
 url=$(grep -o 'http://[0-9.:]*' "$work/out" | head -1)
 echo "baseline $(grep VmHWM /proc/$pid/status)"
+# large bundles (sparse files, so nothing is read from disk to make them): one within the
+# default 1024 MiB --max-upload-mb is accepted, written to disk as it arrives; one over it,
+# sent chunked without a length, is cut off as it arrives (first, so that the peak RSS is theirs)
+truncate -s 1000M "$work/big-within.bin"
+truncate -s 1100M "$work/big-over.bin"
+for size in within over; do
+    answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -H "Transfer-Encoding: chunked" \
+        -F "scene=@scenes/cornell-box/scene.xml;filename=scene.xml" -F 'settings={"spp":1}' \
+        -F "big=@$work/big-$size.bin;filename=big.bin" "$url/api/v1/jobs")
+    echo "bundle $size the limit: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
+done
 submit() { # NAME SCENE SETTINGS
     answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -F "scene=@$2;filename=scene.xml" \
         -F "settings=$3" "$url/api/v1/jobs")
@@ -43,14 +54,3 @@ submit vcm4e9 scenes/cornell-box/scene.xml '{"integrator":"vcm","spp":4000000000
 answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -H "Origin: http://evil.example" \
     -F "scene=@scenes/cornell-box/scene.xml;filename=scene.xml" -F 'settings={"spp":1}' "$url/api/v1/jobs")
 echo "cross-origin: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
-# large bundles (sparse files, so nothing is read from disk to make them): one within the
-# default 1024 MiB --max-upload-mb is accepted, written to disk as it arrives; one over it,
-# sent chunked without a length, is cut off as it arrives
-truncate -s 1000M "$work/big-within.bin"
-truncate -s 1100M "$work/big-over.bin"
-for size in within over; do
-    answer=$(curl -s -o "$work/resp" -w "%{http_code} %{time_total}s" -H "Transfer-Encoding: chunked" \
-        -F "scene=@scenes/cornell-box/scene.xml;filename=scene.xml" -F 'settings={"spp":1}' \
-        -F "big=@$work/big-$size.bin;filename=big.bin" "$url/api/v1/jobs")
-    echo "bundle $size the limit: $answer $(grep VmHWM /proc/$pid/status | tr -s ' \t' ' ') $(head -c 120 "$work/resp")"
-done

@@ -242,6 +242,11 @@ impl CostTerms {
         candidates.iter().map(|c| CostTerms::new(k, s, c, c.merge, pixels)).collect()
     }
 
+    /// The cost of building the photon map (0 for a candidate that builds none).
+    pub fn build(&self) -> f64 {
+        self.build
+    }
+
     /// The cost at merge probability `chi`.
     #[inline]
     pub fn at(&self, chi: f64) -> f64 {

@@ -337,18 +337,32 @@ fn image_level_scores(
         (None, Some(mask)) => mask.data[p],
         (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
     };
+    // a per-pixel group builds the photon map when its mask merges anywhere, and then pays
+    // for it in every pixel, merging or not
+    let map_built = |g: &Group| match (g.merge, pixel_mask) {
+        (None, Some(mask)) => mask.data.iter().any(|&chi| chi > 0.1),
+        _ => false,
+    };
     groups
         .par_iter()
         .map(|g| {
             let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+            let shared_build = match (map_built(g), g.variant(true)) {
+                (true, Some(on)) if input.candidates[on].merge => costs[on].build(),
+                _ => 0.0,
+            };
             for p in 0..w * h {
-                let chi = chi_at(g, p) as f64;
-                let Some(c) = g.variant(chi > 0.1) else { continue };
-                total_cost += costs[c].at(if input.candidates[c].merge { chi } else { 0.0 }) / pixels;
+                // black pixels carry no relative moment, so they are left out of the cost too
                 let i = input.image.data[p] as f64;
                 if i == 0.0 {
                     continue;
                 }
+                // merging is accounted as binary, as its moment is: a pixel merging with
+                // χ = 0.2 is priced and judged as merging always
+                let chi = chi_at(g, p) as f64;
+                let Some(c) = g.variant(chi > 0.1) else { continue };
+                let merges = input.candidates[c].merge;
+                total_cost += (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / pixels;
                 let mut moment = filtered[c].data[p];
                 // outliers are zeroed, but an infinite moment (the candidate cannot sample this
                 // pixel's paths) stays infinite, so that candidate cannot win

@@ -94,8 +94,7 @@ fn a_two_times_lower_moment_at_equal_cost_wins_and_scaling_changes_nothing() {
     let cost_target = pixel_cost(&CostConstants::default(), &PathStatistics::default(), &target, 0.0, false, 32 * 32);
     // every candidate's moment × cost equals 1, except the target's, which is 0.5
     let m = |_: u32, c: &Candidate| {
-        let cc =
-            pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, c.merge, 32 * 32);
+        let cc = pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, c.merge, 32 * 32);
         if *c == target { 0.5 / cost_target } else { 1.0 / cc }
     };
     let img = Image::filled(32, 32, 0.7);
@@ -222,4 +221,51 @@ fn bdpt_candidates_pay_nothing_for_a_photon_map() {
     for (c, t) in candidates.iter().zip(&terms) {
         assert_eq!(*t, CostTerms::new(&k, &stats, c, false, 32 * 32), "{c:?} pays for a map");
     }
+}
+
+/// Issue 21, fault 3: the image-level sums price merging as they judge it, binary (χ > 0.1
+/// merges), over the pixels they judge (not the black ones), and a per-pixel group whose mask
+/// merges anywhere pays for the photon map in every pixel. With every candidate's moment
+/// equal, a mask of χ = 0.2 must not make a group look cheaper than a mask of χ = 1.
+#[test]
+fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
+    let candidates = CandidateConfig::vcm().reduced().candidates();
+    let (w, h) = (16usize, 16usize);
+    let (k, stats) = (CostConstants::reference(), PathStatistics::default());
+    let moments = buffer(w as u32, h as u32, &candidates, |_, _| 1.0);
+    // the left half of the image is black
+    let image = Image::from_data(w, h, (0..w * h).map(|p| if p % w < w / 2 { 0.0 } else { 0.5 }).collect());
+    let input = OptimizerInput {
+        candidates: &candidates,
+        moments: &moments,
+        image: &image,
+        statistics: stats,
+        constants: k,
+        filters: FilterSettings::default(),
+        merge_scope: MergeScope::PerPixel,
+    };
+    let norm: Vec<f32> = image.data.iter().map(|&i| i * i + 1e-4).collect();
+    let filtered: Vec<Image> = moment_planes(&moments);
+    let costs = CostTerms::of_candidates(&k, &stats, &candidates, (w * h) as u32);
+    let groups = image_level_groups(&candidates, MergeScope::PerPixel);
+    let score = |chi: f32| {
+        let mask = Image::filled(w, h, chi);
+        image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask))
+    };
+    let (partial, full) = (score(0.2), score(1.0));
+    let g = groups.iter().position(|g| (g.nu, g.connections) == (1.0, 1)).expect("a ν = 1, c = 1 group");
+    assert_eq!(partial[g].cost, full[g].cost, "χ = 0.2 priced as merging always");
+    let on = groups[g].variant(true).unwrap();
+    let judged = (w * h / 2) as f64 / (w * h) as f64;
+    assert!((full[g].cost - costs[on].at(1.0) * judged).abs() < 1e-9 * full[g].cost, "{:?}", full[g]);
+    // nowhere merging: the merge-off variant, without a map
+    let off = groups[g].variant(false).unwrap();
+    assert!((score(0.0)[g].cost - costs[off].at(0.0) * judged).abs() < 1e-9 * full[g].cost);
+    // merging in one pixel only: the map is built, and every judged pixel pays for it
+    let mut one = Image::filled(w, h, 0.0);
+    one.data[w * h - 1] = 1.0;
+    let with_map = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&one))[g].cost;
+    let expected =
+        (costs[off].at(0.0) + costs[on].build()) * (judged - 1.0 / (w * h) as f64) + costs[on].at(1.0) / (w * h) as f64;
+    assert!((with_map - expected).abs() < 1e-9 * expected, "{with_map} vs {expected}");
 }

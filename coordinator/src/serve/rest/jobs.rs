@@ -20,7 +20,8 @@ fn invalid(message: impl Into<String>) -> ApiError {
 
 fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
-        ApiError::new(ErrorCode::PayloadTooLarge, format!("upload too large: {}", e.body_text()))
+        let message = format!("upload too large: {} (tessera serve --max-upload-mb)", e.body_text());
+        ApiError::new(ErrorCode::PayloadTooLarge, message)
     } else {
         invalid(format!("malformed multipart body: {}", e.body_text()))
     }
