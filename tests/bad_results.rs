@@ -94,8 +94,9 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
 }
 
 /// A hostile worker: uploads under another worker's lease or a lease that does not exist are
-/// stale before anything is buffered, and a claimed rectangle far larger than the lease buys no
-/// room: the leased tile's size bounds what is read.
+/// stale before anything is buffered, a claimed rectangle far larger than the lease buys no
+/// room (the leased tile's size bounds what is read), and a 1 GiB message is refused by the
+/// length it announces.
 #[test]
 fn a_hostile_worker_cannot_make_the_coordinator_buffer_past_a_lease() {
     use pb::upload_result_request::Part;
@@ -132,8 +133,17 @@ fn a_hostile_worker_cannot_make_the_coordinator_buffer_past_a_lease() {
         let e = client.upload_result(flood(&honest, &lease)).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::InvalidArgument, "{e}");
         assert!(e.message().contains("exceeds"), "{}", e.message());
+        // one 1 GiB message: refused by its length, before it is buffered
+        let header = tessera_proto::result_header(&honest, &lease, 0, 0.0, 0);
+        let giant = vec![
+            pb::UploadResultRequest { part: Some(Part::Header(header)) },
+            pb::UploadResultRequest { part: Some(Part::Data(vec![0u8; 1 << 30].into())) },
+        ];
+        let e = client.clone().max_encoding_message_size(usize::MAX).upload_result(tokio_stream::iter(giant)).await;
+        let e = e.expect_err("a 1 GiB message is refused");
+        assert!(matches!(e.code(), tonic::Code::OutOfRange | tonic::Code::ResourceExhausted), "{e}");
     });
     let peak = super::hostile::peak_rss_mib(&c);
-    assert!(peak < 128, "the coordinator peaked at {peak} MiB under 768 MiB of hostile uploads");
+    assert!(peak < 128, "the coordinator peaked at {peak} MiB under 1.75 GiB of hostile uploads");
     assert_eq!(rest::get(&format!("{}/healthz", c.url), None).0, 200);
 }

@@ -41,6 +41,14 @@ pub const CHUNK_BYTES: usize = 1 << 20;
 /// Largest gRPC message either side accepts: a chunk plus headers, or an inline scene bundle.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
 
+/// Largest message the coordinator accepts from a worker: every one is a chunk of an upload
+/// or smaller, so a worker cannot make it buffer more than this per request.
+pub const MAX_WORKER_MESSAGE_BYTES: usize = 4 * CHUNK_BYTES;
+
+/// Largest message the coordinator accepts from a client: a `SubmitJob` with its bundle inline
+/// (larger bundles go through `SubmitJobStream`, whose parts are chunks).
+pub const MAX_INLINE_BUNDLE_BYTES: usize = 64 << 20;
+
 /// The digest that names a blob (scene bundles, merge masks, outputs): the SHA-256 of its
 /// bytes in lowercase hex. The coordinator stores blobs under it and workers check what they
 /// fetch against it.

@@ -13,12 +13,13 @@ use tessera_proto::v1::worker_service_server::WorkerServiceServer;
 
 /// Both services as an axum router.
 pub fn router(state: Arc<AppState>) -> axum::Router {
-    let max = state.max_upload_bytes;
+    // every message is decoded whole in memory before a handler sees it
+    let max = state.max_upload_bytes.min(tessera_proto::MAX_INLINE_BUNDLE_BYTES);
     let jobs = JobServiceServer::new(job_api::JobApi(state.clone()))
         .max_decoding_message_size(max)
         .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
     let workers = WorkerServiceServer::new(worker_api::WorkerApi(state))
-        .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
+        .max_decoding_message_size(tessera_proto::MAX_WORKER_MESSAGE_BYTES)
         .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
     tonic::service::Routes::new(jobs).add_service(workers).into_axum_router()
 }
