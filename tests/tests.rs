@@ -516,5 +516,6 @@ fn image_comparison_notices_a_different_seed() {
 mod bad_results;
 mod faults;
 mod hostile;
+mod logs;
 mod scale;
 mod tls;
