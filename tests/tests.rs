@@ -517,5 +517,6 @@ mod bad_results;
 mod bounded_memory;
 mod faults;
 mod hostile;
+mod logs;
 mod scale;
 mod tls;

@@ -7,7 +7,6 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    tessera_coordinator::serve::telemetry::init();
     match tessera_coordinator::cli::run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -119,3 +119,45 @@ fn emis_vcm_writes_its_layers_strategy_map_and_report() {
     assert_eq!(updates[0]["candidates"].as_array().unwrap().len(), 26, "25 (ν, c) pairs and path tracing");
     assert_eq!(report["final"]["nu"].as_f64().unwrap() as f32, nu as f32);
 }
+
+/// `tessera serve` settings: flag > `TESSERA_*` variable > `--config` file > default, as
+/// `--print-config` shows them, tokens redacted; the variables are set on the child only.
+#[test]
+fn serve_settings_come_from_flags_then_variables_then_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("serve.toml");
+    std::fs::write(
+        &file,
+        "listen = \"127.0.0.1:9001\"\nlease-timeout = 5\nmax-tiles = 77\nclient-token = \"file-secret\"\nlog-format = \"json\"\n",
+    )
+    .unwrap();
+    let run = tessera()
+        .args(["serve", "--print-config", "--config"])
+        .arg(&file)
+        .args(["--listen", "127.0.0.1:9003"])
+        .env("TESSERA_LISTEN", "127.0.0.1:9002")
+        .env("TESSERA_LEASE_TIMEOUT", "9")
+        .env("TESSERA_WORKER_TOKEN", "env-secret")
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let text = String::from_utf8_lossy(&run.stdout);
+    for line in [
+        "listen = \"127.0.0.1:9003\"  # flag",
+        "lease-timeout = 9.0  # env TESSERA_LEASE_TIMEOUT",
+        "max-tiles = 77  # file, line 3",
+        "worker-token = \"<redacted>\"  # env TESSERA_WORKER_TOKEN",
+        "client-token = \"<redacted>\"  # file, line 4",
+        "log-format = \"json\"  # file, line 5",
+        "data-dir = \"tessera-data\"  # default",
+    ] {
+        assert!(text.lines().any(|l| l == line), "no {line:?} in\n{text}");
+    }
+    assert!(!text.contains("secret"), "a token is shown:\n{text}");
+    // an unknown key is an error naming the key, the file and the line
+    std::fs::write(&file, "listen = \"127.0.0.1:0\"\nworker_token = \"x\"\n").unwrap();
+    let run = tessera().args(["serve", "--config"]).arg(&file).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{err}");
+    assert!(err.contains("serve.toml, line 2: unknown key `worker_token` (did you mean `worker-token`?"), "{err}");
+}

@@ -8,6 +8,10 @@
 //! ```text
 //! tessera-worker --coordinator https://farm:7878 --ca-cert farm-ca.pem --threads 16 --token $TOKEN
 //! ```
+//!
+//! Every flag can also be given as a `TESSERA_*` variable (`--token`'s is
+//! `TESSERA_WORKER_TOKEN`, the coordinator's name for the same secret) or in a `--config` TOML
+//! file ([`tessera_config`]).
 
 pub mod client;
 pub mod convert;
@@ -53,14 +57,34 @@ pub struct Args {
     /// per image, 4096 in all]; a job whose scene needs more fails on this worker.
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
+    /// Log format.
+    #[command(flatten)]
+    pub log: tessera_config::LogArgs,
+    /// `--config` and `--print-config`.
+    #[command(flatten)]
+    pub config: tessera_config::ConfigArgs,
 }
 
-/// Installs the `tracing` subscriber (`RUST_LOG`, default `tessera_worker=info`).
-pub fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("tessera_worker=info"));
-    let _ =
-        tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).try_init();
+/// Parses `argv` (program name first): flags, then `TESSERA_*` variables, then the `--config`
+/// file. Clap's errors (and `--help`, `--version`) exit here, as `Args::parse` would.
+pub fn parse_args<I, T>(argv: I) -> anyhow::Result<(Args, tessera_config::Parsed)>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString>,
+{
+    use clap::{CommandFactory, FromArgMatches};
+    let parsed = match tessera_config::parse(Args::command(), None, argv) {
+        Ok(p) => p,
+        Err(tessera_config::ParseError::Clap(e)) => e.exit(),
+        Err(e) => return Err(e.into()),
+    };
+    let args = Args::from_arg_matches(&parsed.matches).unwrap_or_else(|e| e.exit());
+    Ok((args, parsed))
+}
+
+/// Installs the `tracing` subscriber (`RUST_LOG`, default: the worker's own events at `info`).
+pub fn init_logging(format: tessera_config::LogFormat) {
+    tessera_config::logging::init(format, "warn,tessera_worker=info");
 }
 
 /// Runs the worker until it is told to stop.
@@ -70,4 +94,63 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let runtime = tokio::runtime::Runtime::new()?;
     runtime.block_on(runner::run(args))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every flag of the worker can be set in its settings file: a new flag without a sample
+    /// here fails this test until one is added.
+    #[test]
+    fn every_flag_can_be_set_in_the_config_file() {
+        let samples = [
+            ("coordinator", "\"https://farm:7878\""),
+            ("ca-cert", "\"farm-ca.pem\""),
+            ("threads", "3"),
+            ("token", "\"w-secret\""),
+            ("cache-dir", "\"/var/cache/tessera\""),
+            ("cache-limit", "512"),
+            ("name", "\"node-7\""),
+            ("max-tiles", "2"),
+            ("texture-budget", "256"),
+            ("log-format", "\"json\""),
+        ];
+        let keys = tessera_config::file_keys(&Args::command());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("worker.toml");
+        for key in &keys {
+            let (_, sample) = samples
+                .iter()
+                .find(|(k, _)| k == key)
+                .unwrap_or_else(|| panic!("--{key} is new: add a sample value for it to this test"));
+            // the one required flag comes from the command line unless it is the one tested
+            let (text, flags) = match key.as_str() {
+                "coordinator" => (format!("{key} = {sample}\n"), vec![]),
+                _ => (format!("{key} = {sample}\n"), vec!["--coordinator", "http://c"]),
+            };
+            std::fs::write(&path, text).unwrap();
+            let argv = ["tessera-worker", "--config", path.to_str().unwrap()].into_iter().chain(flags);
+            let (_, parsed) = parse_args(argv).unwrap();
+            let shown = if *key == "token" { "\"<redacted>\"" } else { sample };
+            let line = format!("{key} = {shown}  # file, line 1");
+            let printed = parsed.print_config();
+            assert!(printed.lines().any(|l| l == line), "{key}: no {line:?} in\n{printed}");
+        }
+        assert_eq!(keys.len(), samples.len(), "samples for flags that are gone: {keys:?}");
+    }
+
+    #[test]
+    fn the_file_gives_the_coordinator_and_flags_win() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("worker.toml");
+        std::fs::write(&path, "coordinator = \"http://farm:7878\"\nthreads = 4\nname = \"from-file\"\n").unwrap();
+        let (args, _) = parse_args(["tessera-worker", "--config", path.to_str().unwrap(), "--threads", "2"]).unwrap();
+        assert_eq!(args.coordinator, "http://farm:7878");
+        assert_eq!((args.threads, args.name.as_deref()), (Some(2), Some("from-file")));
+        std::fs::write(&path, "coordinator = \"http://farm:7878\"\nthread = 4\n").unwrap();
+        let e = parse_args(["tessera-worker", "--config", path.to_str().unwrap()]).err().unwrap().to_string();
+        assert!(e.contains("worker.toml, line 2: unknown key `thread`"), "{e}");
+    }
 }

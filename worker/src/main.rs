@@ -1,8 +1,7 @@
-//! `tessera-worker`: a render worker for a Tessera coordinator. Parses arguments and runs the
-//! lease → render → upload loop until SIGTERM/SIGINT (which drains: finishes and uploads the
-//! tiles in hand, then exits).
+//! `tessera-worker`: a render worker for a Tessera coordinator. Parses arguments (flags,
+//! `TESSERA_*` variables, the `--config` file) and runs the lease → render → upload loop until
+//! SIGTERM/SIGINT (which drains: finishes and uploads the tiles in hand, then exits).
 
-use clap::Parser;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
@@ -10,9 +9,15 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    tessera_worker::init_logging();
-    let args = tessera_worker::Args::parse();
-    match tessera_worker::run(args) {
+    let result = tessera_worker::parse_args(std::env::args_os()).and_then(|(args, parsed)| {
+        if args.config.print_config {
+            print!("{}", parsed.print_config());
+            return Ok(());
+        }
+        tessera_worker::init_logging(args.log.log_format);
+        tessera_worker::run(args)
+    });
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

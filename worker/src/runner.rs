@@ -81,7 +81,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                     _ => s.into(),
                 })?
                 .into_inner();
-            tracing::info!(worker = %reg.worker_id, coordinator = %args.coordinator, threads, "registered");
+            tracing::info!(worker_id = %reg.worker_id, coordinator = %args.coordinator, threads, "registered");
             backoff.reset();
             let held = Arc::new(Mutex::new(Held::default()));
             let heartbeat = tokio::spawn(heartbeat_loop(
@@ -205,6 +205,8 @@ async fn render_and_upload(
             .iter()
             .map(|l| {
                 Ok(TileWork {
+                    job_id: l.lease.as_ref().map_or_else(String::new, |l| l.job_id.clone()),
+                    tile: l.lease.as_ref().map_or(0, |l| l.tile),
                     rect: convert::rect(l.rect.as_ref())?,
                     samples: l.sample_begin..l.sample_end,
                     seed: settings.seed.unwrap_or(0),
@@ -222,8 +224,10 @@ async fn render_and_upload(
             // cannot render these leases (bad bundle, scene, settings): say so, so the tiles go
             // back to the queue now instead of after the lease timeout
             let message = format!("{e:#}");
-            tracing::error!(error = %message, "cannot render leased tiles");
             for l in leases {
+                if let Some(lease) = &l.lease {
+                    tracing::error!(job_id = %lease.job_id, tile = lease.tile, error = %message, "tile failed: cannot render it");
+                }
                 let req = pb::ReportFailureRequest {
                     worker_id: worker.to_string(),
                     lease: l.lease.clone(),
@@ -237,11 +241,20 @@ async fn render_and_upload(
     let pool = pool.clone();
     let work = tiles.clone();
     let results =
-        tokio::task::spawn_blocking(move || render_batch(&pool, &scene, &renderer, emis.as_ref(), &work)).await?;
+        match tokio::task::spawn_blocking(move || render_batch(&pool, &scene, &renderer, emis.as_ref(), &work)).await {
+            Ok(results) => results,
+            Err(e) => {
+                // a panic in the renderer: the session ends, and registering again re-queues them
+                for t in &tiles {
+                    tracing::error!(job_id = %t.job_id, tile = t.tile, error = %e, "tile failed: the render panicked");
+                }
+                return Err(e.into());
+            }
+        };
     for (l, TileOutput { accum, seconds, pilot }) in leases.iter().zip(results) {
         let Some(lease) = l.lease.clone() else { continue };
         if held.lock().unwrap_or_else(|p| p.into_inner()).lost.contains(&key(&lease)) {
-            tracing::debug!(tile = lease.tile, "lease lost while rendering: result dropped");
+            tracing::debug!(job_id = %lease.job_id, tile = lease.tile, "lease lost while rendering: result dropped");
             continue;
         }
         let header = pb::TileResultHeader {
@@ -256,7 +269,7 @@ async fn render_and_upload(
         };
         let mut payload = tessera_proto::payload::encode_tile(&accum);
         payload.extend_from_slice(&pilot);
-        upload(client, header, payload).await?;
+        upload(client, header, payload, &lease).await?;
         tracing::debug!(job_id = %lease.job_id, tile = lease.tile, seconds, non_finite = accum.non_finite, "tile uploaded");
     }
     Ok(())
@@ -264,7 +277,12 @@ async fn render_and_upload(
 
 /// Uploads one result, retrying while the coordinator is unreachable (a restarted coordinator
 /// still accepts results for leases it persisted).
-async fn upload(client: &mut Client, header: pb::TileResultHeader, payload: Vec<u8>) -> anyhow::Result<()> {
+async fn upload(
+    client: &mut Client,
+    header: pb::TileResultHeader,
+    payload: Vec<u8>,
+    lease: &pb::LeaseRef,
+) -> anyhow::Result<()> {
     use pb::upload_result_request::Part;
     let started = tokio::time::Instant::now();
     let mut backoff = Backoff::default();
@@ -279,12 +297,12 @@ async fn upload(client: &mut Client, header: pb::TileResultHeader, payload: Vec<
             Ok(r) => {
                 let r = r.into_inner();
                 if r.outcome != pb::UploadOutcome::Accepted as i32 {
-                    tracing::info!(message = %r.message, "result not merged");
+                    tracing::info!(job_id = %lease.job_id, tile = lease.tile, message = %r.message, "result not merged");
                 }
                 return Ok(());
             }
             Err(s) if s.code() == tonic::Code::InvalidArgument => {
-                tracing::error!(message = %s.message(), "result refused by the coordinator");
+                tracing::error!(job_id = %lease.job_id, tile = lease.tile, message = %s.message(), "tile failed: result refused by the coordinator");
                 return Ok(());
             }
             Err(s)
@@ -292,7 +310,7 @@ async fn upload(client: &mut Client, header: pb::TileResultHeader, payload: Vec<
                     && matches!(s.code(), tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal) =>
             {
                 let delay = backoff.next_delay();
-                tracing::warn!(message = %s.message(), retry_in_ms = delay.as_millis() as u64, "upload failed, retrying");
+                tracing::warn!(job_id = %lease.job_id, tile = lease.tile, message = %s.message(), retry_in_ms = delay.as_millis() as u64, "upload failed, retrying");
                 // the channel reconnects by itself on the next call
                 tokio::time::sleep(delay).await;
             }

@@ -1,5 +1,6 @@
-//! Runs the real `tessera-worker` binary: argument errors, and draining on SIGTERM while the
-//! coordinator is unreachable (it keeps retrying with backoff until told to stop).
+//! Runs the real `tessera-worker` binary: argument errors, settings from flags, variables and
+//! a file, and draining on SIGTERM while the coordinator is unreachable (it keeps retrying
+//! with backoff until told to stop).
 
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -58,4 +59,43 @@ fn sigterm_stops_a_worker_that_is_retrying_a_dead_coordinator() {
         assert!(start.elapsed() < Duration::from_secs(10), "the worker did not drain");
         std::thread::sleep(Duration::from_millis(50));
     }
+}
+
+/// Flag > `TESSERA_*` variable > `--config` file > default, shown by `--print-config` with
+/// the token redacted. The variables are set on the child only, so no test races another.
+#[test]
+fn settings_come_from_flags_then_variables_then_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("worker.toml");
+    std::fs::write(
+        &file,
+        "coordinator = \"http://file:7878\"\nthreads = 4\nname = \"from-file\"\ncache-limit = 100\ntoken = \"file-secret\"\n",
+    )
+    .unwrap();
+    let out = worker()
+        .args(["--print-config", "--threads", "2"])
+        .env("TESSERA_CONFIG", &file)
+        .env("TESSERA_THREADS", "3")
+        .env("TESSERA_NAME", "from-env")
+        .env("TESSERA_WORKER_TOKEN", "env-secret")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for line in [
+        "coordinator = \"http://file:7878\"  # file, line 1",
+        "threads = 2  # flag",
+        "name = \"from-env\"  # env TESSERA_NAME",
+        "cache-limit = 100  # file, line 4",
+        "token = \"<redacted>\"  # env TESSERA_WORKER_TOKEN",
+        "max-tiles", // unset: a comment
+    ] {
+        assert!(text.lines().any(|l| l == line || l == format!("# {line} is not set")), "no {line:?} in\n{text}");
+    }
+    assert!(!text.contains("secret"), "a token is shown:\n{text}");
+    // an unknown key stops the worker, naming the key and the file
+    std::fs::write(&file, "coordinator = \"http://c\"\nthread = 4\n").unwrap();
+    let out = worker().arg("--config").arg(&file).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("worker.toml, line 2: unknown key `thread`"), "{err}");
 }

@@ -38,9 +38,37 @@ pub enum Command {
     Bench(crate::bench::BenchCommand),
 }
 
-/// Parses the command line and runs the command.
+/// Parses `argv` (program name first): `tessera serve`'s settings also come from `TESSERA_*`
+/// variables and its `--config` file. Clap's errors (and `--help`, `--version`) exit here, as
+/// `Cli::parse` would.
+pub fn parse_from<I, T>(argv: I) -> anyhow::Result<(Cli, tessera_config::Parsed)>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString>,
+{
+    use clap::{CommandFactory, FromArgMatches};
+    let parsed = match tessera_config::parse(Cli::command(), Some("serve"), argv) {
+        Ok(p) => p,
+        Err(tessera_config::ParseError::Clap(e)) => e.exit(),
+        Err(e) => return Err(e.into()),
+    };
+    let cli = Cli::from_arg_matches(&parsed.matches).unwrap_or_else(|e| e.exit());
+    Ok((cli, parsed))
+}
+
+/// Parses the command line, installs logging and runs the command.
 pub fn run() -> anyhow::Result<()> {
-    match Cli::parse().command {
+    use crate::serve::telemetry;
+    let (cli, parsed) = parse_from(std::env::args_os())?;
+    match &cli.command {
+        Command::Serve(args) if args.config.print_config => {
+            print!("{}", parsed.print_config());
+            return Ok(());
+        }
+        Command::Serve(args) => telemetry::init(args.log.log_format, telemetry::SERVE_FILTER),
+        _ => telemetry::init(tessera_config::LogFormat::Text, telemetry::CLI_FILTER),
+    }
+    match cli.command {
         Command::Render(args) => render::render_command(&args),
         Command::Serve(args) => crate::serve::app::serve_command(&args),
         Command::Submit(args) => submit::submit_command(&args),
@@ -59,6 +87,71 @@ mod tests {
     #[test]
     fn the_command_line_is_well_formed() {
         Cli::command().debug_assert();
+    }
+
+    /// Every flag of `tessera serve` can be set in its settings file: a new flag without a
+    /// sample here fails this test until one is added.
+    #[test]
+    fn every_serve_flag_can_be_set_in_the_config_file() {
+        let samples = [
+            ("listen", "\"0.0.0.0:9000\""),
+            ("data-dir", "\"/srv/tessera\""),
+            ("worker-token", "\"w-secret\""),
+            ("worker-token-file", "\"/run/secrets/worker\""),
+            ("client-token", "\"c-secret\""),
+            ("client-token-file", "\"/run/secrets/client\""),
+            ("tls-cert", "\"farm.pem\""),
+            ("tls-key", "\"farm.key\""),
+            ("insecure", "true"),
+            ("lease-timeout", "2.5"),
+            ("lease-max-floor", "60.0"),
+            ("lease-max-factor", "4.0"),
+            ("checkpoint-interval", "0.5"),
+            ("max-upload-mb", "64"),
+            ("texture-budget", "512"),
+            ("max-tiles", "99"),
+            ("max-pixels", "1000"),
+            ("retain-finished", "\"7d\""),
+            ("log-format", "\"json\""),
+        ];
+        let serve = Cli::command().find_subcommand("serve").unwrap().clone();
+        let keys = tessera_config::file_keys(&serve);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("serve.toml");
+        for key in &keys {
+            let (_, sample) = samples
+                .iter()
+                .find(|(k, _)| k == key)
+                .unwrap_or_else(|| panic!("--{key} is new: add a sample value for it to this test"));
+            std::fs::write(&path, format!("{key} = {sample}\n")).unwrap();
+            let (cli, parsed) = parse_from(["tessera", "serve", "--config", path.to_str().unwrap()]).unwrap();
+            assert!(matches!(cli.command, Command::Serve(_)));
+            let shown = if key.ends_with("-token") { "\"<redacted>\"" } else { sample };
+            let line = format!("{key} = {shown}  # file, line 1");
+            let printed = parsed.print_config();
+            assert!(printed.lines().any(|l| l == line), "{key}: no {line:?} in\n{printed}");
+        }
+        assert_eq!(keys.len(), samples.len(), "samples for flags that are gone: {keys:?}");
+    }
+
+    /// clap's `requires` and `conflicts_with` do not see the file's values: `resolve` checks
+    /// the pairs itself.
+    #[test]
+    fn serve_pairs_from_the_config_file_are_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("serve.toml");
+        let resolve = |text: &str, flags: &[&str]| {
+            std::fs::write(&path, text).unwrap();
+            let argv =
+                ["tessera", "serve", "--config", path.to_str().unwrap()].into_iter().chain(flags.iter().copied());
+            let Command::Serve(args) = parse_from(argv).unwrap().0.command else { panic!("not serve") };
+            args.resolve().err().map(|e| format!("{e:#}")).unwrap_or_default()
+        };
+        let e = resolve("tls-cert = \"farm.pem\"\n", &[]);
+        assert!(e.contains("--tls-cert and --tls-key go together"), "{e}");
+        let e = resolve("worker-token = \"w\"\n", &["--worker-token-file", "w.token"]);
+        assert!(e.contains("a token and a token file (w.token) are both given"), "{e}");
+        assert_eq!(resolve("worker-token = \"w\"\nclient-token = \"c\"\n", &[]), "");
     }
 
     #[test]

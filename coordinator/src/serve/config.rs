@@ -1,6 +1,7 @@
-//! The coordinator's configuration: the flags of `tessera serve` (each also read from a
-//! `TESSERA_*` environment variable where a secret is concerned), checked and turned into the
-//! service's settings, the API tokens and the TLS configuration.
+//! The coordinator's configuration: the flags of `tessera serve` (each also read from its
+//! `TESSERA_*` environment variable and settable in the `--config` file, see
+//! [`tessera_config`]), checked and turned into the service's settings, the API tokens and the
+//! TLS configuration.
 
 use super::auth::Tokens;
 use super::job::service::{DEFAULT_MAX_PIXELS, DEFAULT_MAX_TILES, LeaseLifetime, ServiceConfig};
@@ -74,6 +75,12 @@ pub struct ServeArgs {
     /// ended (`90s`, `30m`, `24h`, `7d`, `1h30m`) [default: keep them until deleted].
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     pub retain_finished: Option<Duration>,
+    /// Log format.
+    #[command(flatten)]
+    pub log: tessera_config::LogArgs,
+    /// `--config` and `--print-config`.
+    #[command(flatten)]
+    pub config: tessera_config::ConfigArgs,
 }
 
 /// The checked configuration.
@@ -95,7 +102,9 @@ impl ServeArgs {
         };
         let tls = match (&self.tls_cert, &self.tls_key) {
             (Some(cert), Some(key)) => Some(super::tls::server_config(cert, key)?),
-            _ => None,
+            (None, None) => None,
+            // clap checks this for flags and variables, not for values from the settings file
+            _ => bail!("--tls-cert and --tls-key go together: give both or neither"),
         };
         // beyond loopback, tokens would cross the network in the clear without TLS
         let missing: Vec<&str> = [
@@ -167,6 +176,10 @@ pub fn parse_duration(text: &str) -> Result<Duration, String> {
 }
 
 fn read_token(value: &Option<String>, file: &Option<PathBuf>) -> anyhow::Result<Option<String>> {
+    if let (Some(_), Some(f)) = (value, file) {
+        // one from the settings file, the other from a flag or variable: which was meant?
+        bail!("a token and a token file ({}) are both given: set one of them", f.display());
+    }
     if let Some(f) = file {
         let t = std::fs::read_to_string(f).with_context(|| format!("cannot read token file {}", f.display()))?;
         let t = t.trim().to_string();

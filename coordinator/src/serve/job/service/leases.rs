@@ -8,6 +8,7 @@ use crate::serve::job::emis::MergeSpec;
 use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
+use std::collections::HashMap;
 use tessera_common::film::Rect;
 
 impl JobService {
@@ -50,12 +51,13 @@ impl JobService {
             }
         }
         if !changes.is_empty() {
-            tracing::warn!(worker = %row.id, tiles = orphaned.len(), "worker restarted: its leases are re-queued");
+            tracing::warn!(worker_id = %row.id, tiles = orphaned.len(), "worker restarted: its leases are re-queued");
+            super::events::jobs_failed(&inner.model, &changes, now_ms);
             self.persist(&mut inner, &changes, &[])?;
             self.sync(&inner)?;
             self.work.notify_waiters();
         }
-        tracing::info!(worker = %row.id, name = %row.name, threads, "worker registered");
+        tracing::info!(worker_id = %row.id, name = %row.name, threads, "worker registered");
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
     }
@@ -65,6 +67,11 @@ impl JobService {
             .workers
             .get_mut(worker)
             .ok_or_else(|| ServiceError::NotFound(format!("worker {worker} is not registered")))?;
+        let silent_ms = now_ms.saturating_sub(w.last_seen_ms);
+        if silent_ms > self.cfg.lease_timeout_ms {
+            // logged as lost by the expiry timer (or silent since before a restart)
+            tracing::info!(worker_id = %worker, silent_ms, "worker back");
+        }
         w.last_seen_ms = now_ms;
         Ok(())
     }
@@ -139,17 +146,24 @@ impl JobService {
     pub fn expire(&self, now_ms: u64) -> Result<(), ServiceError> {
         let mut inner = self.lock();
         let period = self.expiry_period_ms();
-        let late = now_ms.saturating_sub(inner.last_expiry_ms.unwrap_or(now_ms)).saturating_sub(period);
+        let previous_ms = inner.last_expiry_ms;
+        let late = now_ms.saturating_sub(previous_ms.unwrap_or(now_ms)).saturating_sub(period);
         inner.last_expiry_ms = Some(now_ms);
         if late > period.max(self.cfg.lease_timeout_ms / 4) {
             tracing::warn!(stalled_ms = late, "the coordinator stalled: leases postponed");
             inner.model.postpone_leases(late);
             inner.counters.stalls += 1;
         }
+        let held: HashMap<String, usize> =
+            inner.model.lease_counts().into_iter().map(|(w, n)| (w.to_string(), n)).collect();
         let mut changes = inner.model.expire(now_ms, &self.cfg.lease_lifetime);
         if !changes.is_empty() {
             inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
-            tracing::warn!(tiles = changes.values().map(|t| t.len()).sum::<usize>(), "leases expired");
+            super::events::leases_expired(&held, &inner.model.lease_counts());
+            super::events::jobs_failed(&inner.model, &changes, now_ms);
+        }
+        if let Some(previous_ms) = previous_ms {
+            super::events::workers_lost(inner.workers.values(), &held, previous_ms, now_ms, self.cfg.lease_timeout_ms);
         }
         let live: Vec<String> = inner
             .workers
@@ -191,7 +205,8 @@ impl JobService {
     ) -> Result<(), ServiceError> {
         let mut inner = self.lock();
         let changes = inner.model.report_failure(worker, lease, message, now_ms);
-        tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, message, "worker reported a failure");
+        tracing::warn!(job_id = %lease.job, tile = lease.tile, worker_id = worker, message, "worker reported a failure");
+        super::events::jobs_failed(&inner.model, &changes, now_ms);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
         self.work.notify_waiters();
@@ -200,7 +215,7 @@ impl JobService {
 
     /// An uploaded result: validated, stored, accepted once for the current epoch, merged in
     /// tile order. A refused result re-queues its tile and returns [`ServiceError::InvalidResult`].
-    #[tracing::instrument(skip_all, fields(job_id = %lease.job, tile = lease.tile, epoch = lease.epoch, worker))]
+    #[tracing::instrument(skip_all, fields(job_id = %lease.job, tile = lease.tile, epoch = lease.epoch, worker_id = worker))]
     pub fn upload(
         &self,
         worker: &str,
@@ -261,7 +276,8 @@ impl JobService {
                 self.persist(&mut inner, &changes, &[])?;
                 self.sync(&inner)?;
                 inner.counters.results_refused += 1;
-                tracing::warn!(job_id = %lease.job, tile = lease.tile, worker, reason = %reason, "tile result refused");
+                tracing::warn!(job_id = %lease.job, tile = lease.tile, worker_id = worker, reason = %reason, "tile result refused");
+                super::events::jobs_failed(&inner.model, &changes, now_ms);
                 self.work.notify_waiters();
                 Err(ServiceError::InvalidResult(reason.clone()))
             }

@@ -74,12 +74,16 @@ impl JobService {
         };
         let span = tracing::info_span!("emis_update", job_id = %job, iterations);
         let restarted = span.in_scope(|| emis.update(film, iterations));
+        if let Some(report) = emis.state.reports.last() {
+            super::events::emis_update(job, report);
+        }
         if restarted {
             // a path-tracing start ended: its iterations leave the image (the checkpoint
             // below stores the empty film with the new strategy)
             *film = Film::for_filter(film.width, film.height, &filter);
         }
         let changes = inner.model.optimized(job, restarted, now_ms)?;
+        super::events::pass_planned(&inner.model, job);
         let upto = inner.model.jobs[job].merged;
         self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
         self.work.notify_waiters();
@@ -190,6 +194,7 @@ impl JobService {
             // `merge_finishes` answered this before the merge was committed
             Some(BarrierAction::Finish) => unreachable!("invariant: a finishing merge returns before its barrier"),
             Some(BarrierAction::NextPass(_)) => {
+                super::events::pass_planned(&inner.model, job);
                 self.checkpoint(inner, job, upto, changes, extras, now_ms)?;
                 self.work.notify_waiters();
             }
@@ -276,7 +281,14 @@ impl JobService {
             self.sync(inner)?;
             self.blobs.remove_checkpoint(&old);
         }
-        tracing::info!(job_id = %job, "job done");
+        let j = &inner.model.jobs[job];
+        tracing::info!(
+            job_id = %job,
+            tiles = j.tiles.len(),
+            spp = j.spp_merged(),
+            duration_ms = j.finished_ms.unwrap_or(0).saturating_sub(j.created_ms),
+            "job done"
+        );
         Ok(())
     }
 

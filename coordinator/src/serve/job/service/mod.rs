@@ -12,6 +12,7 @@
 //! ([`submit`], [`query`], [`retention`] for deleting ended jobs), workers ([`leases`]), and the
 //! merge path ([`merge`]); what the service holds per job is one [`runtime::JobRuntime`].
 
+mod events;
 mod leases;
 mod merge;
 mod query;

@@ -77,7 +77,18 @@ impl JobService {
         drop(pin);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
-        tracing::info!(job_id = %id, integrator = %spec.settings.integrator, "job submitted");
+        tracing::info!(
+            job_id = %id,
+            name = %spec.name,
+            integrator = %spec.settings.integrator,
+            width = spec.width,
+            height = spec.height,
+            spp = spec.settings.spp,
+            time_s = spec.settings.time_s,
+            priority = spec.priority,
+            "job submitted"
+        );
+        super::events::pass_planned(&inner.model, &id);
         self.work.notify_waiters();
         Ok(self.view(&inner, &id, now_ms))
     }
