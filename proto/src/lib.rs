@@ -6,8 +6,10 @@
 //!   heartbeat, lease tiles (long poll), upload tile sums and fetch scene bundles by digest.
 //!
 //! The crate holds generated code plus what both ends must agree on: payload layouts and
-//! constants here, conversions to the renderer's settings and rectangles in [`convert`], and
-//! how clients reach a coordinator over `http://` or `https://` in [`connect`].
+//! constants here, conversions to the renderer's settings and rectangles in [`convert`], how
+//! clients reach a coordinator over `http://` or `https://` in [`connect`], and how the two
+//! long-running ends (`tessera serve`, `tessera-worker`) take their settings and log in
+//! [`settings`].
 //!
 //! ```no_run
 //! use tessera_proto::v1::job_service_client::JobServiceClient;
@@ -24,6 +26,7 @@ pub mod bundle;
 pub mod connect;
 pub mod convert;
 pub mod payload;
+pub mod settings;
 
 /// Generated `tessera.v1` messages, clients and servers.
 #[allow(missing_docs)]
