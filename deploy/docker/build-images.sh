@@ -102,6 +102,11 @@ for image in tessera tessera-worker; do
         || { cat "$context/build.log" >&2; die "docker build of $image:$tag failed"; }
 done
 
+# each build relabels (created, revision), so the image it replaced is left untagged: drop ours
+for image in tessera tessera-worker; do
+    docker image prune --force --filter "label=org.opencontainers.image.title=$image" >/dev/null
+done
+
 # the binaries must start in the base (a glibc they cannot load shows here, not on a farm)
 docker run --rm "tessera:$tag" --version >/dev/null || die "tessera does not start in tessera:$tag"
 docker run --rm "tessera-worker:$tag" --version >/dev/null || die "tessera-worker does not start in tessera-worker:$tag"
