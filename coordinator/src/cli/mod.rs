@@ -4,6 +4,7 @@
 //! `tessera bench …` to [`crate::bench`].
 
 pub mod client;
+pub mod healthcheck;
 pub mod render;
 pub mod submit;
 
@@ -33,6 +34,8 @@ pub enum Command {
     Cancel(client::CancelArgs),
     /// Delete an ended job (done, failed or cancelled) and all its data from a coordinator.
     Delete(client::DeleteArgs),
+    /// Check that a coordinator answers on /healthz: exit 0 if it does, 1 if not.
+    Healthcheck(healthcheck::HealthcheckArgs),
     /// Measure: rendering speed, equal-time quality, EMIS overheads and decisions, the farm.
     #[command(subcommand)]
     Bench(crate::bench::BenchCommand),
@@ -75,6 +78,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Status(args) => client::status_command(&args),
         Command::Cancel(args) => client::cancel_command(&args),
         Command::Delete(args) => client::delete_command(&args),
+        Command::Healthcheck(args) => healthcheck::healthcheck_command(&args),
         Command::Bench(command) => crate::bench::run(&command),
     }
 }
