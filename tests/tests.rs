@@ -57,6 +57,13 @@ fn grpc_submit_pt_with_two_workers_equals_local_render() {
     let status: Value = serde_json::from_str(&status).unwrap();
     assert_eq!((status["state"].as_str(), status["progress"].as_f64()), (Some("done"), Some(1.0)));
     assert_same_image(&out, &local_render(dir.path(), &box_scene, "pt", 3, 5));
+    // a scene named from its own folder, as users type it
+    let submitted = std::process::Command::new(tessera_tests::bin("tessera"))
+        .args(["submit", "scene.xml", "--server", &c.url, "--spp", "1"])
+        .current_dir(box_scene.parent().unwrap())
+        .output()
+        .unwrap();
+    assert!(submitted.status.success(), "{}", String::from_utf8_lossy(&submitted.stderr));
 }
 
 /// Mitsuba's default Gaussian filter reaches across 64² tile borders (pt) and spreads splats

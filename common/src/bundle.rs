@@ -57,9 +57,15 @@ pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, B
     let read = |path: &Path| std::fs::read(path).map_err(|source| BundleError::Read { path: path.into(), source });
     let referenced = referenced_files(scene, defines)?;
     let absolute = |p: &Path| std::path::absolute(p).map(|a| normalize(&a)).unwrap_or_else(|_| normalize(p));
-    let mut folder = absolute(scene.parent().unwrap_or(Path::new("")));
+    // `scene.xml`'s parent is the empty path, which is the current folder
+    let parent_of = |p: &Path| {
+        absolute(
+            Some(p.parent().unwrap_or(Path::new(""))).filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")),
+        )
+    };
+    let mut folder = parent_of(scene);
     for file in &referenced {
-        let parent = absolute(file.parent().unwrap_or(Path::new("")));
+        let parent = parent_of(file);
         while !parent.starts_with(&folder) && folder.pop() {}
     }
     let folder = folder.as_path();
