@@ -6,7 +6,7 @@
 use image::ImageEncoder;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use std::path::{Path, PathBuf};
-use tessera_common::emis::EmisState;
+use tessera_common::emis::{EmisState, UpdateReport};
 use tessera_common::film::Film;
 use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
 use tessera_common::film::png::linear_to_srgb;
@@ -128,6 +128,13 @@ impl<'a> Outputs<'a> {
         }))
     }
 
+    /// EMIS: the JSON report as `tessera render` writes it, pretty-printed (`None` for other
+    /// integrators). The farm stores these bytes too, so both give the same file.
+    pub fn emis_report_text(&self, integrator: &str, iterations: u32) -> Option<String> {
+        let report = self.emis_report(integrator, iterations)?;
+        Some(serde_json::to_string_pretty(&report).expect("invariant: a JSON value serialises"))
+    }
+
     /// Writes everything beside `exr`: the EXR, `NAME.png` and, for EMIS,
     /// `NAME.strategy.png` and `NAME.emis.json`.
     pub fn write_all(&self, exr: &Path, integrator: &str, iterations: u32) -> Result<(), OutputError> {
@@ -137,13 +144,32 @@ impl<'a> Outputs<'a> {
         self.write_exr(exr)?;
         self.write_png(&exr.with_extension("png"), PngEffort::Default)?;
         self.write_strategy_png(&exr.with_extension("strategy.png"), PngEffort::Default)?;
-        if let Some(report) = self.emis_report(integrator, iterations) {
+        if let Some(text) = self.emis_report_text(integrator, iterations) {
             let path = exr.with_extension("emis.json");
-            let text = serde_json::to_string_pretty(&report).map_err(|e| write_error(&path, e))?;
             std::fs::write(&path, text).map_err(|e| write_error(&path, e))?;
         }
         Ok(())
     }
+}
+
+/// The decisions in an EMIS report ([`Outputs::emis_report`]), read back by the coordinator
+/// to show a finished job's strategy after a restart (its EMIS state is gone by then).
+#[derive(Clone, Debug, serde::Deserialize)]
+pub struct ReportDecisions {
+    /// The strategy the last iterations rendered with.
+    #[serde(rename = "final")]
+    pub last: FinalStrategy,
+    /// Every update.
+    pub updates: Vec<UpdateReport>,
+}
+
+/// The report's `final` strategy.
+#[derive(Clone, Debug, serde::Deserialize)]
+pub struct FinalStrategy {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
 }
 
 /// Encodes linear RGB as an 8-bit sRGB PNG.

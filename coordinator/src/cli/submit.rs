@@ -1,11 +1,13 @@
 //! `tessera submit`: packs a scene and every file it references into a bundle, submits it,
-//! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG.
+//! and with `--wait` follows the job with a progress bar and writes the result EXR and PNG (and
+//! for EMIS the strategy PNG and JSON report), named as `tessera render` names them.
 
 use super::client::{Client, ServerArgs, runtime, status_error};
 use crate::options::{JobArgs, scene_name};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
+use tessera_common::settings::IntegratorName;
 use tessera_proto::state_name;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
@@ -30,7 +32,8 @@ pub struct SubmitArgs {
     /// Wait for the job, showing progress, and download the result.
     #[arg(long)]
     pub wait: bool,
-    /// Where --wait writes the EXR (a PNG goes beside it) [default: the scene's name].
+    /// Where --wait writes the EXR (a PNG goes beside it, and for EMIS NAME.strategy.png and
+    /// NAME.emis.json) [default: the scene's name].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
 }
@@ -65,6 +68,10 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         }
         download(&mut c, &job.id, pb::ResultFormat::Exr, &output).await?;
         download(&mut c, &job.id, pb::ResultFormat::Png, &output.with_extension("png")).await?;
+        if is_emis(&last) {
+            download(&mut c, &job.id, pb::ResultFormat::StrategyPng, &output.with_extension("strategy.png")).await?;
+            download(&mut c, &job.id, pb::ResultFormat::EmisJson, &output.with_extension("emis.json")).await?;
+        }
         eprintln!("{}: done -> {}", job.id, output.display());
         Ok(())
     })
@@ -135,6 +142,13 @@ async fn follow(c: &mut Client, id: &str) -> anyhow::Result<pb::Job> {
 
 /// How long `--wait` keeps retrying an unreachable coordinator.
 const RECONNECT_FOR: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// Whether the job renders with EMIS, so has a strategy PNG and report (the server's settings:
+/// the integrator may come from the scene file).
+fn is_emis(job: &pb::Job) -> bool {
+    let integrator = job.settings.as_ref().and_then(|s| s.integrator.parse::<IntegratorName>().ok());
+    integrator.and_then(IntegratorName::emis_method).is_some()
+}
 
 fn is_final(job: &pb::Job) -> bool {
     [pb::JobState::Done, pb::JobState::Failed, pb::JobState::Cancelled].iter().any(|s| *s as i32 == job.state)

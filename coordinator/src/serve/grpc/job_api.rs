@@ -113,6 +113,8 @@ impl pb::job_service_server::JobService for JobApi {
         let req = req.into_inner();
         let kind = match pb::ResultFormat::try_from(req.format) {
             Ok(pb::ResultFormat::Png) => OutputKind::Png,
+            Ok(pb::ResultFormat::StrategyPng) => OutputKind::StrategyPng,
+            Ok(pb::ResultFormat::EmisJson) => OutputKind::EmisJson,
             Ok(pb::ResultFormat::Exr | pb::ResultFormat::Unspecified) => OutputKind::Exr,
             Err(_) => return Err(Status::invalid_argument(format!("field \"format\": unknown value {}", req.format))),
         };

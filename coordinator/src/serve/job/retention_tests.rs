@@ -220,3 +220,70 @@ fn a_restart_deletes_files_no_job_names() {
     assert!(cas(dir.path(), &job.scene_digest).exists(), "the live job's bundle stays");
     assert!(svc.blob(&job.scene_digest).is_ok());
 }
+
+/// A finished EMIS job stores its strategy PNG and report beside the EXR and PNG; other
+/// integrators' jobs have none (not found, whatever their state). After a restart the start-up
+/// sweep keeps the four outputs and the job shows the same decisions, read back from the
+/// report; deleting it removes all four.
+#[test]
+fn a_finished_emis_job_keeps_its_strategy_outputs_across_a_restart_until_deleted() {
+    use super::service::OutputKind;
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let svc = JobService::open(&data, CFG, 1_000).unwrap();
+    let worker = svc.register("w", 1, None, 1_000).unwrap();
+    let (small, scene) = small_cornell(dir.path());
+    let pt = svc.submit(small.clone(), settings(IntegratorName::Pt, 1), 0, None, 1_000).unwrap();
+    let not_emis = |svc: &JobService, job: &str| {
+        for kind in [OutputKind::StrategyPng, OutputKind::EmisJson] {
+            let e = svc.output(job, kind).unwrap_err();
+            assert!(
+                matches!(&e, ServiceError::NotFound(m) if m.contains(kind.file_name()) && m.contains("emis-vcm")),
+                "{e}"
+            );
+        }
+    };
+    not_emis(&svc, &pt.id);
+    // updates after iterations 1 and 4 (the defaults), then 2 more
+    let emis = svc.submit(small, settings(IntegratorName::EmisVcm, 6), 1, None, 1_000).unwrap();
+    assert!(matches!(svc.output(&emis.id, OutputKind::EmisJson), Err(ServiceError::FailedPrecondition(_))));
+    let mut now = 2_000;
+    loop {
+        let grants = svc.lease(&worker, 4, now).unwrap();
+        if grants.is_empty() {
+            break;
+        }
+        for g in grants {
+            now += 10;
+            let outcome = match g.strategy {
+                Some(_) => upload_emis(&svc, &scene, &worker, &g, now),
+                None => upload(&svc, &scene, &worker, &g.lease, now).unwrap(),
+            };
+            assert_eq!(outcome, ResultOutcome::Accepted);
+        }
+    }
+    let before = svc.get(&emis.id, now).unwrap();
+    assert_eq!((before.state, svc.get(&pt.id, now).unwrap().state), (JobState::Done, JobState::Done));
+    let strategy = serde_json::to_value(before.strategy.as_ref().expect("EMIS decisions")).unwrap();
+    assert_eq!(strategy["updates"].as_array().map(Vec::len), Some(2), "{strategy}");
+    not_emis(&svc, &pt.id);
+    let kinds = [OutputKind::Exr, OutputKind::Png, OutputKind::StrategyPng, OutputKind::EmisJson];
+    let outputs = kinds.map(|k| svc.output(&emis.id, k).unwrap());
+    assert_eq!(&outputs[2][1..4], b"PNG");
+    let report: serde_json::Value = serde_json::from_slice(&outputs[3]).unwrap();
+    assert_eq!((report["integrator"].as_str(), report["iterations"].as_u64()), (Some("emis-vcm"), Some(6)));
+    assert_eq!(report["updates"], strategy["updates"], "the report holds the decisions the job shows");
+    let digests = outputs.each_ref().map(|b| tessera_proto::blob_digest(b));
+
+    drop(svc);
+    let svc = JobService::open(&data, CFG, now + 1_000).unwrap();
+    let after = svc.get(&emis.id, now + 1_000).unwrap();
+    assert_eq!(serde_json::to_value(after.strategy.as_ref()).unwrap(), strategy, "the decisions came back");
+    assert_eq!(kinds.map(|k| svc.output(&emis.id, k).unwrap()), outputs, "the sweep kept every output");
+    assert!(svc.get(&pt.id, now + 1_000).unwrap().strategy.is_none());
+    not_emis(&svc, &pt.id);
+    svc.delete(&emis.id).unwrap();
+    for digest in &digests {
+        assert!(!cas(&data, digest).exists(), "output {digest} is still there");
+    }
+}

@@ -19,6 +19,20 @@ pub struct StrategyView {
     pub updates: Vec<UpdateReport>,
 }
 
+impl StrategyView {
+    /// The decisions of a finished job read back from its stored EMIS report, as
+    /// `EmisJob::view` showed them before (`None` before the first update, as there).
+    pub fn from_report(report: crate::output::ReportDecisions) -> Option<StrategyView> {
+        let last = report.updates.last()?;
+        Some(StrategyView {
+            nu: report.last.nu,
+            connections: report.last.connections,
+            mean_merge_probability: last.mean_merge_probability,
+            updates: report.updates,
+        })
+    }
+}
+
 /// A job as clients see it.
 #[derive(Clone, Debug)]
 pub struct JobView {

@@ -144,8 +144,7 @@ pub async fn delete(State(st): St, Path(id): Path<String>) -> Result<axum::http:
 async fn output(st: Arc<AppState>, id: String, kind: OutputKind) -> Result<impl IntoResponse, ApiError> {
     let svc = st.svc.clone();
     let bytes = blocking(move || svc.output(&id, kind)).await?;
-    let mime = if kind == OutputKind::Exr { "image/x-exr" } else { "image/png" };
-    Ok(([(header::CONTENT_TYPE, mime)], bytes))
+    Ok(([(header::CONTENT_TYPE, kind.mime())], bytes))
 }
 
 /// `GET /api/v1/jobs/{id}/result.exr`.
@@ -156,6 +155,16 @@ pub async fn result_exr(State(st): St, Path(id): Path<String>) -> Result<impl In
 /// `GET /api/v1/jobs/{id}/preview.png`.
 pub async fn preview_png(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
     output(st, id, OutputKind::Png).await
+}
+
+/// `GET /api/v1/jobs/{id}/strategy.png`: EMIS jobs only (404 for others).
+pub async fn strategy_png(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
+    output(st, id, OutputKind::StrategyPng).await
+}
+
+/// `GET /api/v1/jobs/{id}/emis.json`: EMIS jobs only (404 for others).
+pub async fn emis_json(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
+    output(st, id, OutputKind::EmisJson).await
 }
 
 /// `GET /api/v1/workers`.

@@ -6,7 +6,8 @@
 //! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON |
 //! | `POST /api/v1/jobs/{id}/cancel` | cancel: the job stops and stays, `cancelled` |
 //! | `DELETE /api/v1/jobs/{id}` | delete an ended job and all its data (204; 409 while it is active) |
-//! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job |
+//! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job (409 before) |
+//! | `GET /api/v1/jobs/{id}/strategy.png`, `/emis.json` | a done EMIS job's strategy picture and report (404 for other integrators) |
 //! | `GET /api/v1/workers` | registered workers |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
 //! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
@@ -29,6 +30,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/v1/jobs/{id}/cancel", post(jobs::cancel))
         .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
         .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
+        .route("/api/v1/jobs/{id}/strategy.png", get(jobs::strategy_png))
+        .route("/api/v1/jobs/{id}/emis.json", get(jobs::emis_json))
         .route("/api/v1/workers", get(jobs::workers))
         .route("/", get(dashboard))
         .route("/dashboard", get(dashboard))

@@ -48,6 +48,37 @@ pub struct JobFiles {
     pub result_exr: Option<String>,
     /// Digest of the preview PNG.
     pub preview_png: Option<String>,
+    /// EMIS: digest of the strategy PNG.
+    pub strategy_png: Option<String>,
+    /// EMIS: digest of the JSON report of every update.
+    pub emis_json: Option<String>,
+}
+
+impl JobFiles {
+    /// The digests of every output blob (not the checkpoint, which is a file of its own).
+    pub fn outputs(&self) -> impl Iterator<Item = &String> {
+        self.result_exr.iter().chain(&self.preview_png).chain(&self.strategy_png).chain(&self.emis_json)
+    }
+}
+
+/// The blobs a finished job's outputs were stored as.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct OutputDigests {
+    /// The EXR.
+    pub exr: String,
+    /// The PNG preview.
+    pub png: String,
+    /// EMIS: the strategy PNG.
+    pub strategy_png: Option<String>,
+    /// EMIS: the JSON report.
+    pub emis_json: Option<String>,
+}
+
+impl OutputDigests {
+    /// Every digest.
+    pub fn all(&self) -> impl Iterator<Item = &String> {
+        [&self.exr, &self.png].into_iter().chain(&self.strategy_png).chain(&self.emis_json)
+    }
 }
 
 /// Something to write with a transition.
@@ -81,10 +112,8 @@ pub enum Extra {
     Outputs {
         /// The job.
         job: String,
-        /// EXR digest.
-        exr: String,
-        /// PNG digest.
-        png: String,
+        /// Their blobs.
+        outputs: OutputDigests,
         /// Tiles in them.
         merged: usize,
     },
@@ -117,7 +146,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     id TEXT PRIMARY KEY, seq INTEGER NOT NULL, spec TEXT NOT NULL, state TEXT NOT NULL,
     passes TEXT NOT NULL, worker_failures TEXT NOT NULL, error TEXT,
     created_ms INTEGER NOT NULL, started_ms INTEGER, finished_ms INTEGER,
-    merged INTEGER NOT NULL DEFAULT 0, checkpoint TEXT, result_exr TEXT, preview_png TEXT);
+    merged INTEGER NOT NULL DEFAULT 0, checkpoint TEXT, result_exr TEXT, preview_png TEXT,
+    strategy_png TEXT, emis_json TEXT);
 CREATE TABLE IF NOT EXISTS tiles (
     job_id TEXT NOT NULL, idx INTEGER NOT NULL, x0 INTEGER NOT NULL, y0 INTEGER NOT NULL,
     x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, s0 INTEGER NOT NULL, s1 INTEGER NOT NULL,
@@ -229,10 +259,11 @@ fn write_extra(tx: &rusqlite::Transaction<'_>, extra: &Extra) -> Result<(), Stor
             )?;
             tx.execute("DELETE FROM results WHERE job_id = ?1 AND idx < ?2", params![job, *merged as i64])?
         }
-        Extra::Outputs { job, exr, png, merged } => {
+        Extra::Outputs { job, outputs: o, merged } => {
             tx.execute(
-                "UPDATE jobs SET result_exr = ?2, preview_png = ?3, merged = ?4, checkpoint = NULL WHERE id = ?1",
-                params![job, exr, png, *merged as i64],
+                "UPDATE jobs SET result_exr = ?2, preview_png = ?3, strategy_png = ?4, emis_json = ?5, merged = ?6,
+                    checkpoint = NULL WHERE id = ?1",
+                params![job, o.exr, o.png, o.strategy_png, o.emis_json, *merged as i64],
             )?;
             tx.execute("DELETE FROM results WHERE job_id = ?1 AND idx < ?2", params![job, *merged as i64])?
         }
@@ -258,11 +289,14 @@ impl Store {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
-        // databases from before workers kept their identity
-        let has_secret =
-            conn.prepare("SELECT 1 FROM pragma_table_info('workers') WHERE name = 'secret_sha256'")?.exists([])?;
-        if !has_secret {
-            conn.execute_batch("ALTER TABLE workers ADD COLUMN secret_sha256 TEXT")?;
+        // databases from before workers kept their identity, and before EMIS jobs stored their
+        // strategy PNG and report
+        for (table, column) in [("workers", "secret_sha256"), ("jobs", "strategy_png"), ("jobs", "emis_json")] {
+            let exists =
+                conn.prepare("SELECT 1 FROM pragma_table_info(?1) WHERE name = ?2")?.exists(params![table, column])?;
+            if !exists {
+                conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {column} TEXT"))?;
+            }
         }
         Ok(Store { conn })
     }
@@ -343,7 +377,7 @@ impl Store {
     ) -> Result<Vec<Result<(Job, JobFiles), (String, StoreError)>>, StoreError> {
         let mut stmt = self.conn.prepare(
             "SELECT id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms,
-                    merged, checkpoint, result_exr, preview_png FROM jobs ORDER BY seq",
+                    merged, checkpoint, result_exr, preview_png, strategy_png, emis_json FROM jobs ORDER BY seq",
         )?;
         let rows = stmt.query_map([], |r| {
             Ok((
@@ -358,7 +392,13 @@ impl Store {
                 r.get::<_, Option<i64>>(8)?,
                 r.get::<_, Option<i64>>(9)?,
                 r.get::<_, i64>(10)?,
-                JobFiles { checkpoint: r.get(11)?, result_exr: r.get(12)?, preview_png: r.get(13)? },
+                JobFiles {
+                    checkpoint: r.get(11)?,
+                    result_exr: r.get(12)?,
+                    preview_png: r.get(13)?,
+                    strategy_png: r.get(14)?,
+                    emis_json: r.get(15)?,
+                },
             ))
         })?;
         let mut out = Vec::new();
@@ -511,63 +551,23 @@ impl Store {
     pub fn job_files(&self, job: &str) -> Result<Option<JobFiles>, StoreError> {
         Ok(self
             .conn
-            .query_row("SELECT checkpoint, result_exr, preview_png FROM jobs WHERE id = ?1", [job], |r| {
-                Ok(JobFiles { checkpoint: r.get(0)?, result_exr: r.get(1)?, preview_png: r.get(2)? })
-            })
+            .query_row(
+                "SELECT checkpoint, result_exr, preview_png, strategy_png, emis_json FROM jobs WHERE id = ?1",
+                [job],
+                |r| {
+                    Ok(JobFiles {
+                        checkpoint: r.get(0)?,
+                        result_exr: r.get(1)?,
+                        preview_png: r.get(2)?,
+                        strategy_png: r.get(3)?,
+                        emis_json: r.get(4)?,
+                    })
+                },
+            )
             .optional()?)
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use tessera_common::settings::{IntegratorName, RenderSettings};
-
-    #[test]
-    fn store_round_trips_the_model_and_pairs_merged_with_its_checkpoint() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut store = Store::open(&dir.path().join("db.sqlite")).unwrap();
-        let mut m = JobsModel::default();
-        let spec = JobSpec {
-            name: "n".into(),
-            priority: 2,
-            settings: RenderSettings { integrator: IntegratorName::Pt, spp: Some(2), ..Default::default() },
-            width: 100,
-            height: 70,
-            full_frame: false,
-            bundle_digest: "d".into(),
-            scene_path: "scene.xml".into(),
-            filter: tessera_common::film::filter::FilterKind::Gaussian { stddev: 0.5 },
-        };
-        let c = m.submit("a", spec, 5).unwrap();
-        store.persist(&m, &c, &[]).unwrap();
-        let (leases, c) = m.lease("w", 3, 10, 1000);
-        store.persist(&m, &c, &[]).unwrap();
-        let (_, c) = m.result("w", &leases[0], Ok(()), 11);
-        store.persist(&m, &c, &[]).unwrap();
-        let (_, c) = m.result("w", &leases[1], Ok(()), 11);
-        store.persist(&m, &c, &[]).unwrap();
-        let (_, c) = m.merged("a", 2, 12);
-        // merged but not yet checkpointed: reloads as accepted
-        store.persist(&m, &c, &[]).unwrap();
-        let loaded: Vec<_> = store.load_jobs(10 + 1000).unwrap().into_iter().map(Result::unwrap).collect();
-        let mut expected = m.jobs["a"].clone();
-        // what is not stored: the measured tile rate, a lease's start (counted from its
-        // restored deadline)
-        expected.slowest_ms_per_sample = None;
-        if let TileState::Leased { since_ms, deadline_ms, .. } = &mut expected.tiles[2].state {
-            *since_ms = *deadline_ms;
-        }
-        let restored = expected.clone();
-        expected.merged = 0;
-        expected.tiles[0].state = TileState::Accepted;
-        expected.tiles[1].state = TileState::Accepted;
-        assert_eq!(loaded[0].0, expected);
-        store
-            .persist(&m, &Changes::new(), &[Extra::Checkpoint { job: "a".into(), merged: 2, file: "f".into() }])
-            .unwrap();
-        let loaded: Vec<_> = store.load_jobs(10 + 1000).unwrap().into_iter().map(Result::unwrap).collect();
-        assert_eq!(loaded[0].0, restored);
-        assert_eq!(loaded[0].1.checkpoint.as_deref(), Some("f"));
-    }
-}
+#[path = "sqlite_tests.rs"]
+mod tests;

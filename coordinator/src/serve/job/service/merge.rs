@@ -10,7 +10,7 @@ use crate::serve::job::emis::EmisJob;
 use crate::serve::job::model::{Changes, JobSpec, TileSpec};
 use crate::serve::job::plan::BarrierAction;
 use crate::serve::job::validate::{ResultClaim, validate_result};
-use crate::serve::storage::Extra;
+use crate::serve::storage::{Extra, OutputDigests};
 use tessera_common::film::Film;
 use tessera_common::film::filter::Filter;
 
@@ -250,7 +250,7 @@ impl JobService {
             // cancelled (or cancelled and deleted) while the outputs were written: nothing will
             // name them
             self.persist(&mut inner, &changes, &[])?;
-            self.remove_unused_blobs(&inner, [outputs.0, outputs.1].into());
+            self.remove_unused_blobs(&inner, outputs.all().cloned().collect());
         }
         self.sync(&inner)
     }
@@ -262,20 +262,21 @@ impl JobService {
         &self,
         inner: &mut Inner,
         job: &str,
-        (exr, png): (String, String),
+        outputs: OutputDigests,
         upto: usize,
         changes: &Changes,
         mut extras: Vec<Extra>,
         emis: Option<EmisJob>,
     ) -> Result<(), ServiceError> {
         let old = inner.job(job).files.checkpoint.clone();
-        extras.push(Extra::Outputs { job: job.to_string(), exr: exr.clone(), png: png.clone(), merged: upto });
+        extras.push(Extra::Outputs { job: job.to_string(), outputs: outputs.clone(), merged: upto });
         self.persist(inner, changes, &extras)?;
         let runtime = inner.job(job);
         runtime.emis = emis;
         runtime.end();
         let f = &mut runtime.files;
-        (f.result_exr, f.preview_png, f.checkpoint) = (Some(exr), Some(png), None);
+        (f.result_exr, f.preview_png, f.checkpoint) = (Some(outputs.exr), Some(outputs.png), None);
+        (f.strategy_png, f.emis_json) = (outputs.strategy_png, outputs.emis_json);
         if let Some(old) = old {
             // the database names the old file until the outputs are committed
             self.sync(inner)?;
@@ -364,32 +365,55 @@ impl JobService {
     }
 
     /// Writes the result EXR (with the EMIS layers and decisions) and PNG preview as blobs,
-    /// as `tessera render` writes them (the PNG with fast compression); returns their digests.
+    /// as `tessera render` writes them (the PNG with fast compression), and for EMIS the
+    /// strategy PNG and JSON report, byte for byte as `tessera render` writes them; returns
+    /// their digests.
     fn write_outputs(
         &self,
         spec: &JobSpec,
         job: &str,
         film: &Film,
         emis: Option<&EmisJob>,
-    ) -> Result<(String, String), ServiceError> {
+    ) -> Result<OutputDigests, ServiceError> {
+        let spp = film.count.iter().max().copied().unwrap_or(0);
         let provenance = Provenance {
             integrator: spec.settings.integrator.to_string(),
-            spp: film.count.iter().max().copied().unwrap_or(0),
+            spp,
             seed: spec.settings.seed.unwrap_or(0),
             scene: spec.name.clone(),
             extra: vec![("job".into(), job.to_string())],
         };
         let outputs = Outputs::new(film, &provenance, emis.map(|e| &e.state));
-        let (exr, png) = (self.blobs.temp_path(".exr"), self.blobs.temp_path(".png"));
-        let written = outputs
-            .write_exr(&exr)
-            .and_then(|()| outputs.write_png(&png, PngEffort::Fast))
-            .map_err(ServiceError::from)
-            .and_then(|()| Ok((self.blobs.put_file(&exr)?, self.blobs.put_file(&png)?)));
-        if written.is_err() {
-            let _ = std::fs::remove_file(exr);
-            let _ = std::fs::remove_file(png);
+        // every file is written before any is stored, so a failure stores nothing
+        let temp = TempFiles([".exr", ".png", ".strategy.png"].map(|suffix| self.blobs.temp_path(suffix)));
+        let [exr, png, strategy] = &temp.0;
+        outputs.write_exr(exr)?;
+        outputs.write_png(png, PngEffort::Fast)?;
+        // default compression, unlike the preview: the same bytes as `tessera render`'s file,
+        // and only EMIS jobs pay for it, once
+        let has_strategy = outputs.write_strategy_png(strategy, PngEffort::Default)?;
+        // the report's `iterations`, like `tessera render`'s, counts the kept iterations
+        let report = outputs.emis_report_text(spec.settings.integrator.as_str(), spp);
+        let digests = OutputDigests {
+            exr: self.blobs.put_file(exr)?,
+            png: self.blobs.put_file(png)?,
+            strategy_png: if has_strategy { Some(self.blobs.put_file(strategy)?) } else { None },
+            emis_json: report.map(|text| self.blobs.put(text.as_bytes())).transpose()?,
+        };
+        Ok(digests)
+    }
+}
+
+/// Temporary files removed when dropped: `put_file` moves a file into the store, so what is
+/// left is what an error stopped halfway.
+struct TempFiles([std::path::PathBuf; 3]);
+
+impl Drop for TempFiles {
+    fn drop(&mut self) {
+        for path in &self.0 {
+            if path.exists() {
+                let _ = std::fs::remove_file(path);
+            }
         }
-        written
     }
 }

@@ -235,6 +235,9 @@ impl JobService {
                 }
             };
             let mut runtime = JobRuntime { files, ..JobRuntime::default() };
+            // a finished EMIS job's state is gone with its checkpoint: its decisions come back
+            // from the report stored with its outputs
+            runtime.decisions = runtime.files.emis_json.as_ref().and_then(|d| stored_decisions(&blobs, &job.id, d));
             if !job.state.is_terminal() {
                 match restore_running(&blobs, &job.id, &job.spec, &runtime.files) {
                     Ok((film, emis)) => {
@@ -380,6 +383,23 @@ fn committer(store: Store) -> Committer {
     return Committer::new(store);
     #[cfg(test)]
     Committer::with_on_failure(store, Box::new(|e| tracing::error!(error = %e, "commit failed (test: not stopping)")))
+}
+
+/// The EMIS decisions in a finished job's stored report; a report that cannot be read is
+/// logged and the job shown without them (its outputs are still there to download).
+fn stored_decisions(blobs: &BlobStore, id: &str, digest: &str) -> Option<StrategyView> {
+    let read = match blobs.get(digest) {
+        Ok(Some(bytes)) => serde_json::from_slice(&bytes).map_err(|e| e.to_string()),
+        Ok(None) => Err("the blob is missing".into()),
+        Err(e) => Err(e.to_string()),
+    };
+    match read {
+        Ok(report) => StrategyView::from_report(report),
+        Err(error) => {
+            tracing::warn!(job_id = %id, blob = %digest, %error, "cannot read the EMIS report of a finished job");
+            None
+        }
+    }
 }
 
 /// The film and EMIS state of an unfinished job: from its checkpoint, or empty.

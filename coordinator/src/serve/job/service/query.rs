@@ -13,6 +13,36 @@ pub enum OutputKind {
     Exr,
     /// The PNG preview.
     Png,
+    /// EMIS: the strategy PNG (the image in grey, tinted by the merge probability).
+    StrategyPng,
+    /// EMIS: the JSON report of every update.
+    EmisJson,
+}
+
+impl OutputKind {
+    /// Its media type.
+    pub fn mime(self) -> &'static str {
+        match self {
+            OutputKind::Exr => "image/x-exr",
+            OutputKind::Png | OutputKind::StrategyPng => "image/png",
+            OutputKind::EmisJson => "application/json",
+        }
+    }
+
+    /// Its name in the REST API, `result.exr` etc.
+    pub fn file_name(self) -> &'static str {
+        match self {
+            OutputKind::Exr => "result.exr",
+            OutputKind::Png => "preview.png",
+            OutputKind::StrategyPng => "strategy.png",
+            OutputKind::EmisJson => "emis.json",
+        }
+    }
+
+    /// Whether only EMIS jobs have it.
+    pub fn emis_only(self) -> bool {
+        matches!(self, OutputKind::StrategyPng | OutputKind::EmisJson)
+    }
 }
 
 /// What `/metrics` reports of the service.
@@ -81,11 +111,20 @@ impl JobService {
         Ok((views, total))
     }
 
-    /// A finished job's EXR or PNG.
+    /// A finished job's output: not found for an EMIS output of another integrator's job
+    /// (whatever its state: it will never have one), a failed precondition while the job is not
+    /// done.
     pub fn output(&self, job: &str, kind: OutputKind) -> Result<Vec<u8>, ServiceError> {
         let digest = {
             let inner = self.lock();
             let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
+            let integrator = j.spec.settings.integrator;
+            if kind.emis_only() && integrator.emis_method().is_none() {
+                return Err(ServiceError::NotFound(format!(
+                    "job {job} has no {}: only emis-bdpt and emis-vcm jobs do, and it is {integrator}",
+                    kind.file_name()
+                )));
+            }
             if j.state != JobState::Done {
                 return Err(ServiceError::FailedPrecondition(format!("job {job} is {}, not done", j.state.as_str())));
             }
@@ -93,9 +132,13 @@ impl JobService {
             match kind {
                 OutputKind::Exr => files.result_exr,
                 OutputKind::Png => files.preview_png,
+                OutputKind::StrategyPng => files.strategy_png,
+                OutputKind::EmisJson => files.emis_json,
             }
         };
-        let digest = digest.ok_or_else(|| ServiceError::NotFound(format!("job {job} has no stored result")))?;
+        // an EMIS job finished by a version that did not store its EMIS outputs has none
+        let digest =
+            digest.ok_or_else(|| ServiceError::NotFound(format!("job {job} has no stored {}", kind.file_name())))?;
         self.blob(&digest)
     }
 

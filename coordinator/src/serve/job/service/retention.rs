@@ -1,11 +1,12 @@
 //! Deleting ended jobs, when a client asks ([`JobService::delete`]) or when they ended more than
 //! `--retain-finished` ago ([`JobService::expire_finished`]). The model and the service's
 //! memory forget the job, one transaction deletes its rows, and only after that commit do its
-//! files go: checkpoint, outputs, merge masks, old result files, and its bundle with the
-//! unpacked scene unless another job, or a submission in flight, uses the same bundle. The
-//! database then gives the space back. A crash between the commit and the files leaves only
-//! files nobody names, which the start-up sweep ([`JobService::sweep_orphans`]) removes. Why an
-//! active job is refused rather than cancelled: docs/decisions/0016-deleting-jobs.md.
+//! files go: checkpoint, outputs (EMIS's strategy PNG and report too), merge masks, old result
+//! files, and its bundle with the unpacked scene unless another job, or a submission in flight,
+//! uses the same bundle. The database then gives the space back. A crash between the commit and
+//! the files leaves only files nobody names, which the start-up sweep
+//! ([`JobService::sweep_orphans`]) removes. Why an active job is refused rather than cancelled:
+//! docs/decisions/0016-deleting-jobs.md.
 
 use super::runtime::JobRuntime;
 use super::{Inner, JobService, ServiceError};
@@ -104,7 +105,7 @@ impl JobService {
             if let Err(e) = self.blobs.remove_results(&job.id) {
                 tracing::warn!(job_id = %job.id, error = %e, "cannot delete old result files");
             }
-            blobs.extend(runtime.files.result_exr.into_iter().chain(runtime.files.preview_png).chain(runtime.masks));
+            blobs.extend(runtime.files.outputs().cloned().chain(runtime.masks));
             blobs.insert(job.spec.bundle_digest);
         }
         self.remove_unused_blobs(inner, blobs);
@@ -188,12 +189,10 @@ fn restore(inner: &mut Inner, removed: Vec<(Job, JobRuntime)>) {
     }
 }
 
-/// Every blob a job in `inner` names: bundles, outputs, merge masks.
+/// Every blob a job in `inner` names: bundles, outputs (EMIS strategy PNGs and reports
+/// included), merge masks.
 fn live_blobs(inner: &Inner) -> HashSet<String> {
     let bundles = inner.model.jobs.values().map(|j| j.spec.bundle_digest.clone());
-    let files = inner.jobs.values().flat_map(|r| {
-        let f = &r.files;
-        f.result_exr.iter().chain(&f.preview_png).chain(&r.masks).cloned().collect::<Vec<_>>()
-    });
+    let files = inner.jobs.values().flat_map(|r| r.files.outputs().chain(&r.masks).cloned().collect::<Vec<_>>());
     bundles.chain(files).collect()
 }
