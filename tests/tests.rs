@@ -7,8 +7,8 @@ use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Duration;
 use tessera_tests::{
-    Coordinator, Worker, assert_same_image, farm, local_render, local_render_with, rest, scene, submit_and_wait,
-    tessera, wait_for,
+    Coordinator, Worker, assert_same_emis_outputs, assert_same_image, farm, local_render, local_render_with, rest,
+    scene, submit_and_wait, tessera, wait_for,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -131,6 +131,11 @@ fn rest_submit_vcm_equals_local_render_and_reports_progress() {
     assert_same_image(&out, &local_render(dir.path(), &scene("cornell-box"), "vcm", 3, 9));
     let (status, png) = rest::get(&format!("{}/preview.png", job_url(&c, id)), None);
     assert_eq!((status, &png[1..4]), (200, &b"PNG"[..]));
+    for name in ["strategy.png", "emis.json"] {
+        let (status, body) = rest::get_json(&format!("{}/{name}", job_url(&c, id)), None);
+        assert_eq!(status, 404, "{body}");
+        assert!(body["error"].as_str().unwrap().contains("only emis-bdpt and emis-vcm jobs"), "{body}");
+    }
     let (_, workers) = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
     assert_eq!(workers.as_array().unwrap().len(), 2);
     let (_, metrics) = rest::get(&format!("{}/metrics", c.url), None);
@@ -141,12 +146,14 @@ fn rest_submit_vcm_equals_local_render_and_reports_progress() {
 
 /// EMIS on the farm: a pilot pass, updates after iterations 1 and 4 run by the coordinator on
 /// the merged moments, final passes with the chosen strategy (its merge mask fetched by the
-/// workers as a blob) — and the same image, bit for bit, and the same decisions as locally.
+/// workers as a blob) — and the same image, bit for bit, the same decisions, strategy PNG and
+/// report as locally. After a coordinator restart the job shows the same decisions (read back
+/// from its stored report) and serves the same files.
 #[test]
 fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     use tessera_common::film::exr::{read_attribute, read_layer};
     let dir = tempfile::tempdir().unwrap();
-    let (c, _w) = farm(dir.path(), 2);
+    let (mut c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     // updates after 1 and 4; the 10 final iterations are two calls (8 + 2) on both sides
     let settings = json!({"integrator": "emis-vcm", "spp": 14, "seed": 4});
@@ -168,6 +175,25 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
         assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap(), "{key}");
     }
     assert_eq!(read_attribute(&out, "tessera/emis_updates").unwrap(), Some(2.0));
+    let files = ["strategy.png", "emis.json"].map(|name| {
+        let (status, bytes) = rest::get(&format!("{}/{name}", job_url(&c, id)), None);
+        assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&bytes));
+        std::fs::write(out.with_extension(name), &bytes).unwrap();
+        bytes
+    });
+    assert_same_emis_outputs(&out, &local);
+    c.kill();
+    let listen = format!("127.0.0.1:{}", c.port());
+    let c = wait_for(Duration::from_secs(20), "port to be free", || {
+        std::net::TcpListener::bind(&listen).ok().map(drop)?;
+        Some(Coordinator::start(&dir.path().join("data"), &listen, &[]))
+    });
+    let (status, after) = rest::get_json(&job_url(&c, id), None);
+    assert_eq!((status, after["state"].as_str()), (200, Some("done")), "{after}");
+    assert_eq!(after["strategy"], done["strategy"], "the decisions after the restart");
+    for (name, bytes) in ["strategy.png", "emis.json"].iter().zip(&files) {
+        assert!(rest::get(&format!("{}/{name}", job_url(&c, id)), None) == (200, bytes.clone()), "{name}");
+    }
 }
 
 /// The path-tracing start on the farm. On caustic-glass (seed 4) the updates after 1 and 2
@@ -348,7 +374,12 @@ fn coordinator_killed_mid_job(
     assert_eq!(done["samples_done"], samples, "every pixel sample merged exactly once: {done}");
     let status = wait_for(TIMEOUT, "tessera submit --wait to finish", || submit.try_wait().unwrap());
     assert!(status.success(), "submit --wait did not survive the restart: {status:?}");
-    assert_same_image(&out, &local_render_with(dir.path(), &scene(name), integrator, spp, 8, more));
+    let local = local_render_with(dir.path(), &scene(name), integrator, spp, 8, more);
+    assert_same_image(&out, &local);
+    if integrator.starts_with("emis-") {
+        // written by `tessera submit --wait` beside the EXR, from a job that crossed the crash
+        assert_same_emis_outputs(&out, &local);
+    }
     if discarded > 0 {
         let kept_from = tessera_common::film::exr::read_attribute(&out, "tessera/emis_kept_from").unwrap();
         assert_eq!(kept_from, Some(discarded as f64));

@@ -211,6 +211,29 @@ pub fn assert_same_image(farm: &Path, local: &Path) {
     assert_eq!(read_sample_counts(farm).expect("farm counts"), read_sample_counts(local).expect("local counts"));
 }
 
+/// Asserts that the EMIS outputs beside two EXRs (`NAME.strategy.png`, `NAME.emis.json`)
+/// agree: the strategy PNGs byte for byte, the reports as JSON except each update's
+/// `denoise_ms` and `optimize_ms`, which time the run (every other number is computed from the
+/// same merged moments, so it is equal).
+pub fn assert_same_emis_outputs(farm: &Path, local: &Path) {
+    let read = |p: &Path| std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let (a, b) = (farm.with_extension("strategy.png"), local.with_extension("strategy.png"));
+    assert!(read(&a) == read(&b), "{} and {} differ", a.display(), b.display());
+    let report = |exr: &Path| {
+        let path = exr.with_extension("emis.json");
+        let mut report: serde_json::Value = serde_json::from_slice(&read(&path)).expect("a JSON report");
+        let updates = report["updates"].as_array_mut().unwrap_or_else(|| panic!("no updates in {}", path.display()));
+        for update in updates {
+            let update = update.as_object_mut().expect("an update is an object");
+            for timing in ["denoise_ms", "optimize_ms"] {
+                assert!(update.remove(timing).is_some_and(|t| t.is_number()), "{timing} in {}", path.display());
+            }
+        }
+        report
+    };
+    assert_eq!(report(farm), report(local), "the EMIS reports differ");
+}
+
 /// Polls `f` every 50 ms until it returns `Some`, panicking after `timeout`.
 pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
     let start = Instant::now();
