@@ -129,7 +129,8 @@ impl<'a> Outputs<'a> {
     }
 
     /// EMIS: the JSON report as `tessera render` writes it, pretty-printed (`None` for other
-    /// integrators). The farm stores these bytes too, so both give the same file.
+    /// integrators). The farm stores the same text, so the two files differ only in the
+    /// updates' timings (`denoise_ms`, `optimize_ms`).
     pub fn emis_report_text(&self, integrator: &str, iterations: u32) -> Option<String> {
         let report = self.emis_report(integrator, iterations)?;
         Some(serde_json::to_string_pretty(&report).expect("invariant: a JSON value serialises"))

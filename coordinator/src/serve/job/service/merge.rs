@@ -366,8 +366,8 @@ impl JobService {
 
     /// Writes the result EXR (with the EMIS layers and decisions) and PNG preview as blobs,
     /// as `tessera render` writes them (the PNG with fast compression), and for EMIS the
-    /// strategy PNG and JSON report, byte for byte as `tessera render` writes them; returns
-    /// their digests.
+    /// strategy PNG (byte for byte as `tessera render`'s) and JSON report (the same but for
+    /// the updates' timings); returns their digests.
     fn write_outputs(
         &self,
         spec: &JobSpec,
