@@ -11,6 +11,7 @@ use tessera_common::settings::IntegratorName;
 use tessera_proto::state_name;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
+use tonic::Code;
 
 /// Arguments of `tessera submit`.
 #[derive(clap::Args, Debug, Clone)]
@@ -69,8 +70,18 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         download(&mut c, &job.id, pb::ResultFormat::Exr, &output).await?;
         download(&mut c, &job.id, pb::ResultFormat::Png, &output.with_extension("png")).await?;
         if is_emis(&last) {
-            download(&mut c, &job.id, pb::ResultFormat::StrategyPng, &output.with_extension("strategy.png")).await?;
-            download(&mut c, &job.id, pb::ResultFormat::EmisJson, &output.with_extension("emis.json")).await?;
+            for (format, extension) in
+                [(pb::ResultFormat::StrategyPng, "strategy.png"), (pb::ResultFormat::EmisJson, "emis.json")]
+            {
+                // a coordinator from before these formats (INVALID_ARGUMENT), or a job it
+                // finished (NOT_FOUND), has none: the image is what was asked for
+                match download(&mut c, &job.id, format, &output.with_extension(extension)).await {
+                    Err(Download::Status(s)) if matches!(s.code(), Code::NotFound | Code::InvalidArgument) => {
+                        eprintln!("warning: no {extension} for job {}: {}", job.id, s.message());
+                    }
+                    done => done?,
+                }
+            }
         }
         eprintln!("{}: done -> {}", job.id, output.display());
         Ok(())
@@ -154,15 +165,33 @@ fn is_final(job: &pb::Job) -> bool {
     [pb::JobState::Done, pb::JobState::Failed, pb::JobState::Cancelled].iter().any(|s| *s as i32 == job.state)
 }
 
-async fn download(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> anyhow::Result<()> {
+/// Why a download failed: the coordinator's answer (kept, for the caller to tell a missing
+/// output from a failure), or anything else.
+enum Download {
+    Status(tonic::Status),
+    Other(anyhow::Error),
+}
+
+impl From<Download> for anyhow::Error {
+    fn from(e: Download) -> Self {
+        match e {
+            Download::Status(s) => status_error(s),
+            Download::Other(e) => e,
+        }
+    }
+}
+
+async fn download(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> Result<(), Download> {
     let req = c.request(pb::GetResultRequest { id: id.to_string(), format: format as i32 });
-    let mut stream = c.jobs.get_result(req).await.map_err(status_error)?.into_inner();
+    let mut stream = c.jobs.get_result(req).await.map_err(Download::Status)?.into_inner();
     let mut bytes = Vec::new();
     while let Some(chunk) = stream.next().await {
-        bytes.extend_from_slice(&chunk.map_err(status_error)?.data);
+        bytes.extend_from_slice(&chunk.map_err(Download::Status)?.data);
     }
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create {}", dir.display()))
+            .map_err(Download::Other)?;
     }
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display())).map_err(Download::Other)
 }
