@@ -51,6 +51,16 @@ impl MomentBuffer {
         Ok(())
     }
 
+    /// Rounds every sum to bfloat16 (8 significant bits, at most 0.4 % off), the precision
+    /// in which pilot data crosses the wire: every call's sums are rounded, locally as on a
+    /// worker, so that a farm's merged moments equal a local render's bit for bit while an
+    /// upload carries 2 bytes per candidate instead of 4 (docs/decisions/0019-compact-pilot-data.md).
+    pub fn round_for_wire(&mut self) {
+        for s in &mut self.sums {
+            *s = super::wire::from_bf16_bits(super::wire::bf16_bits(*s));
+        }
+    }
+
     /// Whether [`MomentBuffer::merge`] would take `other`: the same size and candidates.
     pub fn check_shape(&self, other: &MomentBuffer) -> Result<(), String> {
         if (self.width, self.height, self.candidates) != (other.width, other.height, other.candidates) {
@@ -111,6 +121,21 @@ mod tests {
             }
         }
         assert!(first.merge(&MomentBuffer::new(4, 4, 5)).is_err());
+    }
+
+    #[test]
+    fn rounding_for_the_wire_keeps_eight_bits_and_the_flags() {
+        let mut b = MomentBuffer::new(2, 1, 3);
+        b.sums = vec![0.0, 1.0 + 1.0 / 256.0, f32::INFINITY, f32::MAX, 3.0e-30, 1.0 + 3.0 / 256.0];
+        b.round_for_wire();
+        // a tie goes to the even neighbour; the largest finite sum stays finite
+        assert_eq!(b.sums[..3], [0.0, 1.0, f32::INFINITY]);
+        assert!(b.sums[3].is_finite() && b.sums[3] > 3.3e38);
+        assert!((b.sums[4] - 3.0e-30).abs() <= 3.0e-30 / 256.0);
+        assert_eq!(b.sums[5], 1.0 + 4.0 / 256.0);
+        let mut twice = b.clone();
+        twice.round_for_wire();
+        assert_eq!(twice, b);
     }
 
     #[test]

@@ -66,21 +66,27 @@ fn records_under_path_tracing(iteration: u32) -> bool {
     iteration == 0 || iteration % 4 == 2
 }
 
-/// The first call (farm tile) of a collecting pass over the non-empty `iterations`: one
-/// iteration if it records moments under path tracing ([`collects_moments`]), else the run of
-/// iterations up to the next one that does (at most [`FINAL_ITERATIONS_PER_CALL`]). While
-/// path tracing is the strategy such a run is rendered by `pt` in one call, not one call per
-/// iteration, each a barrier for the threads
-/// (docs/decisions/0006-path-tracing-runs-in-one-call.md); a bidirectional strategy records
-/// every iteration of the run in one call.
-/// The cut depends on iteration numbers only, so a farm plans it before knowing the strategy,
-/// and local and farm renders add the same calls.
-pub fn collecting_call(iterations: Range<u32>) -> Range<u32> {
+/// The first call (farm tile) of a collecting pass over the non-empty `iterations` when the
+/// current strategy has `nu` light paths per pixel.
+/// - A bidirectional strategy records every iteration: calls of up to
+///   [`FINAL_ITERATIONS_PER_CALL`] iterations, so that a worker sums that many iterations'
+///   moments into one upload (docs/decisions/0019-compact-pilot-data.md).
+/// - Under path tracing, one iteration if it records moments ([`collects_moments`]), else the
+///   run of iterations up to the next one that does (at most [`FINAL_ITERATIONS_PER_CALL`]):
+///   such a run is rendered by `pt` in one call, not one call per iteration, each a barrier
+///   for the threads (docs/decisions/0006-path-tracing-runs-in-one-call.md).
+///
+/// The cut depends on iteration numbers and the strategy only, which a farm knows when it
+/// plans a pass, so local and farm renders add the same calls.
+pub fn collecting_call(iterations: Range<u32>, nu: f32) -> Range<u32> {
     let start = iterations.start;
-    if records_under_path_tracing(start) {
-        return start..start + 1;
-    }
-    let end = (start + 1..iterations.end).find(|&i| records_under_path_tracing(i)).unwrap_or(iterations.end);
+    let end = if nu > 0.0 {
+        iterations.end
+    } else if records_under_path_tracing(start) {
+        start + 1
+    } else {
+        (start + 1..iterations.end).find(|&i| records_under_path_tracing(i)).unwrap_or(iterations.end)
+    };
     start..end.min(start + FINAL_ITERATIONS_PER_CALL)
 }
 
@@ -223,7 +229,16 @@ impl Strategy {
         }
     }
 
-    /// The pilot strategy of docs/emis.md, decision 5.
+    /// The strategy a render with `pilot` starts with: [`Strategy::pilot`] or
+    /// [`Strategy::path_tracing_start`].
+    pub fn initial(method: EmisMethod, pilot: PilotStart) -> Self {
+        match pilot {
+            PilotStart::Bidirectional => Self::pilot(method),
+            PilotStart::PathTracing => Self::path_tracing_start(method),
+        }
+    }
+
+    /// The pilot strategy of docs/emis.md, decision 5 ([`PilotStart::Bidirectional`]).
     pub fn pilot(method: EmisMethod) -> Self {
         Strategy {
             nu: 1.0,
@@ -321,7 +336,8 @@ pub fn render_iterations_until(
     let guided = iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS);
     let guides = GuideCollector::new(w, h, guided);
     integrator.with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
-    let (moments, statistics) = estimator.into_snapshot();
+    let (mut moments, statistics) = estimator.into_snapshot();
+    moments.round_for_wire();
     (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
 }
 
@@ -385,7 +401,7 @@ pub fn render_emis(
         };
         let count = match state.next_update().filter(|_| collect.is_some()) {
             // a collecting pass ends at the next update, which is within a sample budget
-            Some(update) => collecting_call(done..update.max(done + 1)).len() as u32,
+            Some(update) => collecting_call(done..update.max(done + 1), state.strategy.nu).len() as u32,
             None => FINAL_ITERATIONS_PER_CALL,
         }
         .min(left);

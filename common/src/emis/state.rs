@@ -112,9 +112,10 @@ pub struct EmisState {
 impl EmisState {
     /// The state before the pilot.
     pub fn new(config: EmisConfig, width: u32, height: u32) -> Self {
-        let (candidate_set, strategy) = match config.pilot {
-            PilotStart::Bidirectional => (CandidateSet::Full, Strategy::pilot(config.method)),
-            PilotStart::PathTracing => (CandidateSet::Reduced, Strategy::path_tracing_start(config.method)),
+        let strategy = Strategy::initial(config.method, config.pilot);
+        let candidate_set = match config.pilot {
+            PilotStart::Bidirectional => CandidateSet::Full,
+            PilotStart::PathTracing => CandidateSet::Reduced,
         };
         let candidates = config.candidates_of(candidate_set);
         let collecting = !config.updates.is_empty();

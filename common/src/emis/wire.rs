@@ -13,7 +13,12 @@ use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
-const PILOT_MAGIC: &[u8; 4] = b"TPD1";
+/// Pilot data with f32 moment sums: the coordinator's checkpoints (and uploads of earlier
+/// versions).
+const PILOT_MAGIC_F32: &[u8; 4] = b"TPD1";
+/// Pilot data with bfloat16 moment sums: uploads, whose sums [`MomentBuffer::round_for_wire`]
+/// rounded, so that the encoding loses nothing.
+const PILOT_MAGIC_BF16: &[u8; 4] = b"TPD2";
 const STATE_MAGIC: &[u8; 4] = b"TES1";
 
 /// Little-endian writer.
@@ -34,6 +39,29 @@ impl Writer {
             self.0.extend_from_slice(&x.to_le_bytes());
         }
     }
+    fn bf16s(&mut self, v: impl IntoIterator<Item = f32>) {
+        for x in v {
+            self.0.extend_from_slice(&bf16_bits(x).to_le_bytes());
+        }
+    }
+}
+
+/// The bfloat16 nearest to `x` (ties to even), as bits: the upper half of an f32. A finite
+/// `x` too large for it stays finite (the largest bfloat16): +∞ flags a candidate that cannot
+/// sample a path, which rounding must not invent.
+pub(super) fn bf16_bits(x: f32) -> u16 {
+    if x.is_nan() {
+        return 0x7FC0;
+    }
+    let bits = x.to_bits();
+    let rounded = bits.wrapping_add(0x7FFF + ((bits >> 16) & 1));
+    let out = (rounded >> 16) as u16;
+    if x.is_finite() && (out & 0x7F80) == 0x7F80 { (out & 0x8000) | 0x7F7F } else { out }
+}
+
+/// The f32 of bfloat16 `bits` (exact).
+pub(super) fn from_bf16_bits(bits: u16) -> f32 {
+    f32::from_bits((bits as u32) << 16)
 }
 
 /// Little-endian reader that names what ran out.
@@ -65,19 +93,39 @@ impl<'a> Reader<'a> {
             .map(|c| f32::from_le_bytes(c.try_into().expect("invariant: 4 bytes")))
             .collect())
     }
+    fn bf16s(&mut self, n: usize, what: &str) -> Result<Vec<f32>, String> {
+        let bytes = n.checked_mul(2).ok_or_else(|| format!("{what} is too large"))?;
+        Ok(self.take(bytes, what)?.chunks_exact(2).map(|c| from_bf16_bits(u16::from_le_bytes([c[0], c[1]]))).collect())
+    }
+}
+
+/// How moment sums are written: exactly (checkpoints) or as bfloat16 (uploads).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum SumPrecision {
+    F32,
+    Bf16,
 }
 
 fn triples(v: Vec<f32>) -> Vec<[f32; 3]> {
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
-fn write_pilot(w: &mut Writer, moments: &MomentBuffer, statistics: &StatisticsSums, guides: &GuideBuffer) {
-    w.0.extend_from_slice(PILOT_MAGIC);
+fn write_pilot(
+    w: &mut Writer,
+    precision: SumPrecision,
+    moments: &MomentBuffer,
+    statistics: &StatisticsSums,
+    guides: &GuideBuffer,
+) {
+    w.0.extend_from_slice(if precision == SumPrecision::F32 { PILOT_MAGIC_F32 } else { PILOT_MAGIC_BF16 });
     w.u32(moments.width);
     w.u32(moments.height);
     w.u32(moments.candidates as u32);
     w.u32(moments.iterations);
-    w.f32s(moments.sums.iter().copied());
+    match precision {
+        SumPrecision::F32 => w.f32s(moments.sums.iter().copied()),
+        SumPrecision::Bf16 => w.bf16s(moments.sums.iter().copied()),
+    }
     w.u64(statistics.iterations);
     w.u64(statistics.camera_vertices);
     w.u64(statistics.light_paths);
@@ -85,22 +133,36 @@ fn write_pilot(w: &mut Writer, moments: &MomentBuffer, statistics: &StatisticsSu
     w.u64(statistics.merge_queries);
     w.f64(statistics.photons_per_path);
     w.u32(guides.samples);
+    // calls past the guide iterations carry no guides: uploads leave out their zeros
+    let zero = |v: &f32| v.to_bits() == 0;
+    let empty = guides.albedo.iter().chain(&guides.normal).flatten().chain(&guides.depth).all(zero);
+    if precision == SumPrecision::Bf16 {
+        w.u32(u32::from(!empty));
+        if empty {
+            return;
+        }
+    }
     w.f32s(guides.albedo.iter().flatten().copied());
     w.f32s(guides.normal.iter().flatten().copied());
     w.f32s(guides.depth.iter().copied());
 }
 
 fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
-    if r.take(4, "the header")? != PILOT_MAGIC {
-        return Err("pilot data has an unknown format".into());
-    }
+    let precision = match r.take(4, "the header")? {
+        m if m == PILOT_MAGIC_F32 => SumPrecision::F32,
+        m if m == PILOT_MAGIC_BF16 => SumPrecision::Bf16,
+        _ => return Err("pilot data has an unknown format".into()),
+    };
     let (w, h, c) = (r.u32("the width")?, r.u32("the height")?, r.u32("the candidate count")? as usize);
     if (w, h, c) != (width, height, candidates) {
         return Err(format!("pilot data is {w}×{h} with {c} candidates, expected {width}×{height} with {candidates}"));
     }
     let pixels = width as usize * height as usize;
     let iterations = r.u32("the iteration count")?;
-    let sums = r.f32s(pixels * candidates, "the moment sums")?;
+    let sums = match precision {
+        SumPrecision::F32 => r.f32s(pixels * candidates, "the moment sums")?,
+        SumPrecision::Bf16 => r.bf16s(pixels * candidates, "the moment sums")?,
+    };
     // +∞ flags a candidate that cannot sample some path; NaN or negative sums are corrupt
     if let Some(i) = sums.iter().position(|s| s.is_nan() || *s < 0.0) {
         return Err(format!("moment sum {i} (pixel {}) is {}", i / candidates.max(1), sums[i]));
@@ -117,6 +179,22 @@ fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Res
         return Err(format!("photons per path {} is out of range", statistics.photons_per_path));
     }
     let samples = r.u32("the guide sample count")?;
+    let present = match precision {
+        SumPrecision::F32 => true,
+        SumPrecision::Bf16 => match r.u32("the guide flag")? {
+            0 => false,
+            1 => true,
+            other => return Err(format!("guide flag {other} is neither 0 nor 1")),
+        },
+    };
+    if !present {
+        let guides = GuideBuffer { samples, ..GuideBuffer::new(width, height) };
+        return Ok(PilotData {
+            moments: MomentBuffer { width, height, candidates, sums, iterations },
+            statistics,
+            guides,
+        });
+    }
     let albedo = r.f32s(pixels * 3, "the albedo guide")?;
     let normal = r.f32s(pixels * 3, "the normal guide")?;
     let depth = r.f32s(pixels, "the depth guide")?;
@@ -131,17 +209,21 @@ fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Res
 }
 
 impl PilotData {
-    /// The bytes a worker uploads after the image sums.
+    /// The bytes a worker uploads after the image sums. Moment sums are written as bfloat16:
+    /// exact for sums that [`MomentBuffer::round_for_wire`] rounded, as `render_iterations`
+    /// rounds them locally and on workers alike.
     pub fn encode(&self) -> Vec<u8> {
         let mut w = Writer(Vec::with_capacity(self.encoded_len()));
-        write_pilot(&mut w, &self.moments, &self.statistics, &self.guides);
+        write_pilot(&mut w, SumPrecision::Bf16, &self.moments, &self.statistics, &self.guides);
         w.0
     }
 
     /// Bytes of [`PilotData::encode`].
     pub fn encoded_len(&self) -> usize {
         let pixels = self.moments.width as usize * self.moments.height as usize;
-        20 + self.moments.sums.len() * 4 + 48 + 4 + pixels * 7 * 4
+        let g = &self.guides;
+        let empty = g.albedo.iter().chain(&g.normal).flatten().chain(&g.depth).all(|v| v.to_bits() == 0);
+        20 + self.moments.sums.len() * 2 + 48 + 8 + if empty { 0 } else { pixels * 7 * 4 }
     }
 
     /// Decodes pilot data of a `width`×`height` image with `candidates` candidates; the error
@@ -204,7 +286,7 @@ impl EmisState {
         w.0.extend_from_slice(STATE_MAGIC);
         w.u32(json.len() as u32);
         w.0.extend_from_slice(&json);
-        write_pilot(&mut w, &self.moments, &self.statistics, &self.guides);
+        write_pilot(&mut w, SumPrecision::F32, &self.moments, &self.statistics, &self.guides);
         if let Some(MergeMask::PerPixel(mask)) = &self.strategy.merge {
             w.f32s(mask.iter().copied());
         }
@@ -282,6 +364,35 @@ mod tests {
             photons_per_path: 0.75,
         };
         PilotData { moments, statistics, guides }
+    }
+
+    #[test]
+    fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
+        let mut p = pilot(3, 2, 5);
+        p.moments.sums[1] = 0.1;
+        let exact = p.clone();
+        p.moments.round_for_wire();
+        let bytes = p.encode();
+        assert_eq!(bytes.len(), p.encoded_len());
+        assert_eq!(&bytes[..4], PILOT_MAGIC_BF16);
+        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
+        // unrounded sums are rounded by the encoding: the decoded data is not the original
+        assert_ne!(PilotData::decode(&exact.encode(), 3, 2, 5).unwrap(), exact);
+        // a checkpoint keeps sums exactly (they are sums of rounded calls, not rounded)
+        let mut w = Writer(Vec::new());
+        write_pilot(&mut w, SumPrecision::F32, &exact.moments, &exact.statistics, &exact.guides);
+        assert_eq!(PilotData::decode(&w.0, 3, 2, 5).unwrap(), exact);
+        assert_eq!(w.0.len(), bytes.len() + 2 * exact.moments.sums.len() - 4);
+        // without guides (calls past the guide iterations) an upload leaves them out
+        p.guides = GuideBuffer::new(3, 2);
+        let bytes = p.encode();
+        assert_eq!(bytes.len(), p.encoded_len());
+        assert_eq!(bytes.len(), pilot(3, 2, 5).encode().len() - 6 * 7 * 4);
+        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
+        // a negative zero is not left out (it would come back positive)
+        p.guides.normal[1][2] = -0.0;
+        let back = PilotData::decode(&p.encode(), 3, 2, 5).unwrap();
+        assert_eq!(back.guides.normal[1][2].to_bits(), (-0.0f32).to_bits());
     }
 
     #[test]

@@ -69,11 +69,14 @@ fn pilot_data(lease: &pb::TileLease, width: u32, height: u32, iterations: u32) -
     let Some(settings) = lease.settings.as_ref().and_then(|s| tessera_proto::convert::settings_from_pb(s).ok()) else {
         return Vec::new();
     };
-    let candidates = settings.emis_config().candidates.candidates().len();
-    let mut moments = MomentBuffer::new(width, height, candidates);
+    let candidates = settings.emis_config().candidates.candidates();
+    let mut moments = MomentBuffer::new(width, height, candidates.len());
     moments.iterations = iterations;
+    // path tracing noisier than every bidirectional candidate: updates keep light paths, so
+    // that every collecting tile carries moments, as in a scene where VCM wins
     for (i, m) in moments.sums.iter_mut().enumerate() {
-        *m = (i % 97) as f32 * 0.01;
+        let pt = candidates[i % candidates.len()].nu == 0.0;
+        *m = if pt { 100.0 } else { (i % 97) as f32 * 0.01 };
     }
     let mut guides = GuideBuffer::new(width, height);
     guides.samples = iterations;
@@ -123,6 +126,10 @@ struct Sample {
     at_s: f64,
     latency_s: f64,
     bytes: usize,
+    /// Iterations the tile covers.
+    iterations: u32,
+    /// Pixels of the tile.
+    pixels: u64,
 }
 
 /// Leases and uploads until `stop` is set and no work is left; returns accepted uploads and
@@ -146,12 +153,15 @@ async fn sim_worker(
         for lease in &leases {
             let result = build_result(&worker, lease);
             let bytes = result.payload.len();
+            let iterations = lease.sample_end.saturating_sub(lease.sample_begin);
+            let r = lease.rect.unwrap_or_default();
+            let pixels = r.x1.saturating_sub(r.x0) as u64 * r.y1.saturating_sub(r.y0) as u64;
             let sent = Instant::now();
             let outcome = client.upload_result(tokio_stream::iter(upload_messages(&result))).await;
             let latency_s = sent.elapsed().as_secs_f64();
             match outcome {
                 Ok(r) if r.get_ref().outcome == pb::UploadOutcome::Accepted as i32 => {
-                    samples.push(Sample { at_s: t0.elapsed().as_secs_f64(), latency_s, bytes })
+                    samples.push(Sample { at_s: t0.elapsed().as_secs_f64(), latency_s, bytes, iterations, pixels })
                 }
                 Ok(_) => refused += 1,
                 Err(s) if s.code() == tonic::Code::InvalidArgument => {
@@ -196,6 +206,11 @@ pub struct IngestReport {
     pub coordinator_cores: f64,
     /// Tiles per coordinator CPU-second: the rate one fully used core sustains.
     pub tiles_per_cpu_s: f64,
+    /// Iterations (summed over the tiles) per coordinator CPU-second: for full-frame tiles
+    /// of several iterations, the frames one core takes in.
+    pub iterations_per_cpu_s: f64,
+    /// Payload bytes per pixel per iteration.
+    pub bytes_per_pixel_iteration: f64,
     /// `GET /healthz` latency while the case ran, 99th percentile and worst (see `probe.rs`).
     pub healthz_p99_ms: f64,
     /// Worst `/healthz` latency.
@@ -290,6 +305,8 @@ pub async fn run_case(
 fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cpu: f64) -> IngestReport {
     let tiles = samples.len() as u64;
     let bytes: usize = samples.iter().map(|s| s.bytes).sum();
+    let iterations: u64 = samples.iter().map(|s| s.iterations as u64).sum();
+    let pixel_iterations: u64 = samples.iter().map(|s| s.iterations as u64 * s.pixels).sum();
     let mut lat: Vec<f64> = samples.iter().map(|s| s.latency_s * 1e3).collect();
     lat.sort_by(f64::total_cmp);
     let whole = seconds.floor() as usize;
@@ -302,7 +319,7 @@ fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cp
     per_second.sort_by(f64::total_cmp);
     IngestReport {
         case: case.into(),
-        tile_pixels: samples.first().map_or(0, |s| (s.bytes / BOX_BYTES_PER_PIXEL) as u64),
+        tile_pixels: samples.first().map_or(0, |s| s.pixels),
         tiles,
         not_accepted,
         seconds,
@@ -314,6 +331,8 @@ fn summarise(case: &str, samples: &[Sample], not_accepted: u64, seconds: f64, cp
         coordinator_cpu_s: cpu,
         coordinator_cores: cpu / seconds,
         tiles_per_cpu_s: tiles as f64 / cpu.max(1e-9),
+        iterations_per_cpu_s: iterations as f64 / cpu.max(1e-9),
+        bytes_per_pixel_iteration: bytes as f64 / pixel_iterations.max(1) as f64,
         healthz_p99_ms: 0.0,
         healthz_max_ms: 0.0,
         finish_s: 0.0,
@@ -339,6 +358,10 @@ fn print_report(r: &IngestReport, json: bool) {
         r.tiles_per_cpu_s,
         r.generator_cores,
         if r.not_accepted > 0 { format!(", {} not accepted", r.not_accepted) } else { String::new() }
+    );
+    println!(
+        "{:<28} {:.0} iterations/cpu-s, {:.1} bytes per pixel per iteration",
+        "", r.iterations_per_cpu_s, r.bytes_per_pixel_iteration
     );
     println!(
         "{:<28} then {:.2} s ({:.2} coordinator CPU-s) for the last {:.0} % of the tiles and the outputs; /healthz p99 {:.1} ms, worst {:.1} ms",
@@ -407,6 +430,11 @@ pub fn ingest_command(args: &FarmArgs) -> anyhow::Result<()> {
         print_report(r, args.json);
     }
     print_feeding(&reports, &times);
+    println!(
+        "emis-vcm pilot: one coordinator core feeds {:.0} worker threads ({:.1} iterations per upload)",
+        emis.iterations_per_cpu_s * times.vcm_iteration_s,
+        emis.iterations_per_cpu_s / emis.tiles_per_cpu_s.max(1e-9)
+    );
     Ok(())
 }
 
@@ -495,7 +523,7 @@ mod tests {
                     pilot_bytes: h.pilot_bytes,
                 };
                 let lease = lease_from_pb(h.lease).unwrap();
-                assert_eq!(svc.upload(&worker, &lease, &claim, &r.payload, 3).unwrap(), ResultOutcome::Accepted);
+                assert_eq!(svc.upload(&worker, &lease, &claim, r.payload.clone(), 3).unwrap(), ResultOutcome::Accepted);
                 tiles += 1;
             }
         }

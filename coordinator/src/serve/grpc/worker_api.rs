@@ -116,7 +116,7 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         let svc = self.0.svc.clone();
         let worker = header.worker_id;
         let started = std::time::Instant::now();
-        let outcome = blocking(move || svc.upload(&worker, &lease, &claim, &payload, now_ms())).await?;
+        let outcome = blocking(move || svc.upload(&worker, &lease, &claim, payload, now_ms())).await?;
         self.0.telemetry.upload_seconds.observe(started.elapsed().as_secs_f64());
         let (outcome, message) = match outcome {
             ResultOutcome::Accepted => (pb::UploadOutcome::Accepted, "accepted"),

@@ -88,6 +88,10 @@ pub struct Pass {
     /// image keeps only the iterations from here on.
     #[serde(default)]
     pub restart: bool,
+    /// EMIS: light paths per pixel of the strategy its tiles render (the cut of a collecting
+    /// pass depends on it; 0 in rows written before it was kept, which planned that cut).
+    #[serde(default)]
+    pub nu: f32,
 }
 
 /// Where a tile is.
@@ -198,6 +202,11 @@ impl Job {
         self.tiles[..self.merged].iter().map(|t| t.spec.samples.end).max().unwrap_or(0)
     }
 
+    /// EMIS: light paths per pixel of the current strategy (the last pass's).
+    pub fn nu(&self) -> f32 {
+        self.passes.last().map_or(0.0, |p| p.nu)
+    }
+
     /// The first iteration the film keeps: where the last restarting pass begins (0 if none).
     pub fn kept_from(&self) -> u32 {
         self.passes
@@ -223,7 +232,7 @@ impl Job {
         self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
     }
 
-    fn append_pass(&mut self, kind: PassKind, plan: PassPlan, restart: bool) -> Range<usize> {
+    fn append_pass(&mut self, kind: PassKind, plan: PassPlan, restart: bool, nu: f32) -> Range<usize> {
         let start = self.tiles.len();
         self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
             spec,
@@ -233,7 +242,7 @@ impl Job {
         }));
         let range = start..self.tiles.len();
         self.index.queued.extend(range.clone());
-        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart });
+        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart, nu });
         range
     }
 
@@ -333,7 +342,8 @@ impl JobsModel {
             index: TileIndex::default(),
         };
         let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
-        let range = job.append_pass(kind, first, false);
+        let nu = plan::initial_nu(&job.spec);
+        let range = job.append_pass(kind, first, false, nu);
         self.jobs.insert(id.to_string(), job);
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
@@ -423,7 +433,7 @@ impl JobsModel {
         let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
-        plan::after_pass(&j.spec, spp, j.kept_from(), elapsed_s, collected) == BarrierAction::Finish
+        plan::after_pass(&j.spec, spp, j.kept_from(), elapsed_s, collected, j.nu()) == BarrierAction::Finish
     }
 
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
@@ -444,10 +454,11 @@ impl JobsModel {
         // every planned tile is merged: the last pass's barrier
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
-        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s, collected);
+        let nu = j.nu();
+        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s, collected, nu);
         match &action {
             BarrierAction::NextPass(plan) => {
-                let range = j.append_pass(PassKind::Final, plan.clone(), false);
+                let range = j.append_pass(PassKind::Final, plan.clone(), false, nu);
                 changes.entry(job.to_string()).or_default().extend(range);
             }
             BarrierAction::Optimize => j.state = JobState::Optimizing,
@@ -456,10 +467,10 @@ impl JobsModel {
         (Some(action), changes)
     }
 
-    /// The optimiser has chosen a strategy at an EMIS barrier: plan the next pass with it.
-    /// `restart`: the update ended a path-tracing start, and the service cleared the film, so
-    /// a sample budget counts from the next pass on.
-    pub fn optimized(&mut self, job: &str, restart: bool, now_ms: u64) -> Result<Changes, TransitionError> {
+    /// The optimiser has chosen a strategy, with `nu` light paths per pixel, at an EMIS
+    /// barrier: plan the next pass with it. `restart`: the update ended a path-tracing start,
+    /// and the service cleared the film, so a sample budget counts from the next pass on.
+    pub fn optimized(&mut self, job: &str, restart: bool, nu: f32, now_ms: u64) -> Result<Changes, TransitionError> {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state != JobState::Optimizing {
             return Err(TransitionError::NotOptimizing(job.to_string()));
@@ -468,8 +479,8 @@ impl JobsModel {
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let spp = j.spp_merged();
         let kept_from = if restart { spp } else { j.kept_from() };
-        let plan = plan::pass_after_update(&j.spec, spp, kept_from, elapsed_s);
-        let range = j.append_pass(PassKind::Final, plan, restart);
+        let plan = plan::pass_after_update(&j.spec, spp, kept_from, elapsed_s, nu);
+        let range = j.append_pass(PassKind::Final, plan, restart, nu);
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());
         Ok(changes)

@@ -17,7 +17,7 @@
 //! one pass at a time at the barrier that ends the previous one.
 
 use super::spec::{JobSpec, TileSpec};
-use tessera_common::emis::{FINAL_ITERATIONS_PER_CALL, collecting_call};
+use tessera_common::emis::{FINAL_ITERATIONS_PER_CALL, Strategy, collecting_call};
 use tessera_common::film::Rect;
 
 /// Edge of the rectangles of image-tile integrators.
@@ -46,6 +46,11 @@ pub enum BarrierAction {
 
 fn is_emis(spec: &JobSpec) -> bool {
     spec.settings.integrator.emis_method().is_some()
+}
+
+/// Light paths per pixel of the strategy an EMIS job starts with (0 for other integrators).
+pub fn initial_nu(spec: &JobSpec) -> f32 {
+    spec.settings.integrator.emis_method().map_or(0.0, |m| Strategy::initial(m, spec.settings.emis_pilot).nu)
 }
 
 /// Iterations the budget allows in total, as far as is known after `spp_done` took
@@ -81,8 +86,9 @@ fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> 
 
 /// A pass from `spp_done` of at most `count` iterations. EMIS collects moments while another
 /// update can come within the budget (`may_collect`: no earlier pass stopped collecting), and
-/// then ends the pass at that update, where the barrier runs it.
-fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total: u32) -> PassPlan {
+/// then ends the pass at that update, where the barrier runs it; `nu` is the current
+/// strategy's light paths per pixel, on which the cut of a collecting pass depends.
+fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total: u32, nu: f32) -> PassPlan {
     let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done).filter(|&u| u < total);
     let update = update.filter(|_| may_collect && is_emis(spec));
     let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
@@ -92,7 +98,7 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
         let mut tiles = Vec::new();
         let mut begin = spp_done;
         while begin < end {
-            let samples = collecting_call(begin..end);
+            let samples = collecting_call(begin..end, nu);
             begin = samples.end;
             tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
         }
@@ -106,7 +112,7 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
 /// the speed.
 pub fn first_pass(spec: &JobSpec) -> PassPlan {
     let count = spec.settings.spp.unwrap_or(1);
-    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0))
+    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0), initial_nu(spec))
 }
 
 /// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take
@@ -130,25 +136,33 @@ pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32, per_tile: u32) -> Vec<
 
 /// What to do at the barrier after a pass. `spp_done` samples per pixel are merged (the film
 /// keeps those from `kept_from` on), rendering has run for `elapsed_s` seconds, and
-/// `collected` says whether the pass collected moments.
+/// `collected` says whether the pass collected moments; `nu` is the current strategy's.
 /// An EMIS update is due when the pass collected up to an update point and iterations remain
 /// to use it (as `render_emis` decides locally).
-pub fn after_pass(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64, collected: bool) -> BarrierAction {
+pub fn after_pass(
+    spec: &JobSpec,
+    spp_done: u32,
+    kept_from: u32,
+    elapsed_s: f64,
+    collected: bool,
+    nu: f32,
+) -> BarrierAction {
     let total = expected_total(spec, spp_done, kept_from, elapsed_s);
     if collected && spec.settings.emis_updates.contains(&spp_done) && spp_done < total {
         return BarrierAction::Optimize;
     }
     match next_count(spec, spp_done, kept_from, elapsed_s) {
         0 => BarrierAction::Finish,
-        count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total)),
+        count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total, nu)),
     }
 }
 
-/// The pass after an EMIS update at `spp_done` (at least one iteration: the update was run
-/// because iterations remain; `kept_from` is `spp_done` if the update restarted the film).
-pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> PassPlan {
+/// The pass after an EMIS update at `spp_done` that chose a strategy with `nu` light paths
+/// per pixel (at least one iteration: the update was run because iterations remain;
+/// `kept_from` is `spp_done` if the update restarted the film).
+pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64, nu: f32) -> PassPlan {
     let total = expected_total(spec, spp_done, kept_from, elapsed_s);
-    plan_from(spec, spp_done, next_count(spec, spp_done, kept_from, elapsed_s).max(1), true, total)
+    plan_from(spec, spp_done, next_count(spec, spp_done, kept_from, elapsed_s).max(1), true, total, nu)
 }
 
 #[cfg(test)]
@@ -186,18 +200,18 @@ mod tests {
             assert_eq!(t.rect, Rect::full(130, 70));
             assert_eq!(t.samples, i as u32..i as u32 + 1);
         }
-        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 0, 1.0, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&spec(IntegratorName::Vcm, Some(3), None), 3, 0, 1.0, false, 0.0), BarrierAction::Finish);
     }
 
     #[test]
     fn plan_time_budget_adds_passes_until_the_time_is_used() {
         let s = spec(IntegratorName::Pt, None, Some(10.0));
         assert!(first_pass(&s).tiles.iter().all(|t| t.samples == (0..1)));
-        match after_pass(&s, 1, 0, 0.1, false) {
+        match after_pass(&s, 1, 0, 0.1, false, 0.0) {
             BarrierAction::NextPass(p) => assert_eq!(p.tiles[0].samples, 1..11),
             other => panic!("{other:?}"),
         }
-        assert_eq!(after_pass(&s, 50, 0, 10.5, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&s, 50, 0, 10.5, false, 0.0), BarrierAction::Finish);
     }
 
     /// The passes and barriers of an EMIS job with a sample budget, as `render_emis` does
@@ -209,29 +223,37 @@ mod tests {
         let first = first_pass(&s);
         assert_eq!(first.tiles.len(), 1);
         assert!(first.collect);
-        assert_eq!(after_pass(&s, 1, 0, 1.0, true), BarrierAction::Optimize);
-        let second = pass_after_update(&s, 1, 0, 1.0);
+        assert_eq!(after_pass(&s, 1, 0, 1.0, true, 0.0), BarrierAction::Optimize);
+        let second = pass_after_update(&s, 1, 0, 1.0, 0.0);
         assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
-        assert_eq!(after_pass(&s, 4, 0, 1.0, true), BarrierAction::Optimize);
-        let third = pass_after_update(&s, 4, 0, 1.0);
+        assert_eq!(after_pass(&s, 4, 0, 1.0, true, 0.0), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 0, 1.0, 0.0);
         // after the last update the pass is cut into calls of FINAL_ITERATIONS_PER_CALL
         assert_eq!(third.collect, false);
         let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12]);
         // a collecting pass: a call per iteration that records under path tracing (0 and
         // ≡ 2 mod 4), one per run between them
-        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0);
+        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0, 0.0);
         let ranges: Vec<_> = collecting.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..16]);
         assert!(collecting.collect);
-        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0, 0.0);
         let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
-        assert_eq!(after_pass(&s, 12, 0, 1.0, false), BarrierAction::Finish);
+        // a bidirectional strategy records every iteration: calls of up to eight iterations
+        // (one upload each), cut at the update
+        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 4, 0, 1.0, 0.5);
+        let ranges: Vec<_> = bidir.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges, [4..12, 12..16]);
+        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 16, 0, 1.0, 1.0);
+        assert_eq!(bidir.tiles.len(), 6);
+        assert!(bidir.tiles.iter().all(|t| t.samples.len() == 8));
+        assert_eq!(after_pass(&s, 12, 0, 1.0, false, 0.0), BarrierAction::Finish);
         // a budget that ends at an update point runs no update there, and collects nothing
         // for it
         let s = spec(IntegratorName::EmisBdpt, Some(4), None);
-        let after = pass_after_update(&s, 1, 0, 1.0);
+        let after = pass_after_update(&s, 1, 0, 1.0, 0.0);
         assert!(!after.collect);
         assert_eq!(after.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [1..4]);
         let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
@@ -246,16 +268,16 @@ mod tests {
     #[test]
     fn plan_after_a_restart_renders_the_whole_budget_into_the_new_film() {
         let s = spec(IntegratorName::EmisVcm, Some(12), None);
-        let second = pass_after_update(&s, 1, 1, 1.0);
+        let second = pass_after_update(&s, 1, 1, 1.0, 0.0);
         let ranges: Vec<_> = second.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!((ranges, second.collect), (vec![1..2, 2..3, 3..4], true));
-        assert_eq!(after_pass(&s, 4, 1, 1.0, true), BarrierAction::Optimize);
-        let third = pass_after_update(&s, 4, 1, 1.0);
+        assert_eq!(after_pass(&s, 4, 1, 1.0, true, 0.0), BarrierAction::Optimize);
+        let third = pass_after_update(&s, 4, 1, 1.0, 0.0);
         assert_eq!(third.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..12, 12..13]);
-        assert!(matches!(after_pass(&s, 12, 1, 1.0, false), BarrierAction::NextPass(_)));
-        assert_eq!(after_pass(&s, 13, 1, 1.0, false), BarrierAction::Finish);
+        assert!(matches!(after_pass(&s, 12, 1, 1.0, false, 0.0), BarrierAction::NextPass(_)));
+        assert_eq!(after_pass(&s, 13, 1, 1.0, false, 0.0), BarrierAction::Finish);
         // a time budget is wall time, whatever was discarded
         let t = spec(IntegratorName::EmisVcm, None, Some(10.0));
-        assert_eq!(after_pass(&t, 40, 1, 10.5, false), BarrierAction::Finish);
+        assert_eq!(after_pass(&t, 40, 1, 10.5, false, 0.0), BarrierAction::Finish);
     }
 }

@@ -59,7 +59,7 @@ fn upload_emis(svc: &JobService, scene: &Scene, worker: &str, g: &LeaseGrant, no
         non_finite: accum.non_finite,
         pilot_bytes: pilot.len() as u64,
     };
-    svc.upload(worker, &g.lease, &claim, &payload, now).unwrap()
+    svc.upload(worker, &g.lease, &claim, payload, now).unwrap()
 }
 
 /// Rows that name `job` in each table.

@@ -42,7 +42,7 @@ pub(super) fn upload(
     integrator.render_tile(scene, &TileRequest::new(tile.rect, tile.samples.clone(), 3), &mut accum);
     let payload = tessera_proto::payload::encode_tile(&accum);
     let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite, pilot_bytes: 0 };
-    svc.upload(worker, lease, &claim, &payload, now)
+    svc.upload(worker, lease, &claim, payload, now)
 }
 
 #[test]
@@ -74,7 +74,7 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
     // a bad result is refused and its tile re-queued with the next epoch
     let next = svc.lease(&worker, 1, 50_003).unwrap().remove(0).lease;
     let bad = ResultClaim { rect: svc.lease_spec(&next).unwrap().rect, samples: 0..1, non_finite: 0, pilot_bytes: 0 };
-    assert!(matches!(svc.upload(&worker, &next, &bad, &[0; 3], 50_004), Err(ServiceError::InvalidResult(_))));
+    assert!(matches!(svc.upload(&worker, &next, &bad, vec![0; 3], 50_004), Err(ServiceError::InvalidResult(_))));
     // the remaining tiles finish the job; the EXR has exactly one sample per pixel
     loop {
         let grants = svc.lease(&worker, 16, 50_005).unwrap();

@@ -40,7 +40,7 @@ fn merge_all(m: &mut JobsModel, job: &str, merges: &mut Vec<u32>, now: u64) {
         }
         if let (Some(BarrierAction::Optimize), _) = m.merged(job, r.end, now) {
             // the service runs the optimiser here
-            m.optimized(job, false, now).unwrap();
+            m.optimized(job, false, 1.0, now).unwrap();
         }
     }
 }
@@ -207,7 +207,7 @@ fn time_budget_plans_passes_at_barriers() {
 fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     let mut m = JobsModel::default();
     m.submit("a", spec(IntegratorName::EmisVcm, 6, 0), 0).unwrap();
-    assert_eq!(m.optimized("a", false, 0), Err(TransitionError::NotOptimizing("a".into())));
+    assert_eq!(m.optimized("a", false, 1.0, 0), Err(TransitionError::NotOptimizing("a".into())));
     let job = &m.jobs["a"];
     assert_eq!((job.passes.len(), job.passes[0].kind, job.collects(0)), (1, PassKind::Pilot, true));
     let (l, _) = m.lease("w", 8, 0, TTL);
@@ -217,10 +217,12 @@ fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     assert_eq!(action, Some(BarrierAction::Optimize));
     assert_eq!(m.jobs["a"].state, JobState::Optimizing);
     assert!(m.lease("w", 8, 1, TTL).0.is_empty(), "nothing to render while optimising");
-    m.optimized("a", false, 2).unwrap();
+    m.optimized("a", false, 1.0, 2).unwrap();
     let job = &m.jobs["a"];
     assert_eq!(job.state, JobState::Final);
-    assert_eq!((job.passes[1].tiles.clone(), job.passes[1].collect), (1..4, true));
+    // a bidirectional strategy (ν = 1) records every iteration: iterations 1..4 in one tile
+    assert_eq!((job.passes[1].tiles.clone(), job.passes[1].collect, job.passes[1].nu), (1..2, true, 1.0));
+    assert_eq!(job.tiles[1].spec.samples, 1..4);
     let mut merges = vec![1];
     for _ in 0..10 {
         for l in m.lease("w", 8, 3, TTL).0 {
@@ -233,7 +235,7 @@ fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     assert_eq!(
         job.passes.iter().map(|p| (p.tiles.clone(), p.collect)).collect::<Vec<_>>(),
         // the final iterations 4..6 are one tile (FINAL_ITERATIONS_PER_CALL)
-        [(0..1, true), (1..4, true), (4..5, false)]
+        [(0..1, true), (1..2, true), (2..3, false)]
     );
 }
 
@@ -257,7 +259,7 @@ fn progress_never_falls_when_an_update_discards_a_path_tracing_start() {
             if let Some(BarrierAction::Optimize) = action {
                 barriers += 1;
                 // the second update ends the path-tracing start, as the service's EMIS state says
-                m.optimized("a", barriers == 2, 3).unwrap();
+                m.optimized("a", barriers == 2, 1.0, 3).unwrap();
                 shown.push(super::view::JobView::of(&m.jobs["a"], 3).progress);
             }
         }

@@ -221,7 +221,7 @@ impl JobService {
         worker: &str,
         lease: &LeaseRef,
         claim: &ResultClaim,
-        payload: &[u8],
+        payload: Vec<u8>,
         now_ms: u64,
     ) -> Result<ResultOutcome, ServiceError> {
         let tile = {
@@ -245,13 +245,14 @@ impl JobService {
             }
             return Ok(outcome);
         };
-        let verdict = self.validate(&lease.job, &tile, collect, claim, payload);
+        let verdict = self.validate(&lease.job, &tile, collect, claim, &payload);
+        // the payload moves into the row it is stored in: megabytes per EMIS tile, not copied
         let stored = verdict.as_ref().ok().map(|(accum, _)| Extra::Result {
             job: lease.job.clone(),
             tile: lease.tile,
             epoch: lease.epoch,
             non_finite: accum.non_finite,
-            payload: payload.to_vec(),
+            payload,
         });
         let mut inner = self.lock();
         let (outcome, changes) =

@@ -82,7 +82,8 @@ impl JobService {
             // below stores the empty film with the new strategy)
             *film = Film::for_filter(film.width, film.height, &filter);
         }
-        let changes = inner.model.optimized(job, restarted, now_ms)?;
+        let nu = emis.state.strategy.nu;
+        let changes = inner.model.optimized(job, restarted, nu, now_ms)?;
         super::events::pass_planned(&inner.model, job);
         let upto = inner.model.jobs[job].merged;
         self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
