@@ -89,6 +89,22 @@ impl PerspectiveCamera {
         self
     }
 
+    /// The same view at `width × height` pixels, crop window included, or `None` if that
+    /// changes the image's proportions (the view would change with them). For tests and
+    /// benchmarks that render a scene smaller than its file says.
+    pub fn with_resolution(mut self, width: u32, height: u32) -> Option<Self> {
+        // same proportions: width · self.height == height · self.width, in integers
+        if width == 0 || (width as u64) * (self.height as u64) != (height as u64) * (self.width as u64) {
+            return None;
+        }
+        let s = width as f32 / self.width as f32;
+        let (x0, y0, full_w, full_h) = self.window;
+        self.window = (x0 * s, y0 * s, full_w * s, full_h * s);
+        (self.width, self.height) = (width, height);
+        // the aspect and the window's share of the image plane are unchanged
+        Some(self)
+    }
+
     /// The primary ray through continuous raster position `raster` (pixels, (0,0) = top-left).
     #[inline]
     pub fn generate_ray(&self, raster: Vec2) -> Ray {
@@ -203,6 +219,23 @@ mod tests {
         let d = crop.generate_ray(Vec2::new(50.0, 20.0)).d;
         let ratio = crop.importance(d) / full.importance(d);
         assert!((ratio - 200.0 * 100.0 / (100.0 * 40.0)).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_resized_camera_sees_the_same_view_at_another_resolution() {
+        let full = cam();
+        let half = cam().with_resolution(100, 50).expect("same proportions");
+        for (x, y) in [(0.5f32, 0.5f32), (99.5, 49.5), (37.25, 12.75)] {
+            let a = half.generate_ray(Vec2::new(x, y)).d;
+            assert!((a - full.generate_ray(Vec2::new(2.0 * x, 2.0 * y)).d).length() < 1e-6);
+            assert!((half.raster_of(a).unwrap() - Vec2::new(x, y)).length() < 1e-3);
+        }
+        let d = full.generate_ray(Vec2::new(70.0, 30.0)).d;
+        assert_eq!(half.importance(d), full.importance(d), "the image's importance is the same");
+        let crop = cam().with_crop(50, 20, 100, 40).with_resolution(50, 20).expect("same proportions");
+        let a = crop.generate_ray(Vec2::new(5.0, 5.0)).d;
+        assert!((a - full.generate_ray(Vec2::new(60.0, 30.0)).d).length() < 1e-6);
+        assert!(cam().with_resolution(100, 40).is_none(), "other proportions are refused");
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //! factor that re-weight a pilot sample for every candidate ([`proxy`], [`delta`]), the moment
 //! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic and its
 //! calibration ([`cost`], [`calibrate`]), the image filters and denoiser ([`filter`],
-//! [`denoise`]) and the optimiser ([`optimize`]).
+//! [`denoise`]) and the optimiser ([`optimize`]), plus the cached brute-force truth its
+//! decisions are tested against ([`decision_truth`]).
 //!
 //! The driver, which renders with the bidirectional integrators: strategies and iteration
 //! ranges ([`render`]), the denoiser's guides ([`guides`]), the merged state and its updates
@@ -17,6 +18,7 @@
 pub mod calibrate;
 pub mod candidate;
 pub mod cost;
+pub mod decision_truth;
 pub mod delta;
 pub mod denoise;
 pub mod estimator;

@@ -152,6 +152,14 @@ impl Scene {
         build::build(&tree, path, TextureLimits::default())
     }
 
+    /// The same scene rendered at `width × height` pixels: the camera's view and the film's
+    /// filter stay, the pixels are resized. `None` if that changes the image's proportions.
+    pub fn with_resolution(mut self, width: u32, height: u32) -> Option<Scene> {
+        self.camera = self.camera.with_resolution(width, height)?;
+        self.film = FilmSpec::new(width, height, self.film.filter);
+        Some(self)
+    }
+
     /// Finishes a scene from its parts: builds the BVH, the light distribution and bounds.
     pub(crate) fn assemble(path: &Path, parts: Parts) -> Scene {
         let Parts {

@@ -4,6 +4,7 @@
 
 pub mod calibrate;
 pub mod chart;
+pub mod decision_truth;
 pub mod envmap;
 pub mod equal_time;
 pub mod farm;
@@ -28,6 +29,9 @@ pub enum BenchCommand {
     Overheads(overheads::OverheadsArgs),
     /// Does the EMIS pilot choose what the candidates' measured errors would choose?
     GroundTruth(ground_truth::GroundTruthArgs),
+    /// The brute-force truth of the EMIS decision-quality tests: every image-level candidate's
+    /// relative variance and time at 128², written as JSON for `common/tests`.
+    DecisionTruth(decision_truth::DecisionTruthArgs),
     /// Time path tracing, light tracing, connections and merging and fit the EMIS cost
     /// heuristic's constants.
     CalibrateCosts(calibrate::CalibrateArgs),
@@ -46,6 +50,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<()> {
         BenchCommand::EqualTime(args) => equal_time::run(args),
         BenchCommand::Overheads(args) => overheads::run(args),
         BenchCommand::GroundTruth(args) => ground_truth::run(args),
+        BenchCommand::DecisionTruth(args) => decision_truth::run(args),
         BenchCommand::CalibrateCosts(args) => calibrate::run(args),
         BenchCommand::PhotonMap(args) => photon_map::run(args),
         BenchCommand::Envmap(args) => envmap::run(args),

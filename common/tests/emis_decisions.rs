@@ -1,0 +1,147 @@
+//! Decision-quality regression tests of `emis-vcm` (docs/decisions/0018-decision-quality-tests.md):
+//! at 128², on three scenes of different character, the (ν, c) the updates after 4 and 16
+//! iterations choose must be within 1.25× of the best image-level candidate's work-normalised
+//! error (relMSE × time), for seeds 1, 2 and 3. The truth is brute force, measured once by
+//! `tessera bench decision-truth` and cached in `tests/data/emis-decision-truth.json`
+//! ([`DecisionTruth`]); these tests only run the optimiser's own renders (17 iterations per
+//! seed), which are deterministic, so the tests are too.
+//!
+//! Plus one invariant per extreme: where light paths are essential (caustic-glass) every
+//! update keeps ν > 0; where path tracing wins (veach-mis) the merge mask stays almost empty.
+//! `EMIS_DIAG=1` prints every candidate's prediction beside its truth at each judged update.
+//!
+//! Regenerate the truth after a change that alters what candidates render or cost (from the
+//! repository root, release build, an otherwise idle machine; about 30 minutes on 2 cores):
+//!
+//! ```text
+//! cargo run --release -- bench decision-truth scenes/caustic-glass/scene.xml \
+//!     scenes/cornell-box/scene.xml scenes/veach-mis/scene.xml
+//! ```
+
+mod common;
+
+use common::scene_path;
+use tessera_common::emis::decision_truth::{DecisionTruth, SceneTruth};
+use tessera_common::emis::{EmisConfig, EmisMethod, UpdateReport, render_emis};
+use tessera_common::integrator::PathSettings;
+use tessera_common::render::{Budget, RenderOptions};
+use tessera_common::scene::Scene;
+
+/// Side of the square images.
+const SIZE: u32 = 128;
+/// The seeds every scene is decided with.
+const SEEDS: [u64; 3] = [1, 2, 3];
+/// The updates judged.
+const JUDGED: [u32; 2] = [4, 16];
+/// Largest regret accepted: the chosen (ν, c)'s relMSE × time over the best candidate's.
+const MAX_REGRET: f64 = 1.25;
+
+fn truth(name: &str) -> SceneTruth {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/emis-decision-truth.json");
+    let text = std::fs::read_to_string(&path).expect("the cached truth exists");
+    let truth: DecisionTruth = serde_json::from_str(&text).expect("the cached truth parses");
+    assert_eq!((truth.width, truth.height), (SIZE, SIZE), "the truth is for {SIZE}² renders");
+    let scene = truth.scene(name).unwrap_or_else(|| panic!("the truth has {name}")).clone();
+    assert_eq!(scene.candidates.len(), 26, "{name}: 25 (ν, c) and path tracing");
+    scene
+}
+
+/// The reports of the judged updates of one `emis-vcm` render at `SIZE`².
+fn judged_updates(name: &str, seed: u64) -> Vec<UpdateReport> {
+    let scene = Scene::load(&scene_path(name)).expect("scene loads").with_resolution(SIZE, SIZE).expect("square");
+    // the update after 16 runs only if an iteration follows it
+    let config = EmisConfig { updates: vec![1, 4, 16], ..EmisConfig::new(EmisMethod::Vcm) };
+    let opts = RenderOptions { budget: Budget::Samples(17), seed, threads: 0, tile_size: 32 };
+    let out = render_emis(&scene, PathSettings::from_scene(&scene, None), &config, &opts, &|_, _| {}).expect("render");
+    out.state.reports.into_iter().filter(|r| JUDGED.contains(&r.iteration)).collect()
+}
+
+/// One judged update with its regret.
+struct Judged {
+    report: UpdateReport,
+    line: String,
+    regret: f64,
+}
+
+/// Every seed's judged updates with their regrets, printed as a table.
+fn judge(name: &str) -> Vec<Judged> {
+    let truth = truth(name);
+    let best = truth.best().expect("candidates");
+    eprintln!("{name}: best ν {} c {}", best.nu, best.connections);
+    eprintln!("| scene | seed | update | ν | c | mean χ | regret | regret, cost model |");
+    let mut judged = Vec::new();
+    for seed in SEEDS {
+        let updates = judged_updates(name, seed);
+        assert_eq!(updates.len(), JUDGED.len(), "{name}, seed {seed}: updates after 4 and 16 iterations");
+        for report in updates {
+            let regret = truth.regret(report.nu, report.connections).expect("the decision is a candidate");
+            let model = truth.model_regret(report.nu, report.connections).expect("the decision is a candidate");
+            let line = format!(
+                "| {name} | {seed} | {} | {} | {} | {:.3} | {regret:.3} | {model:.3} |",
+                report.iteration, report.nu, report.connections, report.mean_merge_probability
+            );
+            eprintln!("{line}");
+            if std::env::var("EMIS_DIAG").is_ok() {
+                print_predictions(&truth, &report);
+            }
+            judged.push(Judged { report, line, regret });
+        }
+    }
+    judged
+}
+
+/// Every candidate's predicted relative moment × cost at an update beside its truth, for
+/// finding out why a decision went wrong (`EMIS_DIAG=1`).
+fn print_predictions(truth: &SceneTruth, report: &UpdateReport) {
+    for c in &report.candidates {
+        let t = truth.candidate(c.nu, c.connections).expect("the prediction is a candidate");
+        eprintln!(
+            "  update {} ν {} c {}: predicted {:.3e} × cost {:.2} = {:.3e}; truth {:.3e} × {:.2} ms, regret {:.2}",
+            report.iteration,
+            c.nu,
+            c.connections,
+            c.relative_moment,
+            c.cost,
+            c.work_normalised,
+            t.relative_variance,
+            t.seconds * 1e3,
+            truth.regret(c.nu, c.connections).unwrap_or(f64::NAN)
+        );
+    }
+}
+
+/// Fails with every judged update whose regret is above [`MAX_REGRET`].
+fn assert_regrets(name: &str, judged: &[Judged]) {
+    let failures: Vec<&str> = judged.iter().filter(|j| j.regret > MAX_REGRET).map(|j| j.line.as_str()).collect();
+    assert!(failures.is_empty(), "{name}: regret above {MAX_REGRET}:\n{}", failures.join("\n"));
+}
+
+/// Light paths are essential: a caustic seen directly and through glass.
+#[test]
+fn caustic_glass_decisions_are_near_the_best_and_keep_light_paths() {
+    let judged = judge("caustic-glass");
+    for j in &judged {
+        assert!(j.report.nu > 0.0, "caustic-glass: path tracing chosen: {}", j.line);
+    }
+    assert_regrets("caustic-glass", &judged);
+}
+
+/// In between: diffuse interreflection, where light tracing and connections help a little.
+#[test]
+fn cornell_box_decisions_are_near_the_best() {
+    assert_regrets("cornell-box", &judge("cornell-box"));
+}
+
+/// Path tracing wins: glossy plates lit by small lights, where light paths add cost but
+/// little variance reduction. Merging should be almost nowhere: mean χ below 0.05. One pixel
+/// whose merge bit wins becomes, dilated (radius 16) and blurred, a spot worth 33² pixels of
+/// χ, 0.066 of a 128² image (less where the border clips it), so the bound allows at most
+/// such a clipped spot.
+#[test]
+fn veach_mis_decisions_are_near_the_best_and_merge_almost_nowhere() {
+    let judged = judge("veach-mis");
+    for j in &judged {
+        assert!(j.report.mean_merge_probability < 0.05, "veach-mis: merging: {}", j.line);
+    }
+    assert_regrets("veach-mis", &judged);
+}

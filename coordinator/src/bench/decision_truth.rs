@@ -1,0 +1,280 @@
+//! `tessera bench decision-truth`: the brute-force truth of the decision-quality tests
+//! (`common/tests/emis_decisions.rs`; docs/decisions/0018-decision-quality-tests.md), written
+//! as the small JSON file the tests read ([`DecisionTruth`]).
+//!
+//! Per scene, rendered at `--size` (square; the 256² Mitsuba reference is averaged over
+//! 2 × 2 blocks, exact for its box filter):
+//!
+//! 1. a `vcm` pilot (ν = 1, c = 1, χ = 1) collects every candidate's moments for `--pilot`
+//!    iterations; the optimiser's pixel level turns them, with the converged reference as Ī,
+//!    into the merge mask every bidirectional candidate below renders with (the image-level
+//!    choice is judged with the mask held fixed; the tests check the mask on its own);
+//! 2. every image-level candidate of `emis-vcm` (25 (ν, c) and path tracing) renders
+//!    `iterations` iterations, one call each, and its per-pixel per-iteration variance
+//!    relative to the reference is averaged as relMSE averages: the relMSE × iterations it
+//!    converges to, free of the reference's own noise and of bias;
+//! 3. each candidate is timed (CPU seconds per iteration) the way a final pass renders it,
+//!    in [`FINAL_ITERATIONS_PER_CALL`] calls, path tracing by `pt`, on `--timing-threads`
+//!    threads (one by default: CPU time then counts no thread waiting at a barrier for a
+//!    sibling that another process descheduled); rounds alternate over the candidates and the
+//!    least time counts, as the machine's load drifts.
+//!
+//! Seconds are measured once here and cached, because a test that times renders on a shared
+//! machine is not reproducible.
+
+use super::{SceneArgs, cpu_seconds};
+use crate::options::scene_name;
+use anyhow::{Context, bail};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth};
+use tessera_common::emis::denoise::DenoiseSettings;
+use tessera_common::emis::filter::Image;
+use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::{
+    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, render_iterations,
+};
+use tessera_common::film::Film;
+use tessera_common::film::compare::relmse;
+use tessera_common::integrator::PathSettings;
+use tessera_common::integrator::path::merge::MergeMask;
+use tessera_common::scene::Scene;
+
+/// Arguments of `tessera bench decision-truth`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DecisionTruthArgs {
+    /// Scenes and threads.
+    #[command(flatten)]
+    pub scenes: SceneArgs,
+    /// Side of the square image the scenes are rendered at.
+    #[arg(long, default_value_t = 128)]
+    pub size: u32,
+    /// Iterations each candidate renders for its variance.
+    #[arg(long, default_value_t = 256)]
+    pub iterations: u32,
+    /// Iterations of the pilot that chooses the merge mask.
+    #[arg(long, default_value_t = 64)]
+    pub pilot: u32,
+    /// Iterations per timing round.
+    #[arg(long, default_value_t = 32)]
+    pub timed: u32,
+    /// Timing rounds over all candidates.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
+    /// Threads of the timing renders.
+    #[arg(long, default_value_t = 1)]
+    pub timing_threads: usize,
+    /// The JSON file to write.
+    #[arg(long, short = 'o', default_value = "common/tests/data/emis-decision-truth.json")]
+    pub output: PathBuf,
+}
+
+/// One scene at the benchmark's size with its reference.
+struct Subject {
+    name: String,
+    scene: Scene,
+    settings: PathSettings,
+    reference: Vec<[f32; 3]>,
+    config: EmisConfig,
+}
+
+impl Subject {
+    fn load(path: &Path, size: u32) -> anyhow::Result<Subject> {
+        let scene = Scene::load(path)?;
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        if !scene.film.filter.is_box() || w % size != 0 || h != w {
+            bail!("{}: needs a square box-filtered film that {size} divides, not {w}×{h}", path.display());
+        }
+        let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+        let scene = scene.with_resolution(size, size).context("same proportions")?;
+        let reference = downsample(&reference.pixels, w as usize, (w / size) as usize);
+        let settings = PathSettings::from_scene(&scene, None);
+        Ok(Subject { name: scene_name(path), scene, settings, reference, config: EmisConfig::new(EmisMethod::Vcm) })
+    }
+
+    fn pixels(&self) -> u32 {
+        self.scene.camera.width * self.scene.camera.height
+    }
+}
+
+/// A `side × side` image averaged over `factor × factor` blocks: with a box filter each
+/// pixel of the smaller image is exactly the mean of its block.
+fn downsample(pixels: &[[f32; 3]], side: usize, factor: usize) -> Vec<[f32; 3]> {
+    let small = side / factor;
+    let mut out = vec![[0.0f32; 3]; small * small];
+    for y in 0..side {
+        for x in 0..side {
+            let o = &mut out[(y / factor) * small + x / factor];
+            for c in 0..3 {
+                o[c] += pixels[y * side + x][c] / (factor * factor) as f32;
+            }
+        }
+    }
+    out
+}
+
+/// The fixed merge mask, and the cost model's image-level cost of each (ν, c) with it, in the
+/// optimiser's order of groups.
+fn reference_decision(s: &Subject, iterations: u32, pool: &rayon::ThreadPool) -> (Vec<f32>, Vec<(f32, u32, f64)>) {
+    let (w, h) = (s.scene.camera.width as usize, s.scene.camera.height as usize);
+    let pilot = Strategy::pilot(EmisMethod::Vcm);
+    let (_, data) = pool.install(|| {
+        render_iterations(&s.scene, s.settings, &s.config, &pilot, 7, 0..iterations, Some(CandidateSet::Full))
+    });
+    let data = data.expect("invariant: the pilot collects moments");
+    let intensity = Image::from_data(w, h, s.reference.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect())
+        .box_blur(DenoiseSettings::default().final_box);
+    let candidates = s.config.candidates_of(CandidateSet::Full);
+    let decision = pool.install(|| {
+        optimize(&OptimizerInput {
+            candidates: &candidates,
+            moments: &data.moments,
+            image: &intensity,
+            statistics: data.statistics.statistics(s.pixels()),
+            constants: s.config.constants,
+            filters: s.config.filters,
+            merge_scope: MergeScope::PerPixel,
+        })
+    });
+    let costs = decision.scores.iter().map(|g| (g.nu, g.connections, g.cost)).collect();
+    (decision.merge_mask.data, costs)
+}
+
+fn strategy(nu: f32, connections: u32, mask: &Arc<Vec<f32>>) -> Strategy {
+    if nu == 0.0 {
+        return Strategy::path_tracing();
+    }
+    Strategy { nu, connections, merge: Some(MergeMask::PerPixel(mask.clone())) }
+}
+
+/// Per-iteration variance relative to the reference from `iterations` single-iteration
+/// renders: the whole run's, each half's, and relMSE × iterations of the mean image.
+fn relative_variance(
+    s: &Subject,
+    strategy: &Strategy,
+    iterations: u32,
+    pool: &rayon::ThreadPool,
+) -> (f64, [f64; 2], f64) {
+    let n = s.reference.len();
+    // per half: Σx and Σx² per pixel and channel
+    let mut sums = [vec![[0.0f64; 6]; n], vec![[0.0f64; 6]; n]];
+    for it in 0..iterations {
+        let (accum, _) =
+            pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 1000, it..it + 1, None));
+        let mut film = Film::new(&s.scene.film);
+        film.merge_tile(&accum);
+        let half = &mut sums[(2 * it / iterations) as usize];
+        for (acc, p) in half.iter_mut().zip(film.average()) {
+            for c in 0..3 {
+                acc[c] += p[c] as f64;
+                acc[3 + c] += (p[c] as f64).powi(2);
+            }
+        }
+    }
+    let variance = |parts: &[&Vec<[f64; 6]>], k: f64| -> f64 {
+        let mut total = 0.0;
+        for (j, r) in s.reference.iter().enumerate() {
+            for c in 0..3 {
+                let (sx, sxx) = parts.iter().fold((0.0, 0.0), |(a, b), part| (a + part[j][c], b + part[j][3 + c]));
+                let var = ((sxx - sx * sx / k) / (k - 1.0)).max(0.0);
+                total += var / ((r[c] as f64).powi(2) + 1e-4);
+            }
+        }
+        total / (3 * n) as f64
+    };
+    let half = (iterations / 2) as f64;
+    let whole = variance(&[&sums[0], &sums[1]], iterations as f64);
+    let halves = [variance(&[&sums[0]], half), variance(&[&sums[1]], iterations as f64 - half)];
+    let mean: Vec<[f32; 3]> =
+        (0..n).map(|j| std::array::from_fn(|c| ((sums[0][j][c] + sums[1][j][c]) / iterations as f64) as f32)).collect();
+    (whole, halves, relmse(&mean, &s.reference, 0.0) * iterations as f64)
+}
+
+/// CPU seconds per iteration of `strategy`, rendered as a final pass renders it.
+fn seconds_per_iteration(s: &Subject, strategy: &Strategy, iterations: u32, pool: &rayon::ThreadPool) -> f64 {
+    let started = cpu_seconds();
+    let mut done = 0;
+    while done < iterations {
+        let count = FINAL_ITERATIONS_PER_CALL.min(iterations - done);
+        pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 2000, done..done + count, None));
+        done += count;
+    }
+    (cpu_seconds() - started) / iterations as f64
+}
+
+fn measure_scene(s: &Subject, args: &DecisionTruthArgs, pool: &rayon::ThreadPool) -> anyhow::Result<SceneTruth> {
+    let (mask, groups) = reference_decision(s, args.pilot, pool);
+    let timing = rayon::ThreadPoolBuilder::new().num_threads(args.timing_threads).build()?;
+    let mean_merge_probability = mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len() as f64;
+    let mask = Arc::new(mask);
+    let mut seconds = vec![f64::INFINITY; groups.len()];
+    for _ in 0..args.rounds {
+        for (t, &(nu, connections, _)) in seconds.iter_mut().zip(&groups) {
+            *t = t.min(seconds_per_iteration(s, &strategy(nu, connections, &mask), args.timed, &timing));
+        }
+    }
+    let candidates = groups
+        .iter()
+        .zip(&seconds)
+        .map(|(&(nu, connections, model_cost), &seconds)| {
+            let (relative_variance, relative_variance_halves, relmse_k) =
+                relative_variance(s, &strategy(nu, connections, &mask), args.iterations, pool);
+            let c = CandidateTruth {
+                nu,
+                connections,
+                relative_variance,
+                relative_variance_halves,
+                relmse_k,
+                seconds,
+                model_cost,
+            };
+            println!(
+                "| {} | {nu} | {connections} | {:.4e} | {:.4e} {:.4e} | {:.4e} | {:.3} | {:.2} | {:.4e} |",
+                s.name,
+                c.relative_variance,
+                c.relative_variance_halves[0],
+                c.relative_variance_halves[1],
+                c.relmse_k,
+                c.seconds * 1e3,
+                c.model_cost,
+                c.work_normalised()
+            );
+            c
+        })
+        .collect();
+    Ok(SceneTruth { scene: s.name.clone(), mean_merge_probability, candidates })
+}
+
+/// Runs `tessera bench decision-truth`.
+pub fn run(args: &DecisionTruthArgs) -> anyhow::Result<()> {
+    let pool = args.scenes.pool()?;
+    if args.iterations < 4 {
+        bail!("--iterations must be at least 4, for two halves with a variance each");
+    }
+    let mut truth = DecisionTruth {
+        width: args.size,
+        height: args.size,
+        iterations: args.iterations,
+        timed_iterations: args.timed,
+        pilot_iterations: args.pilot,
+        command: std::env::args().skip(1).collect::<Vec<_>>().join(" "),
+        scenes: Vec::new(),
+    };
+    println!("| scene | ν | c | relative variance | halves | relMSE × K | ms/iteration | model cost | relMSE × time |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for path in args.scenes.scenes()? {
+        let subject = Subject::load(&path, args.size)?;
+        let scene = measure_scene(&subject, args, &pool)?;
+        if let Some(best) = scene.best() {
+            println!(
+                "{}: best ν {} c {}, mask mean χ {:.3}",
+                scene.scene, best.nu, best.connections, scene.mean_merge_probability
+            );
+        }
+        truth.scenes.push(scene);
+    }
+    let json = serde_json::to_string_pretty(&truth)?;
+    std::fs::write(&args.output, json + "\n").with_context(|| format!("writing {}", args.output.display()))?;
+    println!("wrote {}", args.output.display());
+    Ok(())
+}
