@@ -142,10 +142,10 @@ fn cornell_box_decisions_are_near_the_best() {
 }
 
 /// Path tracing wins: glossy plates lit by small lights, where light paths add cost but
-/// little variance reduction. Merging should be almost nowhere: mean χ below 0.05. One pixel
-/// whose merge bit wins becomes, dilated (radius 16) and blurred, a spot worth 33² pixels of
-/// χ, 0.066 of a 128² image (less where the border clips it), so the bound allows at most
-/// such a clipped spot.
+/// little variance reduction. Merging should be almost nowhere: mean χ below 0.05, 5 % of the
+/// image. At 128² the mask's radii are 4 px (16 at 640×480, in proportion), so one pixel whose
+/// merge bit wins becomes a spot worth 9² pixels of χ, 0.005 of the image: the bound allows
+/// about ten such spots.
 #[test]
 fn veach_mis_merges_almost_nowhere() {
     for j in &judge("veach-mis") {

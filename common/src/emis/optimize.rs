@@ -6,7 +6,8 @@
 //!    the filter; the reference filters M and Ī separately and divides after).
 //! 1. Pixel level: per pixel, the candidate (ν, c, merge) minimising filtered M_j × C_j over
 //!    all candidates; its merge bit goes into a binary image that is dilated (radius 16) and
-//!    blurred (box radius 16) into χ. A pixel whose best value is 0 merges nothing.
+//!    blurred (box radius 16) into χ, both radii for 640×480 and in proportion to the image's
+//!    linear size otherwise. A pixel whose best value is 0 merges nothing.
 //! 2. Image level: per image-level candidate g = (ν, c) (and path tracing), the mean over
 //!    pixels of the relative moment M_j(g, merge_j) / (Ī_j² + 1e-4) with merge_j = χ_j > 0.1,
 //!    after zeroing values above each candidate's 99.9 % quantile, times the mean cost; the
@@ -38,9 +39,9 @@ use serde::{Deserialize, Serialize};
 pub struct FilterSettings {
     /// Box passes on each candidate's moments.
     pub moment_box: usize,
-    /// Dilation of the binary merge decisions.
+    /// Dilation of the binary merge decisions at 640×480 (see [`FilterSettings::mask_radii`]).
     pub mask_dilate: usize,
-    /// Box passes on the dilated mask.
+    /// Box passes on the dilated mask at 640×480.
     pub mask_box: usize,
     /// Quantile above which pixel moments are zeroed in the image-level sums.
     pub outlier_quantile: f64,
@@ -109,6 +110,18 @@ impl MomentFilter {
             MomentFilter::Absolute => filtered_moment,
             MomentFilter::Relative => filtered_moment / norm,
         }
+    }
+}
+
+impl FilterSettings {
+    /// The mask's dilation and box radii for a `width`×`height` image: the configured ones
+    /// (the reference's 16 px, chosen for 640×480) scaled with the image's linear size, the
+    /// square root of its pixel count over 640×480's, so that χ covers the same part of the
+    /// picture at any resolution (256²: 7 px; 1920×1080: 42 px). At least 1 where configured.
+    pub fn mask_radii(&self, width: usize, height: usize) -> (usize, usize) {
+        let scale = ((width * height) as f64 / (640.0 * 480.0)).sqrt();
+        let radius = |r: usize| if r == 0 { 0 } else { ((r as f64 * scale).round() as usize).max(1) };
+        (radius(self.mask_dilate), radius(self.mask_box))
     }
 }
 
@@ -405,7 +418,8 @@ fn pixel_level(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) 
             }
         })
         .collect();
-    Image::from_data(w, h, bits).dilate(input.filters.mask_dilate).box_blur(input.filters.mask_box)
+    let (dilate, blur) = input.filters.mask_radii(w, h);
+    Image::from_data(w, h, bits).dilate(dilate).box_blur(blur)
 }
 
 /// An image-level candidate.
