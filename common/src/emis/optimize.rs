@@ -7,7 +7,8 @@
 //! 1. Pixel level: per pixel, the candidate (ν, c, merge) minimising filtered M_j × C_j over
 //!    all candidates; its merge bit goes into a binary image that is dilated (radius 16) and
 //!    blurred (box radius 16) into χ, both radii for 640×480 and in proportion to the image's
-//!    linear size otherwise. A pixel whose best value is 0 merges nothing.
+//!    linear size otherwise (docs/decisions/0020-merge-mask-radii-scale.md). A pixel whose
+//!    best value is 0 merges nothing.
 //! 2. Image level: per image-level candidate g = (ν, c) (and path tracing), the mean over
 //!    pixels of the relative moment M_j(g, merge_j) / (Ī_j² + 1e-4) with merge_j = χ_j > 0.1,
 //!    after zeroing values above each candidate's 99.9 % quantile, times the mean cost; the
