@@ -91,3 +91,12 @@ pub fn render_emis_bdpt(scene: &Scene, iterations: u32, seed: u64, threads: usiz
 pub fn render_emis_vcm(scene: &Scene, iterations: u32, seed: u64, threads: usize) -> Film {
     render_emis_state(scene, tessera_common::emis::EmisMethod::Vcm, iterations, seed, threads).0
 }
+
+/// The mean of `v` and its standard error (sample standard deviation / √n).
+pub fn mean_and_standard_error(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = v.collect();
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}

@@ -21,7 +21,7 @@
 
 mod common;
 
-use common::scene_path;
+use common::{mean_and_standard_error, scene_path};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use tessera_common::emis::candidate::Candidate;
@@ -148,14 +148,6 @@ fn measured() -> Sums {
             })
         })
         .collect()
-}
-
-fn mean_and_standard_error(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let v: Vec<f64> = v.collect();
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, (var / n).sqrt())
 }
 
 /// The z-score of predicted against measured for the per-iteration sum over `tiles`.

@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::scene_path;
+use common::{mean_and_standard_error, scene_path};
 use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::estimator::{MomentEstimator, MomentSettings};
 use tessera_common::emis::moments::MomentBuffer;
@@ -43,14 +43,6 @@ fn per_iteration_totals(scene: &Scene, pilot: (f32, u32), candidates: &[Candidat
             (0..candidates.len()).map(|c| (0..w * h).map(|p| buffer.moment(p, c)).sum::<f64>()).collect()
         })
         .collect()
-}
-
-fn mean_and_standard_error(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let v: Vec<f64> = v.collect();
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, (var / n).sqrt())
 }
 
 #[test]
