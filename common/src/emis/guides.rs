@@ -51,6 +51,12 @@ impl GuideBuffer {
         Ok(())
     }
 
+    /// Whether every sum is +0.0 (bit for bit: a −0.0 is not, so leaving such a buffer out of
+    /// an upload and decoding it as [`GuideBuffer::new`] loses nothing).
+    pub fn is_zero(&self) -> bool {
+        self.albedo.iter().chain(&self.normal).flatten().chain(&self.depth).all(|v| v.to_bits() == 0)
+    }
+
     /// Adds another buffer of the same size.
     pub fn merge(&mut self, o: &GuideBuffer) -> Result<(), String> {
         self.check_shape(o)?;

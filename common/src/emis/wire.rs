@@ -46,22 +46,17 @@ impl Writer {
     }
 }
 
-/// The bfloat16 nearest to `x` (ties to even), as bits: the upper half of an f32. A finite
-/// `x` too large for it stays finite (the largest bfloat16): +∞ flags a candidate that cannot
-/// sample a path, which rounding must not invent.
+/// The bfloat16 nearest to `x` (ties to even), as bits. A finite `x` too large for it stays
+/// finite (the largest bfloat16): +∞ flags a candidate that cannot sample a path, which
+/// rounding must not invent.
 pub(super) fn bf16_bits(x: f32) -> u16 {
-    if x.is_nan() {
-        return 0x7FC0;
-    }
-    let bits = x.to_bits();
-    let rounded = bits.wrapping_add(0x7FFF + ((bits >> 16) & 1));
-    let out = (rounded >> 16) as u16;
-    if x.is_finite() && (out & 0x7F80) == 0x7F80 { (out & 0x8000) | 0x7F7F } else { out }
+    let b = half::bf16::from_f32(x);
+    if x.is_finite() && b.is_infinite() { half::bf16::MAX.copysign(b).to_bits() } else { b.to_bits() }
 }
 
 /// The f32 of bfloat16 `bits` (exact).
 pub(super) fn from_bf16_bits(bits: u16) -> f32 {
-    f32::from_bits((bits as u32) << 16)
+    half::bf16::from_bits(bits).to_f32()
 }
 
 /// Little-endian reader that names what ran out.
@@ -134,8 +129,7 @@ fn write_pilot(
     w.f64(statistics.photons_per_path);
     w.u32(guides.samples);
     // calls past the guide iterations carry no guides: uploads leave out their zeros
-    let zero = |v: &f32| v.to_bits() == 0;
-    let empty = guides.albedo.iter().chain(&guides.normal).flatten().chain(&guides.depth).all(zero);
+    let empty = guides.is_zero();
     if precision == SumPrecision::Bf16 {
         w.u32(u32::from(!empty));
         if empty {
@@ -221,9 +215,7 @@ impl PilotData {
     /// Bytes of [`PilotData::encode`].
     pub fn encoded_len(&self) -> usize {
         let pixels = self.moments.width as usize * self.moments.height as usize;
-        let g = &self.guides;
-        let empty = g.albedo.iter().chain(&g.normal).flatten().chain(&g.depth).all(|v| v.to_bits() == 0);
-        20 + self.moments.sums.len() * 2 + 48 + 8 + if empty { 0 } else { pixels * 7 * 4 }
+        20 + self.moments.sums.len() * 2 + 48 + 8 + if self.guides.is_zero() { 0 } else { pixels * 7 * 4 }
     }
 
     /// Decodes pilot data of a `width`×`height` image with `candidates` candidates; the error
