@@ -52,6 +52,11 @@ impl SceneCache {
         if let Err(e) = evict(&dir, limit_bytes, &HashSet::new()) {
             tracing::warn!(error = %e, "cannot trim the scene cache");
         }
+        match remove_leftovers(&dir, LEFTOVER_AGE) {
+            Ok(0) => {}
+            Ok(n) => tracing::info!(folders = n, "removed unfinished unpackings of killed workers"),
+            Err(e) => tracing::warn!(error = %e, "cannot remove unfinished unpackings"),
+        }
         SceneCache { dir, limit_bytes, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
     }
 
@@ -69,7 +74,7 @@ impl SceneCache {
             touch(&self.dir, digest);
             return Ok(scene.clone());
         }
-        let scene_file = self.unpack(client, digest).await?;
+        let scene_file = self.unpack_retrying(client, digest).await?;
         touch(&self.dir, digest);
         // the scene may name only files of its own bundle, whatever the coordinator checked
         let options = LoadOptions {
@@ -84,6 +89,25 @@ impl SceneCache {
             self.loaded.remove(0);
         }
         Ok(scene)
+    }
+
+    /// [`SceneCache::unpack`], tried again after a pause when it failed in a way that may pass
+    /// (the cache's disk, a blob corrupted in transit), so that a passing fault of this worker
+    /// does not count as a failure of the tiles it holds.
+    async fn unpack_retrying(&self, client: &mut Client, digest: &str) -> anyhow::Result<PathBuf> {
+        let mut pauses = UNPACK_RETRY_PAUSES.iter();
+        loop {
+            match self.unpack(client, digest).await {
+                Err(e) if may_pass(&e) => match pauses.next() {
+                    Some(&pause) => {
+                        tracing::warn!(bundle = digest, error = %format!("{e:#}"), retry_in_ms = pause.as_millis() as u64, "cannot unpack the bundle");
+                        tokio::time::sleep(pause).await;
+                    }
+                    None => return Err(e),
+                },
+                other => return other,
+            }
+        }
     }
 
     /// Makes sure the bundle is unpacked; returns the scene file's path.
@@ -112,6 +136,21 @@ impl SceneCache {
     }
 }
 
+/// Pauses before unpacking a bundle again after a fault that may pass.
+const UNPACK_RETRY_PAUSES: [std::time::Duration; 2] =
+    [std::time::Duration::from_millis(500), std::time::Duration::from_secs(2)];
+
+/// A fetched blob whose bytes do not match its digest.
+#[derive(Debug, thiserror::Error)]
+#[error("blob {0} arrived corrupted (digest mismatch)")]
+struct Corrupted(String);
+
+/// Whether an unpacking failure may pass when tried again: a local I/O error or a corrupted
+/// transfer, not a bad bundle nor a refusal by the coordinator.
+fn may_pass(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.is::<std::io::Error>() || c.is::<Corrupted>())
+}
+
 /// A blob fetched by digest and checked against it.
 async fn fetch_verified(client: &mut Client, digest: &str) -> anyhow::Result<Vec<u8>> {
     let mut stream = client
@@ -124,7 +163,7 @@ async fn fetch_verified(client: &mut Client, digest: &str) -> anyhow::Result<Vec
         bytes.extend_from_slice(&chunk?.data);
     }
     if tessera_proto::blob_digest(&bytes) != digest {
-        anyhow::bail!("blob {digest} arrived corrupted (digest mismatch)");
+        return Err(Corrupted(digest.to_string()).into());
     }
     Ok(bytes)
 }
@@ -158,23 +197,29 @@ impl MaskCache {
     }
 }
 
+/// Unpacks `bundle` into `<cache>/<digest>/`; returns its scene file. Files are written into a
+/// folder of a unique name and renamed into place, so that workers sharing the cache (even ones
+/// with equal process ids, as in containers) never see each other's half-written folders: the
+/// loser of a race drops its copy and uses the winner's.
 fn write_bundle(cache: &Path, digest: &str, bundle: &Bundle) -> anyhow::Result<PathBuf> {
-    let tmp = cache.join(format!(".{digest}.{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
+    let scene_rel = safe_relative_path(&bundle.scene_path)
+        .ok_or_else(|| anyhow::anyhow!("unsafe scene path {:?}", bundle.scene_path))?;
+    let tmp = tempfile::Builder::new().prefix(&format!(".{digest}.")).tempdir_in(cache)?;
     for (path, data) in &bundle.files {
         let rel = safe_relative_path(path).ok_or_else(|| anyhow::anyhow!("unsafe bundle path {path:?}"))?;
-        let p = tmp.join(rel);
-        std::fs::create_dir_all(p.parent().unwrap_or(&tmp))?;
+        let p = tmp.path().join(rel);
+        std::fs::create_dir_all(p.parent().unwrap_or(tmp.path()))?;
         std::fs::write(&p, data)?;
     }
-    safe_relative_path(&bundle.scene_path).ok_or_else(|| anyhow::anyhow!("unsafe scene path"))?;
-    std::fs::write(tmp.join(MARKER), &bundle.scene_path)?;
+    std::fs::write(tmp.path().join(MARKER), &bundle.scene_path)?;
     let dir = cache.join(digest);
-    if std::fs::rename(&tmp, &dir).is_err() {
-        // another worker process sharing the cache unpacked it first
-        let _ = std::fs::remove_dir_all(&tmp);
+    if let Err(e) = std::fs::rename(tmp.path(), &dir) {
+        // renaming onto a complete folder fails: another worker unpacked it first
+        if !dir.join(MARKER).exists() {
+            return Err(anyhow::Error::new(e).context(format!("cannot move the unpacked bundle to {}", dir.display())));
+        }
     }
-    Ok(dir.join(&bundle.scene_path))
+    Ok(dir.join(scene_rel))
 }
 
 /// An unpacked bundle in the cache folder.
@@ -212,11 +257,35 @@ pub fn evict(dir: &Path, limit_bytes: u64, in_use: &HashSet<&str>) -> std::io::R
     let gone = plan_eviction(scan(dir)?, limit_bytes, in_use);
     for digest in &gone {
         // renamed away first: a folder with its marker is always complete for another process
-        let doomed = dir.join(format!(".evict.{digest}.{}", std::process::id()));
-        std::fs::rename(dir.join(digest), &doomed)?;
-        std::fs::remove_dir_all(&doomed)?;
+        let doomed = dir.join(format!(".evict.{digest}.{}", uuid::Uuid::new_v4().simple()));
+        match std::fs::rename(dir.join(digest), &doomed) {
+            Ok(()) => std::fs::remove_dir_all(&doomed)?,
+            // another worker sharing the folder evicted it at the same time
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
     }
     Ok(gone)
+}
+
+/// Unpacking and evicting folders older than this were left by killed workers.
+const LEFTOVER_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Deletes the unpacking and evicting folders under `dir` (named with a leading dot) older
+/// than `age`, which a killed worker left behind; returns how many.
+fn remove_leftovers(dir: &Path, age: std::time::Duration) -> std::io::Result<usize> {
+    let mut removed = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let meta = entry.metadata()?;
+        let old = meta.modified()?.elapsed().is_ok_and(|a| a >= age);
+        if name.starts_with('.') && meta.is_dir() && old {
+            std::fs::remove_dir_all(entry.path())?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
 }
 
 /// The unpacked bundles under `dir`: folders named by a digest holding a marker.
@@ -308,5 +377,41 @@ mod tests {
         assert!(evict(dir.path(), 0, &HashSet::from([digest(2).as_str()])).unwrap().is_empty());
         assert!(dir.path().join(digest(2)).join(MARKER).exists());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2, "no evicted leftovers");
+        // the unfinished unpacking is a killed worker's leftover once old enough
+        assert_eq!(remove_leftovers(dir.path(), Duration::from_secs(3600)).unwrap(), 0);
+        assert_eq!(remove_leftovers(dir.path(), Duration::ZERO).unwrap(), 1);
+        assert!(dir.path().join(digest(2)).join(MARKER).exists());
+    }
+
+    /// Workers sharing a cache folder unpack the same bundle at once: each gets the complete
+    /// scene. Threads of one process stand in for containers, whose workers all have pid 1.
+    #[test]
+    fn concurrent_unpacking_of_one_bundle_always_gives_a_complete_folder() {
+        let files: Vec<(String, Vec<u8>)> = std::iter::once(("scene.xml".to_string(), b"<scene/>".to_vec()))
+            .chain((0..40).map(|i| (format!("meshes/m{i}.obj"), vec![i as u8; 4096])))
+            .collect();
+        let bundle = Bundle { scene_path: "scene.xml".into(), files };
+        for round in 0..20u8 {
+            let dir = tempfile::tempdir().unwrap();
+            let d = digest(round);
+            let barrier = std::sync::Barrier::new(6);
+            std::thread::scope(|s| {
+                let runs: Vec<_> = (0..6)
+                    .map(|_| {
+                        s.spawn(|| {
+                            barrier.wait();
+                            write_bundle(dir.path(), &d, &bundle)
+                        })
+                    })
+                    .collect();
+                for run in runs {
+                    let scene = run.join().unwrap().expect("every worker gets the bundle");
+                    assert_eq!(std::fs::read(&scene).unwrap(), b"<scene/>");
+                    assert_eq!(std::fs::read(dir.path().join(&d).join("meshes/m39.obj")).unwrap(), vec![39u8; 4096]);
+                }
+            });
+            let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+            assert_eq!(left, vec![std::ffi::OsString::from(&d)], "only the bundle's folder is left");
+        }
     }
 }
