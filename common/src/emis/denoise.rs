@@ -202,25 +202,24 @@ impl<'a> Pass<'a> {
                     }
                 }
                 power(cosine, s.normal_power, weight);
+                let (ep, eq) = (&g.escaped[p.clone()][..len], &g.escaped[q.clone()][..len]);
                 for (w, e) in weight.iter_mut().zip(exponent.iter()) {
                     *w *= e.exp();
                 }
                 let kernel = kx * ky;
-                let (ep, eq) = (&g.escaped[p.clone()][..len], &g.escaped[q.clone()][..len]);
                 let c = img.each_ref().map(|v| &v[q.clone()][..len]);
                 let [sr, sg, sb] = &mut scratch.sum;
                 let (sr, sg, sb) = (&mut sr[x0..x1][..len], &mut sg[x0..x1][..len], &mut sb[x0..x1][..len]);
                 let sw = &mut scratch.weight_sum[x0..x1][..len];
                 for x in 0..len {
                     // escaped pixels mix with escaped pixels only
-                    let w = if ep[x] + eq[x] > 0.0 { ep[x] * eq[x] } else { weight[x] };
+                    let w = blend(ep[x] + eq[x] > 0.0, ep[x] * eq[x], weight[x]);
                     let k = kernel * w;
-                    if k > 0.0 {
-                        sr[x] += k * c[0][x];
-                        sg[x] += k * c[1][x];
-                        sb[x] += k * c[2][x];
-                        sw[x] += k;
-                    }
+                    let add = k > 0.0;
+                    sr[x] = blend(add, sr[x] + k * c[0][x], sr[x]);
+                    sg[x] = blend(add, sg[x] + k * c[1][x], sg[x]);
+                    sb[x] = blend(add, sb[x] + k * c[2][x], sb[x]);
+                    sw[x] = blend(add, sw[x] + k, sw[x]);
                 }
             }
         }
@@ -233,6 +232,14 @@ impl<'a> Pass<'a> {
             (or[x], og[x], ob[x]) = (r, g, b);
         }
     }
+}
+
+/// `a` where `pick`, else `b`, by bit masks: a branch-free select that keeps the loops it is
+/// in vector code (an `if` there becomes a branch per pixel).
+#[inline(always)]
+fn blend(pick: bool, a: f32, b: f32) -> f32 {
+    let mask = 0u32.wrapping_sub(pick as u32);
+    f32::from_bits((a.to_bits() & mask) | (b.to_bits() & !mask))
 }
 
 /// |offset| of tap (i, j) in units of the step.

@@ -5,6 +5,15 @@
 //! * dilation: 3×3 maximum with out-of-image taps counting as −∞; radius r means r passes;
 //! * quantile: a linear histogram with one bin per pixel over [min, max], returning the centre
 //!   of the bin holding the requested quantile.
+//!
+//! The passes are computed as the definition says, one rounding per tap sum as in r single
+//! passes, but in an order that keeps the data in cache: all row passes of a row while it sits
+//! in L1, then all column passes of a strip of columns while it sits in L2
+//! (docs/decisions/0021-optimiser-at-1080p.md). The optimiser's moment planes use the same
+//! passes through [`PassScratch`] with hooks before and after, one plane per thread.
+
+use super::quantile::{QuantileStream, histogram_keep};
+use rayon::prelude::*;
 
 /// A single-channel image.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,62 +59,181 @@ impl Image {
     /// `radius` successive dilation passes (exactly `radius` applications of
     /// [`Image::dilate3`]).
     pub fn dilate(&self, radius: usize) -> Image {
+        if self.data.iter().all(|v| v.to_bits() == 0 || v.to_bits() == 1f32.to_bits()) {
+            return self.dilate_binary(radius);
+        }
         self.repeated(radius, Pass::Max)
     }
 
-    fn repeated(&self, radius: usize, pass: Pass) -> Image {
-        use rayon::prelude::*;
+    /// [`Image::dilate`] of an image of +0 and 1 only: a pixel becomes 1 where a 1 lies within
+    /// `radius` rows and columns of it, which is what `radius` max passes give, with a
+    /// running count instead of a pass per radius.
+    fn dilate_binary(&self, radius: usize) -> Image {
         let (w, h) = (self.width, self.height);
         if radius == 0 || w == 0 || h == 0 {
             return self.clone();
         }
-        let mut data = self.data.clone();
-        data.par_chunks_mut(w).for_each(|row| {
-            let mut tmp = vec![0.0f32; w];
-            for _ in 0..radius {
-                pass.row(row, &mut tmp);
-                row.copy_from_slice(&tmp);
+        let mut rows = self.data.clone();
+        rows.par_chunks_mut(w).for_each(|row| {
+            let ones: Vec<u32> = std::iter::once(0)
+                .chain(row.iter().scan(0u32, |n, &v| {
+                    *n += (v == 1.0) as u32;
+                    Some(*n)
+                }))
+                .collect();
+            for (x, v) in row.iter_mut().enumerate() {
+                let (a, b) = (x.saturating_sub(radius), (x + radius + 1).min(w));
+                *v = if ones[b] > ones[a] { 1.0 } else { 0.0 };
             }
         });
-        let mut next = vec![0.0f32; w * h];
-        for _ in 0..radius {
-            next.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-                let here = &data[y * w..(y + 1) * w];
-                let up = y.checked_sub(1).map(|u| &data[u * w..(u + 1) * w]);
-                let down = (y + 1 < h).then(|| &data[(y + 1) * w..(y + 2) * w]);
-                pass.rows(up, here, down, out);
-            });
-            std::mem::swap(&mut data, &mut next);
+        // per column, the count of ones in the rows above each row
+        let mut above = vec![0u32; (h + 1) * w];
+        for y in 0..h {
+            let (done, next) = above.split_at_mut((y + 1) * w);
+            for ((n, &prev), &v) in next[..w].iter_mut().zip(&done[y * w..]).zip(&rows[y * w..(y + 1) * w]) {
+                *n = prev + (v == 1.0) as u32;
+            }
         }
+        let mut data = vec![0.0f32; w * h];
+        data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            let (a, b) = (y.saturating_sub(radius), (y + radius + 1).min(h));
+            for ((v, &top), &bottom) in out.iter_mut().zip(&above[a * w..]).zip(&above[b * w..(b + 1) * w]) {
+                *v = if bottom > top { 1.0 } else { 0.0 };
+            }
+        });
+        Image { width: w, height: h, data }
+    }
+
+    /// `radius` passes of `pass`: the rows in parallel, then strips of columns in parallel.
+    fn repeated(&self, radius: usize, pass: Pass) -> Image {
+        let (w, h) = (self.width, self.height);
+        if radius == 0 || w == 0 || h == 0 {
+            return self.clone();
+        }
+        let mut rows = self.data.clone();
+        rows.par_chunks_mut(w).for_each_init(|| vec![0.0f32; w], |tmp, row| pass.rows_in_place(row, tmp, radius));
+        let strips: Vec<Vec<f32>> = (0..w.div_ceil(STRIP))
+            .into_par_iter()
+            .map_init(PassScratch::default, |scratch, s| {
+                let x0 = s * STRIP;
+                scratch.columns(&rows, w, h, x0..(x0 + STRIP).min(w), radius, pass).to_vec()
+            })
+            .collect();
+        let mut data = vec![0.0f32; w * h];
+        data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            for (s, strip) in strips.iter().enumerate() {
+                let x0 = s * STRIP;
+                let sw = (x0 + STRIP).min(w) - x0;
+                out[x0..x0 + sw].copy_from_slice(&strip[y * sw..(y + 1) * sw]);
+            }
+        });
         Image { width: w, height: h, data }
     }
 
     /// The `q` quantile (0..1) by a linear histogram with one bin per pixel over [min, max],
     /// returning the centre of the bin (the reference implementation's approximation).
     pub fn histogram_quantile(&self, q: f64) -> f32 {
-        let finite = || self.data.iter().copied().filter(|v| v.is_finite());
-        let (lo, hi, n) = finite().fold((f32::MAX, f32::MIN, 0usize), |(a, b, n), v| (a.min(v), b.max(v), n + 1));
-        if n == 0 {
-            return 0.0;
+        let mut stream = QuantileStream::new(histogram_keep(q, self.data.len()));
+        for chunk in self.data.chunks(STRIP) {
+            stream.push_slice(chunk);
         }
-        if hi <= lo {
-            return lo;
+        stream.histogram_quantile(q).unwrap_or_else(|| histogram_quantile_by_counts(&self.data, q))
+    }
+}
+
+/// [`Image::histogram_quantile`] by its definition: count every finite value into its bin.
+/// What [`QuantileStream`] falls back on when it kept too few values to answer.
+pub(crate) fn histogram_quantile_by_counts(data: &[f32], q: f64) -> f32 {
+    let finite = || data.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi, n) = finite().fold((f32::MAX, f32::MIN, 0usize), |(a, b, n), v| (a.min(v), b.max(v), n + 1));
+    if n == 0 {
+        return 0.0;
+    }
+    if hi <= lo {
+        return lo;
+    }
+    let bins = n;
+    let width = (hi - lo) as f64 / bins as f64;
+    let mut counts = vec![0u32; bins];
+    for v in finite() {
+        counts[(((v - lo) as f64 / width) as usize).min(bins - 1)] += 1;
+    }
+    let target = (q * n as f64).ceil().max(1.0) as u64;
+    let mut acc = 0u64;
+    for (i, &c) in counts.iter().enumerate() {
+        acc += c as u64;
+        if acc >= target {
+            return (lo as f64 + (i as f64 + 0.5) * width) as f32;
         }
-        let bins = n;
-        let width = (hi - lo) as f64 / bins as f64;
-        let mut counts = vec![0u32; bins];
-        for v in finite() {
-            counts[(((v - lo) as f64 / width) as usize).min(bins - 1)] += 1;
+    }
+    hi
+}
+
+/// Columns per strip of the column passes: a strip of a 1080-row image and its second buffer
+/// (2 × 276 KB) stay in a core's L2.
+pub(crate) const STRIP: usize = 64;
+
+/// One thread's buffers for filter passes.
+#[derive(Default)]
+pub(crate) struct PassScratch {
+    row: Vec<f32>,
+    strip: [Vec<f32>; 2],
+}
+
+impl PassScratch {
+    /// `radius` box passes over a `w`×`h` plane in place, with `before` applied to each row
+    /// (`y`, the row) ahead of the row passes and `after` to each row segment (`y`, its first
+    /// column, the segment) of the result before it is stored.
+    pub(crate) fn box_blur_in_place(
+        &mut self,
+        data: &mut [f32],
+        (w, h): (usize, usize),
+        radius: usize,
+        mut before: impl FnMut(usize, &mut [f32]),
+        mut after: impl FnMut(usize, usize, &mut [f32]),
+    ) {
+        if w == 0 || h == 0 {
+            return;
         }
-        let target = (q * n as f64).ceil().max(1.0) as u64;
-        let mut acc = 0u64;
-        for (i, &c) in counts.iter().enumerate() {
-            acc += c as u64;
-            if acc >= target {
-                return (lo as f64 + (i as f64 + 0.5) * width) as f32;
+        self.row.resize(w, 0.0);
+        for (y, row) in data.chunks_exact_mut(w).enumerate() {
+            before(y, row);
+            Pass::Mean.rows_in_place(row, &mut self.row, radius);
+        }
+        for x0 in (0..w).step_by(STRIP) {
+            let x1 = (x0 + STRIP).min(w);
+            let sw = x1 - x0;
+            let result = self.columns(data, w, h, x0..x1, radius, Pass::Mean);
+            for (y, (seg, out)) in result.chunks_exact_mut(sw).zip(data.chunks_exact_mut(w)).enumerate() {
+                after(y, x0, seg);
+                out[x0..x1].copy_from_slice(seg);
             }
         }
-        hi
+    }
+
+    /// `radius` passes down the columns `xs` of the `w`-wide `data` with `h` rows; the result,
+    /// `h` rows of `xs.len()`, in one of the strip buffers.
+    fn columns(
+        &mut self,
+        data: &[f32],
+        w: usize,
+        h: usize,
+        xs: std::ops::Range<usize>,
+        radius: usize,
+        pass: Pass,
+    ) -> &mut [f32] {
+        let sw = xs.len();
+        let [a, b] = &mut self.strip;
+        a.resize(sw * h, 0.0);
+        b.resize(sw * h, 0.0);
+        for (dst, src) in a.chunks_exact_mut(sw).zip(data.chunks_exact(w)) {
+            dst.copy_from_slice(&src[xs.clone()]);
+        }
+        for _ in 0..radius {
+            pass.columns(a, b, sw);
+            std::mem::swap(a, b);
+        }
+        a
     }
 }
 
@@ -117,52 +245,83 @@ enum Pass {
 }
 
 impl Pass {
-    #[inline]
-    fn three(self, a: f32, b: f32, c: f32) -> f32 {
-        match self {
-            Pass::Mean => (a + b + c) / 3.0,
-            Pass::Max => a.max(b).max(c),
+    /// `radius` passes along `row` in place (`tmp`: a row of scratch).
+    fn rows_in_place(self, row: &mut [f32], tmp: &mut [f32], radius: usize) {
+        let tmp = &mut tmp[..row.len()];
+        for _ in 0..radius / 2 {
+            self.row(row, tmp);
+            self.row(tmp, row);
         }
-    }
-
-    #[inline]
-    fn two(self, a: f32, b: f32) -> f32 {
-        match self {
-            Pass::Mean => (a + b) / 2.0,
-            Pass::Max => a.max(b),
+        if radius % 2 == 1 {
+            self.row(row, tmp);
+            row.copy_from_slice(tmp);
         }
     }
 
     /// One pass along a row.
     fn row(self, row: &[f32], out: &mut [f32]) {
-        let w = row.len();
-        if w == 1 {
-            out[0] = row[0];
-            return;
+        match self {
+            Pass::Mean => row_pass(row, out, |a, b, c| (a + b + c) / 3.0, |a, b| (a + b) / 2.0),
+            Pass::Max => row_pass(row, out, |a, b, c| a.max(b).max(c), |a, b| a.max(b)),
         }
-        out[0] = self.two(row[0], row[1]);
-        for x in 1..w - 1 {
-            out[x] = self.three(row[x - 1], row[x], row[x + 1]);
-        }
-        out[w - 1] = self.two(row[w - 2], row[w - 1]);
     }
 
-    /// One pass across rows: `out` from the rows above, here and below.
-    fn rows(self, up: Option<&[f32]>, here: &[f32], down: Option<&[f32]>, out: &mut [f32]) {
-        match (up, down) {
-            (Some(u), Some(d)) => {
-                for x in 0..here.len() {
-                    out[x] = self.three(u[x], here[x], d[x]);
-                }
-            }
-            (Some(o), None) | (None, Some(o)) => {
-                for x in 0..here.len() {
-                    out[x] = self.two(o[x], here[x]);
-                }
-            }
-            (None, None) => out.copy_from_slice(here),
+    /// One pass down the columns of `src` (rows of `sw`) into `dst`.
+    fn columns(self, src: &[f32], dst: &mut [f32], sw: usize) {
+        match self {
+            Pass::Mean => column_pass(src, dst, sw, |a, b, c| (a + b + c) / 3.0, |a, b| (a + b) / 2.0),
+            Pass::Max => column_pass(src, dst, sw, |a, b, c| a.max(b).max(c), |a, b| a.max(b)),
         }
     }
+}
+
+/// One pass along a row: `three(left, centre, right)` inside, `two` of the two taps at the
+/// ends (slices zipped so that the loop has no bounds checks and compiles to vector code).
+#[inline(always)]
+fn row_pass(row: &[f32], out: &mut [f32], three: impl Fn(f32, f32, f32) -> f32, two: impl Fn(f32, f32) -> f32) {
+    let w = row.len();
+    if w == 1 {
+        out[0] = row[0];
+        return;
+    }
+    out[0] = two(row[0], row[1]);
+    for (o, ((&l, &c), &r)) in out[1..w - 1].iter_mut().zip(row.iter().zip(&row[1..]).zip(&row[2..])) {
+        *o = three(l, c, r);
+    }
+    out[w - 1] = two(row[w - 2], row[w - 1]);
+}
+
+/// One pass down the columns of a strip: `three(up, here, down)` inside, `two(neighbour,
+/// here)` in the first and last rows.
+#[inline(always)]
+fn column_pass(
+    src: &[f32],
+    dst: &mut [f32],
+    sw: usize,
+    three: impl Fn(f32, f32, f32) -> f32,
+    two: impl Fn(f32, f32) -> f32,
+) {
+    let h = src.len() / sw;
+    if h == 1 {
+        dst.copy_from_slice(src);
+        return;
+    }
+    let edge = |o: &[f32], here: &[f32], out: &mut [f32]| {
+        for ((d, &o), &c) in out.iter_mut().zip(o).zip(here) {
+            *d = two(o, c);
+        }
+    };
+    edge(&src[sw..2 * sw], &src[..sw], &mut dst[..sw]);
+    for ((out, up), (here, down)) in dst[sw..(h - 1) * sw]
+        .chunks_exact_mut(sw)
+        .zip(src.chunks_exact(sw))
+        .zip(src[sw..].chunks_exact(sw).zip(src[2 * sw..].chunks_exact(sw)))
+    {
+        for (((d, &u), &c), &n) in out.iter_mut().zip(up).zip(here).zip(down) {
+            *d = three(u, c, n);
+        }
+    }
+    edge(&src[(h - 2) * sw..(h - 1) * sw], &src[(h - 1) * sw..], &mut dst[(h - 1) * sw..]);
 }
 
 #[cfg(test)]
@@ -218,6 +377,64 @@ mod tests {
             assert!((a - b).abs() <= 1e-5 * b.abs().max(1.0), "{a} vs {b}");
         }
         assert_eq!(img.dilate(2), img.dilate3().dilate3());
+    }
+
+    /// The definition: `radius` row passes over the whole image, then `radius` column passes,
+    /// one pass at a time.
+    fn passes_one_by_one(img: &Image, radius: usize, pass: Pass) -> Image {
+        let (w, h) = (img.width, img.height);
+        let mut data = img.data.clone();
+        for _ in 0..radius {
+            for row in data.chunks_exact_mut(w) {
+                let mut out = vec![0.0; w];
+                pass.row(row, &mut out);
+                row.copy_from_slice(&out);
+            }
+        }
+        for _ in 0..radius {
+            let prev = data.clone();
+            for y in 0..h {
+                for x in 0..w {
+                    let at = |y: usize| prev[y * w + x];
+                    let three = |a: f32, b: f32, c: f32| match pass {
+                        Pass::Mean => (a + b + c) / 3.0,
+                        Pass::Max => a.max(b).max(c),
+                    };
+                    let two = |a: f32, b: f32| match pass {
+                        Pass::Mean => (a + b) / 2.0,
+                        Pass::Max => a.max(b),
+                    };
+                    data[y * w + x] = match (y > 0, y + 1 < h) {
+                        (true, true) => three(at(y - 1), at(y), at(y + 1)),
+                        (true, false) => two(at(y - 1), at(y)),
+                        (false, true) => two(at(y + 1), at(y)),
+                        (false, false) => at(y),
+                    };
+                }
+            }
+        }
+        Image::from_data(w, h, data)
+    }
+
+    /// Rows wider than a strip and not a multiple of it, single rows and columns, radii 0 to
+    /// 9: the cache-ordered passes give the one-by-one passes' values bit for bit, and the
+    /// binary dilation the max passes' values.
+    #[test]
+    fn cache_ordered_passes_equal_the_definition_bit_for_bit() {
+        for (w, h) in [(1, 1), (1, 9), (9, 1), (2, 2), (STRIP + 13, 11), (3 * STRIP, 4), (37, 23)] {
+            let mut s = crate::sampler::Sampler::for_pixel(7, (w * h) as u32, 0);
+            let img = Image::from_data(w, h, (0..w * h).map(|_| (0.001 / s.next_1d().max(1e-6)).powi(2)).collect());
+            let bits = Image::from_data(w, h, (0..w * h).map(|_| (s.next_1d() < 0.05) as u8 as f32).collect());
+            for radius in [0, 1, 2, 3, 9] {
+                let expected = passes_one_by_one(&img, radius, Pass::Mean);
+                assert_eq!(img.box_blur(radius), expected, "box {w}×{h} r {radius}");
+                let mut in_place = img.clone();
+                PassScratch::default().box_blur_in_place(&mut in_place.data, (w, h), radius, |_, _| (), |_, _, _| ());
+                assert_eq!(in_place, expected, "in place {w}×{h} r {radius}");
+                assert_eq!(bits.dilate(radius), passes_one_by_one(&bits, radius, Pass::Max), "{w}×{h} r {radius}");
+                assert_eq!(img.dilate(radius), passes_one_by_one(&img, radius, Pass::Max), "{w}×{h} r {radius}");
+            }
+        }
     }
 
     #[test]

@@ -4,8 +4,8 @@
 //! between passes: the candidate strategies ([`candidate`]), the proxy weights and correction
 //! factor that re-weight a pilot sample for every candidate ([`proxy`], [`delta`]), the moment
 //! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic and its
-//! calibration ([`cost`], [`calibrate`]), the image filters and denoiser ([`filter`],
-//! [`denoise`]) and the optimiser ([`optimize`]), plus the cached brute-force truth its
+//! calibration ([`cost`], [`calibrate`]), the image filters, quantiles and denoiser ([`filter`],
+//! `quantile`, [`denoise`]) and the optimiser ([`optimize`]), plus the cached brute-force truth its
 //! decisions are tested against ([`decision_truth`]).
 //!
 //! The driver, which renders with the bidirectional integrators: strategies and iteration
@@ -27,6 +27,7 @@ pub mod guides;
 pub mod moments;
 pub mod optimize;
 pub mod proxy;
+mod quantile;
 pub mod render;
 mod state;
 mod wire;
@@ -36,3 +37,4 @@ pub use render::{
     PilotStart, Strategy, collecting_call, collects_moments, render_emis, render_iterations, render_iterations_until,
 };
 pub use state::{EmisState, UpdateReport};
+pub use wire::Decisions;

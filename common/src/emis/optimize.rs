@@ -35,6 +35,10 @@ use super::moments::MomentBuffer;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+mod planes;
+
+pub use planes::remove_shared_outliers;
+
 /// Filter radii (docs/emis.md, decision 6).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FilterSettings {
@@ -139,47 +143,6 @@ impl Default for FilterSettings {
     }
 }
 
-/// The `quantile` of the finite per-pixel relative moments `moments / norm`, exact (a
-/// selection, not a histogram: one rare sample can be 1e6 times the rest, and a histogram's
-/// bins over [min, max] would then put every other pixel in its first bin); +∞ if none is
-/// finite.
-fn relative_quantile(moments: &[f32], norm: &[f32], quantile: f64) -> f32 {
-    let mut v: Vec<f32> = moments.iter().zip(norm).map(|(&m, &n)| m / n).filter(|v| v.is_finite()).collect();
-    if v.is_empty() {
-        return f32::INFINITY;
-    }
-    let k = ((quantile * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
-    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
-}
-
-/// Takes out of every candidate's per-pixel moments, in the pixels where it is an outlier,
-/// the part all candidates share: their minimum. It is what paths only the camera's own
-/// techniques can sample contribute (δ = 1 for every candidate), which no strategy changes.
-/// Outliers are pixels whose shared relative moment is above its `quantile`, taken before the
-/// box filter spreads one rare sample over its neighbours.
-pub fn remove_shared_outliers(planes: &mut [Image], norm: &[f32], quantile: f64) {
-    // the minimum over the finite values, plane by plane over blocks of pixels (contiguous)
-    const BLOCK: usize = 4096;
-    let mut shared = vec![f32::INFINITY; norm.len()];
-    shared.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
-        for plane in planes.iter() {
-            for (s, &v) in out.iter_mut().zip(&plane.data[b * BLOCK..]) {
-                if v.is_finite() && v < *s {
-                    *s = v;
-                }
-            }
-        }
-    });
-    let threshold = relative_quantile(&shared, norm, quantile);
-    planes.par_iter_mut().for_each(|plane| {
-        for ((v, &s), &n) in plane.data.iter_mut().zip(&shared).zip(norm) {
-            if s.is_finite() && s / n > threshold && v.is_finite() {
-                *v = (*v - s).max(0.0);
-            }
-        }
-    });
-}
-
 /// Where the merge decision is made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MergeScope {
@@ -238,42 +201,6 @@ pub struct Decision {
     pub relative_moment: Image,
 }
 
-/// Every candidate's per-iteration moments as one image each, transposed from the buffer's
-/// pixel-major layout block by block (reading each candidate with a stride would touch every
-/// cache line of the buffer once per candidate).
-fn moment_planes(m: &MomentBuffer) -> Vec<Image> {
-    let (w, h, k) = (m.width as usize, m.height as usize, m.candidates);
-    let scale = if m.iterations == 0 { 0.0 } else { 1.0 / m.iterations as f32 };
-    const BLOCK: usize = 4096;
-    let blocks: Vec<Vec<f32>> = m
-        .sums
-        .par_chunks(BLOCK * k.max(1))
-        .map(|s| {
-            let n = s.len() / k.max(1);
-            let mut out = vec![0.0f32; s.len()];
-            for p in 0..n {
-                for c in 0..k {
-                    // +∞ flags stay infinite; 0 iterations give 0 for finite sums
-                    let v = s[p * k + c];
-                    out[c * n + p] = if v.is_finite() { v * scale } else { v };
-                }
-            }
-            out
-        })
-        .collect();
-    (0..k)
-        .into_par_iter()
-        .map(|c| {
-            let mut data = Vec::with_capacity(w * h);
-            for b in &blocks {
-                let n = b.len() / k;
-                data.extend_from_slice(&b[c * n..(c + 1) * n]);
-            }
-            Image::from_data(w, h, data)
-        })
-        .collect()
-}
-
 /// Runs the optimisation.
 pub fn optimize(input: &OptimizerInput) -> Decision {
     let m = input.moments;
@@ -282,12 +209,13 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     // ---- filtered moments, one image per candidate ----
     let order = input.filters.order;
     let norm: Vec<f32> = input.image.data.iter().map(|&i| i * i + 1e-4).collect();
-    let mut planes = moment_planes(m);
-    if input.filters.outliers == OutlierStage::Shared {
-        remove_shared_outliers(&mut planes, &norm, input.filters.outlier_quantile);
+    let quantile = input.filters.outlier_quantile;
+    let shared = input.filters.outliers == OutlierStage::Shared;
+    let (mut filtered, minimum) = planes::moment_planes(m, shared);
+    if let Some(minimum) = minimum {
+        planes::subtract_shared_outliers(&mut filtered, &minimum, &norm, quantile);
     }
-    let filtered: Vec<Image> =
-        planes.par_iter().map(|plane| order.filter(plane, &norm, input.filters.moment_box)).collect();
+    let thresholds = planes::filter_planes(&mut filtered, &norm, order, input.filters.moment_box, quantile);
     let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);
     // ---- pixel level: the merge bit of the best full candidate ----
     let pixel_mask = match input.merge_scope {
@@ -296,7 +224,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     };
     // ---- image level ----
     let groups = image_level_groups(input.candidates, input.merge_scope);
-    let scores = image_level_scores(input, &groups, &filtered, &norm, &costs, pixel_mask.as_ref());
+    let scores = image_level_scores(input, &groups, &filtered, &norm, &costs, pixel_mask.as_ref(), &thresholds);
     let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
         let score = |g: usize| scores[g].relative_moment * scores[g].cost;
         score(a).total_cmp(&score(b))
@@ -312,6 +240,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         w,
         h,
         (0..w * h)
+            .into_par_iter()
             .map(|p| {
                 let merge = merge_mask.data[p] > 0.1;
                 let i = input.image.data[p] as f64;
@@ -324,7 +253,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     Decision { nu, connections, merge_mask, scores, relative_moment }
 }
 
-/// Every image-level group's relative moment (outliers above each candidate's quantile
+/// Every image-level group's relative moment (outliers above each candidate's `thresholds`
 /// zeroed) and cost, each pixel taking the group's merging or non-merging variant by its χ
 /// (`pixel_mask`, or the group's own global choice).
 fn image_level_scores(
@@ -334,93 +263,142 @@ fn image_level_scores(
     norm: &[f32],
     costs: &[CostTerms],
     pixel_mask: Option<&Image>,
+    thresholds: &[f32],
 ) -> Vec<ImageLevelScore> {
-    let (w, h) = (input.moments.width as usize, input.moments.height as usize);
-    let pixels = (w * h) as f64;
-    let order = input.filters.order;
-    let thresholds: Vec<f32> = filtered
-        .par_iter()
-        .map(|img| {
-            let basis: Vec<f32> = img.data.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
-            Image::from_data(w, h, basis).histogram_quantile(input.filters.outlier_quantile)
-        })
-        .collect();
-    // χ_j of group `g` in pixel `p`
-    let chi_at = |g: &Group, p: usize| match (g.merge, pixel_mask) {
-        (Some(merge), _) => merge as u8 as f32,
-        (None, Some(mask)) => mask.data[p],
-        (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
+    // merging is accounted as binary, as its moment is: a pixel merging with χ = 0.2 is priced
+    // and judged as merging always; runs of pixels that merge alike, in pixel order
+    let n = input.image.data.len();
+    let runs: Vec<Run> = match pixel_mask {
+        Some(mask) => {
+            let mut runs: Vec<Run> = Vec::new();
+            for (p, &chi) in mask.data.iter().enumerate() {
+                let merge = chi as f64 > 0.1;
+                match runs.last_mut() {
+                    Some(run) if run.merge == merge => run.end = p + 1,
+                    _ => runs.push(Run { start: p, end: p + 1, merge }),
+                }
+            }
+            runs
+        }
+        None => Vec::new(),
     };
     // a per-pixel group builds the photon map when its mask merges anywhere, and then pays
     // for it in every pixel, merging or not
-    let map_built = |g: &Group| match (g.merge, pixel_mask) {
-        (None, Some(mask)) => mask.data.iter().any(|&chi| chi > 0.1),
-        _ => false,
-    };
+    let map_built = pixel_mask.is_some_and(|mask| mask.data.iter().any(|&chi| chi > 0.1));
     groups
         .par_iter()
         .map(|g| {
-            let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
-            let shared_build = match (map_built(g), g.variant(true)) {
-                (true, Some(on)) if input.candidates[on].merge => costs[on].build(),
-                _ => 0.0,
+            let sums = |map_built: bool, runs: &[Run]| {
+                group_sums(input, g, filtered, norm, costs, thresholds, map_built, runs)
             };
-            for p in 0..w * h {
-                // black pixels carry no relative moment, so they are left out of the cost too
-                let i = input.image.data[p] as f64;
-                if i == 0.0 {
-                    continue;
-                }
-                // merging is accounted as binary, as its moment is: a pixel merging with
-                // χ = 0.2 is priced and judged as merging always
-                let chi = chi_at(g, p) as f64;
-                let Some(c) = g.variant(chi > 0.1) else { continue };
-                let merges = input.candidates[c].merge;
-                total_cost += (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / pixels;
-                let mut moment = filtered[c].data[p];
+            let (relative_moment, cost) = match (g.merge, pixel_mask) {
+                (Some(merge), _) => sums(false, &[Run { start: 0, end: n, merge }]),
+                (None, Some(_)) => sums(map_built, &runs),
+                (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
+            };
+            ImageLevelScore { nu: g.nu, connections: g.connections, merge: g.merge, relative_moment, cost }
+        })
+        .collect()
+}
+
+/// Pixels `start..end`, which all merge or all do not.
+struct Run {
+    start: usize,
+    end: usize,
+    merge: bool,
+}
+
+/// One group's image-level sums (relative moment, cost) over `runs`, which cover the image in
+/// pixel order. Per block of pixels of a run, the terms are computed first without branches
+/// (vector code), then added in pixel order, as one sum over the pixels.
+#[allow(clippy::too_many_arguments)]
+fn group_sums(
+    input: &OptimizerInput,
+    g: &Group,
+    filtered: &[Image],
+    norm: &[f32],
+    costs: &[CostTerms],
+    thresholds: &[f32],
+    map_built: bool,
+    runs: &[Run],
+) -> (f64, f64) {
+    let image = &input.image.data;
+    let pixels = image.len() as f64;
+    let order = input.filters.order;
+    let shared_build = match (map_built, g.variant(true)) {
+        (true, Some(on)) if input.candidates[on].merge => costs[on].build(),
+        _ => 0.0,
+    };
+    const BLOCK: usize = 256;
+    let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
+    let (mut rel_terms, mut cost_terms) = ([0.0f64; BLOCK], [0.0f64; BLOCK]);
+    for run in runs {
+        // a group without the variant a pixel needs leaves the pixel out (never, as groups
+        // are built)
+        let Some(c) = g.variant(run.merge) else { continue };
+        let merges = input.candidates[c].merge;
+        let cost = (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / pixels;
+        let (plane, threshold) = (&filtered[c].data, thresholds[c]);
+        for start in (run.start..run.end).step_by(BLOCK) {
+            let range = start..(start + BLOCK).min(run.end);
+            let len = range.len();
+            let pixels_in = plane[range.clone()].iter().zip(&norm[range.clone()]).zip(&image[range]);
+            for ((r, k), ((&moment, &n), &i)) in rel_terms.iter_mut().zip(cost_terms.iter_mut()).zip(pixels_in) {
                 // outliers are zeroed, but an infinite moment (the candidate cannot sample this
                 // pixel's paths) stays infinite, so that candidate cannot win
                 // (docs/emis.md, decision 4)
-                if order.outlier_basis(moment, norm[p]) > thresholds[c] && moment.is_finite() {
-                    moment = 0.0;
-                }
-                rel += moment as f64 / (i * i + 1e-4) / pixels;
+                let outlier = order.outlier_basis(moment, n) > threshold && moment.is_finite();
+                let moment = if outlier { 0.0 } else { moment };
+                // black pixels carry no relative moment, so they are left out of the cost too;
+                // a pixel left out adds +0, which leaves a sum of non-negative terms as it is
+                let i = i as f64;
+                *r = if i == 0.0 { 0.0 } else { moment as f64 / (i * i + 1e-4) / pixels };
+                *k = if i == 0.0 { 0.0 } else { cost };
             }
-            ImageLevelScore {
-                nu: g.nu,
-                connections: g.connections,
-                merge: g.merge,
-                relative_moment: rel,
-                cost: total_cost,
+            for (r, k) in rel_terms[..len].iter().zip(&cost_terms[..len]) {
+                rel += r;
+                total_cost += k;
             }
-        })
-        .collect()
+        }
+    }
+    (rel, total_cost)
 }
 
 /// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered
 /// moment × cost, dilated and blurred into χ.
 fn pixel_level(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Image {
     let (w, h) = (input.moments.width as usize, input.moments.height as usize);
+    let (dilate, blur) = input.filters.mask_radii(w, h);
+    Image::from_data(w, h, merge_bits(input, filtered, terms)).dilate(dilate).box_blur(blur)
+}
+
+/// Per pixel, 1 where the first candidate with the lowest filtered moment × cost merges and
+/// that value is above 0, else 0.
+fn merge_bits(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Vec<f32> {
+    let (w, h) = (input.moments.width as usize, input.moments.height as usize);
     let costs: Vec<f64> =
         input.candidates.iter().zip(terms).map(|(c, t)| t.at(if c.merge { 1.0 } else { 0.0 })).collect();
-    let bits: Vec<f32> = (0..w * h)
-        .into_par_iter()
-        .map(|p| {
-            let mut best = (f64::INFINITY, None);
-            for (c, cost) in costs.iter().enumerate() {
-                let v = filtered[c].data[p] as f64 * cost;
-                if v < best.0 {
-                    best = (v, Some(c));
-                }
+    // per block of pixels, candidate by candidate, the first candidate with the lowest value
+    const BLOCK: usize = 256;
+    const NONE: usize = usize::MAX;
+    let mut bits = vec![0.0f32; w * h];
+    bits.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+        let start = b * BLOCK;
+        let (mut best, mut which) = ([f64::INFINITY; BLOCK], [NONE; BLOCK]);
+        let (best, which) = (&mut best[..out.len()], &mut which[..out.len()]);
+        for (c, &cost) in costs.iter().enumerate() {
+            for ((v, i), &m) in best.iter_mut().zip(which.iter_mut()).zip(&filtered[c].data[start..]) {
+                let value = m as f64 * cost;
+                let lower = value < *v;
+                *v = if lower { value } else { *v };
+                *i = if lower { c } else { *i };
             }
-            match best {
-                (v, Some(c)) if v > 0.0 && input.candidates[c].merge => 1.0,
-                _ => 0.0,
-            }
-        })
-        .collect();
-    let (dilate, blur) = input.filters.mask_radii(w, h);
-    Image::from_data(w, h, bits).dilate(dilate).box_blur(blur)
+        }
+        for ((bit, &v), &c) in out.iter_mut().zip(best.iter()).zip(which.iter()) {
+            *bit = if c != NONE && v > 0.0 && input.candidates[c].merge { 1.0 } else { 0.0 };
+        }
+    });
+    bits
 }
 
 /// An image-level candidate.

@@ -230,6 +230,20 @@ impl PilotData {
     }
 }
 
+/// The strategy in force and every update's report, from a checkpoint's head.
+#[derive(Clone, Debug)]
+pub struct Decisions {
+    /// Light paths per pixel per iteration.
+    pub nu: f32,
+    /// Connections per camera vertex.
+    pub connections: u32,
+    /// Every update so far.
+    pub reports: Vec<UpdateReport>,
+}
+
+/// The longest checkpoint header [`EmisState::read_decisions`] reads.
+const MAX_META_BYTES: u64 = 64 << 20;
+
 /// The small part of a checkpointed state.
 #[derive(Serialize, Deserialize)]
 struct StateMeta {
@@ -286,6 +300,26 @@ impl EmisState {
             w.f32s(image.data.iter().copied());
         }
         w.0
+    }
+
+    /// The decisions at the head of an [`EmisState::encode`], read from `r` without the
+    /// buffers after them: what a job that ended without outputs still shows.
+    pub fn read_decisions(r: &mut impl std::io::Read) -> Result<Decisions, String> {
+        use std::io::Read;
+        let mut head = [0u8; 8];
+        r.read_exact(&mut head).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+        if &head[..4] != STATE_MAGIC {
+            return Err("EMIS checkpoint has an unknown format".into());
+        }
+        let len = u32::from_le_bytes(head[4..].try_into().expect("invariant: 4 bytes")) as u64;
+        let mut json = Vec::new();
+        // a header longer than a few reports is corrupt: read no more than that
+        r.take(len.min(MAX_META_BYTES)).read_to_end(&mut json).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+        if json.len() as u64 != len {
+            return Err(format!("EMIS checkpoint header has {} of its {len} bytes", json.len()));
+        }
+        let meta: StateMeta = serde_json::from_slice(&json).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+        Ok(Decisions { nu: meta.nu, connections: meta.connections, reports: meta.reports })
     }
 
     /// Restores a state written by [`EmisState::encode`] for an image of `width`×`height`.
@@ -404,6 +438,22 @@ mod tests {
         let mut guide = p;
         guide.guides.normal[0][1] = f32::INFINITY;
         assert!(PilotData::decode(&guide.encode(), 3, 2, 5).unwrap_err().contains("guide"));
+    }
+
+    #[test]
+    fn decisions_read_from_a_checkpoint_head_alone() {
+        let config = EmisConfig::new(EmisMethod::Vcm);
+        let mut state = EmisState::new(config, 4, 3);
+        state.update(&[[0.5; 3]; 12], 1);
+        let bytes = state.encode();
+        let d = EmisState::read_decisions(&mut &bytes[..]).unwrap();
+        assert_eq!((d.nu, d.connections, d.reports.len()), (state.strategy.nu, state.strategy.connections, 1));
+        assert_eq!(d.reports[0].iteration, 1);
+        // the head is enough: the buffers after it are not read
+        let meta_len = 8 + u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
+        assert!(EmisState::read_decisions(&mut &bytes[..meta_len]).is_ok());
+        assert!(EmisState::read_decisions(&mut &bytes[..meta_len - 1]).unwrap_err().contains("bytes"));
+        assert!(EmisState::read_decisions(&mut &b"TPD1...."[..]).unwrap_err().contains("unknown format"));
     }
 
     #[test]

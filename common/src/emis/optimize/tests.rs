@@ -259,12 +259,14 @@ fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
         merge_scope: MergeScope::PerPixel,
     };
     let norm: Vec<f32> = image.data.iter().map(|&i| i * i + 1e-4).collect();
-    let filtered: Vec<Image> = moment_planes(&moments);
+    let (filtered, _) = planes::moment_planes(&moments, false);
+    let order = input.filters.order;
+    let thresholds = planes::thresholds(&filtered, &norm, order, input.filters.outlier_quantile);
     let costs = CostTerms::of_candidates(&k, &stats, &candidates, (w * h) as u32);
     let groups = image_level_groups(&candidates, MergeScope::PerPixel);
     let score = |chi: f32| {
         let mask = Image::filled(w, h, chi);
-        image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask))
+        image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask), &thresholds)
     };
     let (partial, full) = (score(0.2), score(1.0));
     let g = groups.iter().position(|g| (g.nu, g.connections) == (1.0, 1)).expect("a ν = 1, c = 1 group");
@@ -278,8 +280,157 @@ fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
     // merging in one pixel only: the map is built, and every judged pixel pays for it
     let mut one = Image::filled(w, h, 0.0);
     one.data[w * h - 1] = 1.0;
-    let with_map = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&one))[g].cost;
+    let with_map = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&one), &thresholds)[g].cost;
     let expected =
         (costs[off].at(0.0) + costs[on].build()) * (judged - 1.0 / (w * h) as f64) + costs[on].at(1.0) / (w * h) as f64;
     assert!((with_map - expected).abs() < 1e-9 * expected, "{with_map} vs {expected}");
+}
+
+/// Moments with heavy tails, +∞ flags and zeros, `k` candidates (the VCM ones first, path
+/// tracing for the rest), on an image with black pixels, over more than one filter strip.
+fn random_input(k: usize, seed: u64) -> (Vec<Candidate>, MomentBuffer, Image) {
+    let (w, h) = (70u32, 23u32);
+    let mut s = crate::sampler::Sampler::for_pixel(seed, 0, 0);
+    let all = CandidateConfig::vcm().candidates();
+    let candidates: Vec<Candidate> = (0..k).map(|c| all[c.min(all.len() - 1)]).collect();
+    let mut moments = MomentBuffer::new(w, h, k);
+    for v in moments.sums.iter_mut() {
+        let u = s.next_1d();
+        *v = match u {
+            u if u < 0.0002 => f32::INFINITY,
+            u if u < 0.05 => 0.0,
+            u => (0.02 / u).powi(3),
+        };
+    }
+    moments.iterations = 3;
+    let image = Image::from_data(
+        w as usize,
+        h as usize,
+        (0..w * h).map(|p| if p % 17 == 0 { 0.0 } else { 0.2 + s.next_1d() }).collect(),
+    );
+    (candidates, moments, image)
+}
+
+/// The optimiser's moment planes (transposed by tiles, shared outliers by index, filtered in
+/// place with the thresholds streamed) equal the definitions in the module documentation bit
+/// for bit: one image per candidate, the shared minimum's outliers by a full sort, the box
+/// filter of [`MomentFilter::filter`] and the histogram quantile counted over every pixel.
+#[test]
+fn moment_planes_equal_the_definitions_bit_for_bit() {
+    let (candidates, moments, image) = random_input(9, 3);
+    let (w, h, k) = (image.width, image.height, candidates.len());
+    let norm: Vec<f32> = image.data.iter().map(|&i| i * i + 1e-4).collect();
+    let scale = 1.0 / moments.iterations as f32;
+    let plane = |c: usize| -> Image {
+        let v = (0..w * h).map(|p| moments.sums[p * k + c]).map(|v| if v.is_finite() { v * scale } else { v });
+        Image::from_data(w, h, v.collect())
+    };
+    for order in MomentFilter::ALL {
+        for outliers in [OutlierStage::Filtered, OutlierStage::Shared] {
+            let mut expected: Vec<Image> = (0..k).map(plane).collect();
+            if outliers == OutlierStage::Shared {
+                let shared: Vec<f32> = (0..w * h)
+                    .map(|p| expected.iter().map(|e| e.data[p]).filter(|v| v.is_finite()).fold(f32::INFINITY, f32::min))
+                    .collect();
+                let mut relative: Vec<f32> =
+                    shared.iter().zip(&norm).map(|(s, n)| s / n).filter(|v| v.is_finite()).collect();
+                relative.sort_by(f32::total_cmp);
+                let rank = ((0.999 * relative.len() as f64).ceil() as usize).clamp(1, relative.len()) - 1;
+                for p in (0..w * h).filter(|&p| shared[p].is_finite() && shared[p] / norm[p] > relative[rank]) {
+                    for e in expected.iter_mut().filter(|e| e.data[p].is_finite()) {
+                        e.data[p] = (e.data[p] - shared[p]).max(0.0);
+                    }
+                }
+            }
+            let expected: Vec<Image> = expected.iter().map(|e| order.filter(e, &norm, 3)).collect();
+            let (mut got, minimum) = planes::moment_planes(&moments, outliers == OutlierStage::Shared);
+            if let Some(minimum) = minimum {
+                planes::subtract_shared_outliers(&mut got, &minimum, &norm, 0.999);
+            }
+            let thresholds = planes::filter_planes(&mut got, &norm, order, 3, 0.999);
+            assert_eq!(got, expected, "{order:?} {outliers:?}");
+            let by_counts = planes::thresholds(&expected, &norm, order, 0.999);
+            assert_eq!(thresholds.map_bits(), by_counts.map_bits(), "{order:?} {outliers:?}");
+        }
+    }
+}
+
+trait Bits {
+    fn map_bits(&self) -> Vec<u32>;
+}
+
+impl Bits for Vec<f32> {
+    fn map_bits(&self) -> Vec<u32> {
+        self.iter().map(|v| v.to_bits()).collect()
+    }
+}
+
+/// The image-level sums (in runs of pixels that merge alike, terms computed per block) and
+/// the pixel level's merge bits equal the per-pixel definitions bit for bit, with a mask whose
+/// χ lies on both sides of 0.1, black pixels, outliers and +∞ moments, per pixel and global.
+#[test]
+fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
+    let (candidates, moments, image) = random_input(51, 5);
+    let (w, h, k) = (image.width, image.height, candidates.len());
+    let norm: Vec<f32> = image.data.iter().map(|&i| i * i + 1e-4).collect();
+    let stats = PathStatistics { camera_vertices: 4.0, light_vertices: 3.0, photons_per_query_per_path: 2e-6 };
+    let constants = CostConstants::default();
+    let costs = CostTerms::of_candidates(&constants, &stats, &candidates, (w * h) as u32);
+    let (filtered, _) = planes::moment_planes(&moments, false);
+    let thresholds = planes::thresholds(&filtered, &norm, MomentFilter::Relative, 0.999);
+    let mut s = crate::sampler::Sampler::for_pixel(8, 0, 0);
+    let mask = Image::from_data(w, h, (0..w * h).map(|p| if p % 40 < 15 { 0.0 } else { 0.2 * s.next_1d() }).collect());
+    for scope in [MergeScope::PerPixel, MergeScope::Global] {
+        let input = OptimizerInput {
+            candidates: &candidates,
+            moments: &moments,
+            image: &image,
+            statistics: stats,
+            constants,
+            filters: FilterSettings::default(),
+            merge_scope: scope,
+        };
+        let groups = image_level_groups(&candidates, scope);
+        let pixel_mask = (scope == MergeScope::PerPixel).then_some(&mask);
+        let got = image_level_scores(&input, &groups, &filtered, &norm, &costs, pixel_mask, &thresholds);
+        assert!(got.iter().filter(|s| s.relative_moment.is_finite()).count() > groups.len() / 2);
+        for (g, score) in groups.iter().zip(&got) {
+            // the definition: one pass over the pixels per group
+            let map_built = g.merge.is_none() && mask.data.iter().any(|&chi| chi > 0.1);
+            let shared_build = match (map_built, g.variant(true)) {
+                (true, Some(on)) if candidates[on].merge => costs[on].build(),
+                _ => 0.0,
+            };
+            let (mut rel, mut cost) = (0.0f64, 0.0f64);
+            for (p, (&i, &n)) in image.data.iter().zip(&norm).enumerate() {
+                let i = i as f64;
+                if i == 0.0 {
+                    continue;
+                }
+                let chi = g.merge.map_or(mask.data[p], |m| m as u8 as f32) as f64;
+                let Some(c) = g.variant(chi > 0.1) else { continue };
+                let merges = candidates[c].merge;
+                cost += (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / (w * h) as f64;
+                let mut moment = filtered[c].data[p];
+                if moment / n > thresholds[c] && moment.is_finite() {
+                    moment = 0.0;
+                }
+                rel += moment as f64 / (i * i + 1e-4) / (w * h) as f64;
+            }
+            assert_eq!((score.relative_moment.to_bits(), score.cost.to_bits()), (rel.to_bits(), cost.to_bits()));
+        }
+        // the merge bits: per pixel, the first candidate with the lowest value
+        let bits = merge_bits(&input, &filtered, &costs);
+        for (p, bit) in bits.iter().enumerate() {
+            let mut best = (f64::INFINITY, None);
+            for c in 0..k {
+                let v = filtered[c].data[p] as f64 * costs[c].at(candidates[c].merge as u8 as f64);
+                if v < best.0 {
+                    best = (v, Some(c));
+                }
+            }
+            let expected = matches!(best, (v, Some(c)) if v > 0.0 && candidates[c].merge) as u8 as f32;
+            assert_eq!(bit.to_bits(), expected.to_bits(), "pixel {p}");
+        }
+    }
 }
