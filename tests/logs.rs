@@ -93,3 +93,36 @@ fn json_logs_carry_the_job_lifecycle_and_worker_events_with_ids() {
     }
     assert!(events(&wlog, "registered").iter().any(|e| e["worker_id"] == worker_id));
 }
+
+/// A job that no worker can render fails, and the coordinator says so once, as an error
+/// carrying the job's id and the reason.
+#[test]
+fn a_failed_job_is_logged_once_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--log-format", "json"]);
+    // a worker whose texture budget no textured scene fits in
+    let mut worker = Command::new(bin("tessera-worker"))
+        .args(["--coordinator", &c.url, "--threads", "1", "--texture-budget", "0", "--cache-dir"])
+        .arg(dir.path().join("cache"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let textured = scene("textured-room");
+    let (ok, stdout, stderr) = tessera(&["submit", textured.to_str().unwrap(), "--server", &c.url, "--spp", "4"]);
+    assert!(ok, "{stderr}");
+    let job = stdout.trim().to_string();
+    let failed = wait_for(Duration::from_secs(60), "the job's failure in the log", || {
+        let lines = json_lines(&c.log);
+        let failed: Vec<Value> =
+            events(&lines, "job failed").into_iter().filter(|e| e["job_id"] == job.as_str()).cloned().collect();
+        (!failed.is_empty()).then_some(failed)
+    });
+    worker.kill().unwrap();
+    worker.wait().unwrap();
+    assert_eq!(failed.len(), 1, "{failed:?}");
+    assert_eq!(failed[0]["level"], "ERROR", "{}", failed[0]);
+    let error = failed[0]["error"].as_str().unwrap_or_default();
+    // why the worker could not render it, not only that it could not
+    assert!(error.contains("no eligible worker") && error.contains("texture"), "reason: {}", failed[0]);
+}

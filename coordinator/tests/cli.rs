@@ -128,7 +128,7 @@ fn serve_settings_come_from_flags_then_variables_then_the_file() {
     let file = dir.path().join("serve.toml");
     std::fs::write(
         &file,
-        "listen = \"127.0.0.1:9001\"\nlease-timeout = 5\nmax-tiles = 77\nclient-token = \"file-secret\"\nlog-format = \"json\"\n",
+        "listen = \"127.0.0.1:9001\"\nlease-timeout = 5\nmax-job-tiles = 77\nclient-token = \"file-secret\"\nlog-format = \"json\"\n",
     )
     .unwrap();
     let run = tessera()
@@ -145,7 +145,7 @@ fn serve_settings_come_from_flags_then_variables_then_the_file() {
     for line in [
         "listen = \"127.0.0.1:9003\"  # flag",
         "lease-timeout = 9.0  # env TESSERA_LEASE_TIMEOUT",
-        "max-tiles = 77  # file, line 3",
+        "max-job-tiles = 77  # file, line 3",
         "worker-token = \"<redacted>\"  # env TESSERA_WORKER_TOKEN",
         "client-token = \"<redacted>\"  # file, line 4",
         "log-format = \"json\"  # file, line 5",

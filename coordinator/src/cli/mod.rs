@@ -113,7 +113,7 @@ mod tests {
             ("checkpoint-interval", "0.5"),
             ("max-upload-mb", "64"),
             ("texture-budget", "512"),
-            ("max-tiles", "99"),
+            ("max-job-tiles", "99"),
             ("max-pixels", "1000"),
             ("retain-finished", "\"7d\""),
             ("log-format", "\"json\""),

@@ -65,9 +65,10 @@ pub struct ServeArgs {
     /// coordinator validates it, in MiB [default: 1024 per image, 4096 in all].
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
-    /// Most tiles a job may plan (vcm, bdpt and lt plan one per iteration of the spp).
+    /// Most tiles a job may plan (vcm, bdpt and lt plan one per iteration of the spp). Not
+    /// `--max-tiles`, the worker's tiles per lease, so that one environment serves both.
     #[arg(long, default_value_t = DEFAULT_MAX_TILES)]
-    pub max_tiles: u64,
+    pub max_job_tiles: u64,
     /// Largest film a job may have, in pixels (width × height).
     #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
     pub max_pixels: u64,
@@ -141,8 +142,9 @@ impl ServeArgs {
                 .texture_budget
                 .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
             max_pixels: self.max_pixels,
-            max_tiles: self.max_tiles,
+            max_tiles: self.max_job_tiles,
             retain_finished_ms: self.retain_finished.map(|d| d.as_millis() as u64),
+            result_file_bytes: crate::serve::storage::blobs::RESULT_FILE_BYTES,
         };
         Ok(Resolved { tokens, service: cfg, tls })
     }

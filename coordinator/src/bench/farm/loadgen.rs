@@ -496,6 +496,7 @@ mod tests {
             max_pixels: DEFAULT_MAX_PIXELS,
             max_tiles: u64::MAX,
             retain_finished_ms: None,
+            result_file_bytes: crate::serve::storage::blobs::RESULT_FILE_BYTES,
         };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();
         let req = generated_job(integrator, width, height, spp, "t");

@@ -160,10 +160,13 @@ impl JobsModel {
             .map(|j| j.id.clone())
             .collect();
         for id in &stranded {
-            let error = format!(
+            let mut error = format!(
                 "no eligible worker is left: each of the {} live workers failed {BLOCKLIST_AFTER_FAILURES} of its tiles",
                 live.len()
             );
+            if let Some(last) = &self.jobs[id].last_failure {
+                error += &format!("; the last failure: {last}");
+            }
             changes.extend(self.fail(id, error, now_ms));
         }
         (stranded, changes)

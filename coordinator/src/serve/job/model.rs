@@ -147,6 +147,9 @@ pub struct Job {
     pub merged: usize,
     /// Failed leases per worker; reaching [`BLOCKLIST_AFTER_FAILURES`] blocklists the worker.
     pub worker_failures: BTreeMap<String, u32>,
+    /// Why a tile last failed, for the error of a job every worker is blocklisted for (kept
+    /// in memory only: after a restart the error goes without it).
+    pub last_failure: Option<String>,
     /// Why the job failed.
     pub error: Option<String>,
     /// Submission time.
@@ -334,6 +337,7 @@ impl JobsModel {
             tiles: Vec::new(),
             merged: 0,
             worker_failures: BTreeMap::new(),
+            last_failure: None,
             error: None,
             created_ms: now_ms,
             started_ms: None,
@@ -518,6 +522,7 @@ pub(super) fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now
     tile.epoch += 1;
     tile.failures += 1;
     *job.worker_failures.entry(worker.to_string()).or_default() += 1;
+    job.last_failure = Some(reason.to_string());
     if tile.failures >= MAX_TILE_FAILURES {
         job.error = Some(format!("tile {i} failed {} times, last: {reason}", tile.failures));
         job.finish(JobState::Failed, now_ms);

@@ -136,6 +136,11 @@ fn cancel_and_delete_mid_emis_frees_memory_rows_and_files() {
     assert!(matches!(svc.delete(&emis.id), Err(ServiceError::FailedPrecondition(m)) if m.contains("cancel it")));
     assert!(matches!(svc.delete("no-such-job"), Err(ServiceError::NotFound(_))));
     assert_eq!(svc.cancel(&emis.id, 2_600).unwrap().state, JobState::Cancelled);
+    // after a restart the cancelled job shows its decisions, read from its checkpoint's head
+    drop(svc);
+    let svc = JobService::open(&data, CFG, 2_650).unwrap();
+    let view = svc.get(&emis.id, 2_650).unwrap();
+    assert_eq!((view.state, view.strategy.map(|s| s.updates.len())), (JobState::Cancelled, Some(1)));
     for job in [&done.id, &emis.id] {
         assert_ne!(rows(&data, job), [0, 0, 0]);
         svc.delete(job).unwrap();

@@ -2,9 +2,10 @@
 //! PNGs, named by [`tessera_proto::blob_digest`]) and checkpoints of merged films. Every file is
 //! written to a temporary name, synced, renamed into place and its folder synced, so a crash
 //! never leaves a half-written blob under a real name nor loses a rename that was reported
-//! done; a blob is checked against its digest whenever it is read. Accepted tile results live in the database
-//! (docs/decisions/0009-results-in-the-database.md); [`BlobStore::get_result`] reads the result
-//! files a data directory may still hold from before that.
+//! done; a blob is checked against its digest whenever it is read. Accepted tile results live in
+//! the database (docs/decisions/0009-results-in-the-database.md), except large ones, which are
+//! files under `results/<job>/` ([`BlobStore::put_result`], decision 0022): SQLite copies each
+//! byte twice (its log, then the checkpoint of the log), a file once.
 //!
 //! Files go when the database stops naming them: a deleted job's files after the commit that
 //! deletes its rows, and at start-up whatever a crash left between such a commit and the
@@ -19,6 +20,59 @@ use tessera_common::film::Film;
 pub const CHECKPOINT_MAGIC: u32 = u32::from_le_bytes(*b"TSCK");
 /// The checkpoint format this version writes.
 pub const CHECKPOINT_VERSION: u32 = 2;
+
+/// The fixed part of a checkpoint: its film's size and channels.
+struct CheckpointHeader {
+    flags: u32,
+    width: u32,
+    height: u32,
+    /// Where the non-finite count is; the channels follow it.
+    at: usize,
+}
+
+impl CheckpointHeader {
+    /// From the checkpoint's first bytes (20 or 12 of them, after the box-only format's).
+    fn parse(name: &str, bytes: &[u8]) -> std::io::Result<CheckpointHeader> {
+        let word = |at: usize| -> std::io::Result<u32> {
+            Ok(u32::from_le_bytes(
+                bytes
+                    .get(at..at + 4)
+                    .ok_or_else(|| corrupt_checkpoint(name, "too short"))?
+                    .try_into()
+                    .expect("invariant: 4 bytes"),
+            ))
+        };
+        let (flags, header) = match word(0)? {
+            CHECKPOINT_MAGIC if word(4)? == CHECKPOINT_VERSION => (word(8)?, 12),
+            CHECKPOINT_MAGIC => {
+                return Err(corrupt_checkpoint(name, &format!("unknown format version {}", word(4)?)));
+            }
+            _ => (0, 0),
+        };
+        Ok(CheckpointHeader { flags, width: word(header)?, height: word(header + 4)?, at: header + 8 })
+    }
+
+    fn weights(&self) -> bool {
+        self.flags & 1 != 0
+    }
+
+    fn splats(&self) -> bool {
+        self.flags & 2 != 0
+    }
+
+    /// Where the film ends and the trailer starts (`None` if that overflows).
+    fn trailer(&self) -> Option<usize> {
+        let per_pixel = 28 + if self.weights() { 8 } else { 0 } + if self.splats() { 24 } else { 0 };
+        (self.width as usize * self.height as usize).checked_mul(per_pixel)?.checked_add(self.at + 8)
+    }
+}
+
+fn corrupt_checkpoint(name: &str, why: &str) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt: {why}"))
+}
+
+/// Accepted results of at least this many bytes are stored as files instead of rows.
+pub const RESULT_FILE_BYTES: usize = 1 << 20;
 
 /// Blob storage under one directory.
 #[derive(Clone, Debug)]
@@ -82,9 +136,54 @@ impl BlobStore {
         }
     }
 
-    /// Deletes the result files a job may hold from before results moved into the database.
+    /// Deletes every result file of a job.
     pub fn remove_results(&self, job: &str) -> std::io::Result<()> {
         remove_all(&self.root.join("results").join(job))
+    }
+
+    /// Stores an accepted result too large for a database row as a file (the non-finite
+    /// count, then the payload), synced before this returns.
+    pub fn put_result(
+        &self,
+        job: &str,
+        tile: usize,
+        epoch: u64,
+        non_finite: u64,
+        payload: &[u8],
+    ) -> std::io::Result<()> {
+        self.write_atomic_with(&self.result_path(job, tile, epoch), |w| {
+            w.write_all(&non_finite.to_le_bytes())?;
+            w.write_all(payload)
+        })
+    }
+
+    /// Deletes one result file (a result stored, then not accepted).
+    pub fn remove_result(&self, job: &str, tile: usize, epoch: u64) -> std::io::Result<()> {
+        match std::fs::remove_file(self.result_path(job, tile, epoch)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+            _ => Ok(()),
+        }
+    }
+
+    /// Deletes the result files of a job's tiles before `upto` (a committed checkpoint holds
+    /// them); returns how many went.
+    pub fn remove_results_below(&self, job: &str, upto: usize) -> std::io::Result<usize> {
+        let entries = match std::fs::read_dir(self.root.join("results").join(job)) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+            Err(e) => return Err(e),
+        };
+        let mut removed = 0;
+        for entry in entries {
+            let entry = entry?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let tile = name.split_once('-').and_then(|(t, _)| t.parse::<usize>().ok());
+            if tile.is_some_and(|t| t < upto) {
+                std::fs::remove_file(entry.path())?;
+                removed += 1;
+            }
+        }
+        Ok(removed)
     }
 
     /// Deletes every file that `live` does not name: content-addressed blobs, checkpoints,
@@ -152,8 +251,8 @@ impl BlobStore {
         self.root.join("results").join(job).join(format!("{tile}-{epoch}.bin"))
     }
 
-    /// An accepted tile result's payload stored as a file (non-finite count, then
-    /// the payload).
+    /// An accepted tile result's payload stored as a file by [`BlobStore::put_result`]
+    /// (non-finite count, then the payload).
     pub fn get_result(&self, job: &str, tile: usize, epoch: u64) -> std::io::Result<Vec<u8>> {
         std::fs::read(self.result_path(job, tile, epoch))
     }
@@ -187,33 +286,33 @@ impl BlobStore {
     /// number, by the box-only format before it): the film and the trailer.
     pub fn get_checkpoint(&self, name: &str) -> std::io::Result<(Film, Vec<u8>)> {
         let bytes = std::fs::read(self.root.join("checkpoints").join(name))?;
-        let bad = |why: &str| {
-            std::io::Error::new(std::io::ErrorKind::InvalidData, format!("checkpoint {name} is corrupt: {why}"))
-        };
-        let word = |at: usize| -> std::io::Result<u32> {
-            Ok(u32::from_le_bytes(
-                bytes.get(at..at + 4).ok_or_else(|| bad("too short"))?.try_into().expect("invariant: 4 bytes"),
-            ))
-        };
-        let (flags, header) = match word(0)? {
-            CHECKPOINT_MAGIC if word(4)? == CHECKPOINT_VERSION => (word(8)?, 12),
-            CHECKPOINT_MAGIC => return Err(bad(&format!("unknown format version {}", word(4)?))),
-            _ => (0, 0),
-        };
-        let (width, height) = (word(header)?, word(header + 4)?);
-        let at = header + 8;
+        let h = CheckpointHeader::parse(name, &bytes)?;
+        let bad = |why: &str| corrupt_checkpoint(name, why);
         let non_finite = u64::from_le_bytes(
-            bytes.get(at..at + 8).ok_or_else(|| bad("too short"))?.try_into().expect("invariant: 8 bytes"),
+            bytes.get(h.at..h.at + 8).ok_or_else(|| bad("too short"))?.try_into().expect("invariant: 8 bytes"),
         );
-        let (weights, splats) = (flags & 1 != 0, flags & 2 != 0);
-        let pixels = width as usize * height as usize;
-        let per_pixel = 28 + if weights { 8 } else { 0 } + if splats { 24 } else { 0 };
-        let end = pixels.checked_mul(per_pixel).and_then(|n| n.checked_add(at + 8)).filter(|&n| n <= bytes.len());
-        let end = end.ok_or_else(|| bad("too short for its size"))?;
+        let end = h.trailer().filter(|&n| n <= bytes.len()).ok_or_else(|| bad("too short for its size"))?;
+        let pixels = h.width as usize * h.height as usize;
         let (sum, weight, splat, count) =
-            tessera_proto::payload::decode_channels(&bytes[at + 8..end], pixels, weights, splats)
+            tessera_proto::payload::decode_channels(&bytes[h.at + 8..end], pixels, h.weights(), h.splats())
                 .ok_or_else(|| bad("wrong size"))?;
+        let (width, height) = (h.width, h.height);
         Ok((Film { width, height, sum, weight, splat, count, non_finite }, bytes[end..].to_vec()))
+    }
+
+    /// A checkpoint's file positioned at its trailer, the film left unread: a job that ended
+    /// without outputs shows its EMIS decisions from the trailer's head.
+    pub fn checkpoint_trailer(&self, name: &str) -> std::io::Result<std::fs::File> {
+        use std::io::{Read, Seek};
+        let mut file = std::fs::File::open(self.root.join("checkpoints").join(name))?;
+        let mut head = Vec::with_capacity(24);
+        (&mut file).take(24).read_to_end(&mut head)?;
+        let end = CheckpointHeader::parse(name, &head)?.trailer();
+        let end = end.filter(|&n| n as u64 <= file.metadata().map_or(0, |m| m.len()));
+        file.seek(std::io::SeekFrom::Start(
+            end.ok_or_else(|| corrupt_checkpoint(name, "too short for its size"))? as u64
+        ))?;
+        Ok(file)
     }
 
     /// Deletes a superseded checkpoint.
@@ -348,6 +447,27 @@ mod tests {
         blobs.remove(&kept).unwrap();
         blobs.remove(&kept).unwrap();
         assert!(blobs.get(&kept).unwrap().is_none());
+    }
+
+    #[test]
+    fn result_files_round_trip_and_go_once_a_checkpoint_holds_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let blobs = BlobStore::open(dir.path()).unwrap();
+        for (tile, epoch) in [(0, 0), (1, 2), (2, 0), (10, 1)] {
+            blobs.put_result("a", tile, epoch, tile as u64 + 7, &vec![tile as u8; 3 << 20]).unwrap();
+        }
+        let read = blobs.get_result("a", 1, 2).unwrap();
+        assert_eq!(read.len(), 8 + (3 << 20));
+        assert_eq!((u64::from_le_bytes(read[..8].try_into().unwrap()), read[8]), (8, 1));
+        assert!(blobs.get_result("a", 1, 1).is_err(), "another epoch is another result");
+        // tile 10 is not below 2: "10-1.bin" must not read as tile 1
+        assert_eq!(blobs.remove_results_below("a", 2).unwrap(), 2);
+        assert!(blobs.get_result("a", 0, 0).is_err() && blobs.get_result("a", 2, 0).is_ok());
+        assert!(blobs.get_result("a", 10, 1).is_ok());
+        blobs.remove_result("a", 2, 0).unwrap();
+        blobs.remove_result("a", 2, 0).unwrap();
+        assert_eq!(blobs.remove_results_below("no-such-job", 5).unwrap(), 0);
+        assert_eq!(std::fs::read_dir(dir.path().join("tmp")).unwrap().count(), 0);
     }
 
     #[test]

@@ -8,7 +8,8 @@
 //! exactly-once across restarts. Tiles merged after the last checkpoint are stored as
 //! `accepted` and merged again on start-up from their results, which the `results` table keeps
 //! (written in the transaction that accepts them, deleted in the one that records the
-//! checkpoint covering them: one commit per result, and no file per result).
+//! checkpoint covering them: one commit per result, and no file per result). Results of a
+//! megabyte or more are files instead (docs/decisions/0022-large-results-as-files.md).
 //!
 //! Deleting a job removes its job, tile and result rows in one transaction queued like any
 //! other batch (so it lands after every earlier change of the job); the space is given back by
@@ -451,6 +452,7 @@ impl Store {
                 tiles,
                 merged: merged as usize,
                 worker_failures,
+                last_failure: None,
                 error,
                 created_ms: created as u64,
                 started_ms: started.map(|t| t as u64),

@@ -174,7 +174,8 @@ impl JobService {
         let (stranded, failed) =
             inner.model.fail_stranded(&live.iter().map(String::as_str).collect::<Vec<_>>(), now_ms);
         for job in &stranded {
-            tracing::error!(job_id = %job, error = ?inner.model.jobs[job].error, "job failed");
+            let error = inner.model.jobs[job].error.as_deref().unwrap_or("");
+            tracing::error!(job_id = %job, error, "job failed");
         }
         for (j, tiles) in failed {
             changes.entry(j).or_default().extend(tiles);
@@ -246,21 +247,40 @@ impl JobService {
             return Ok(outcome);
         };
         let verdict = self.validate(&lease.job, &tile, collect, claim, &payload);
-        // the payload moves into the row it is stored in: megabytes per EMIS tile, not copied
-        let stored = verdict.as_ref().ok().map(|(accum, _)| Extra::Result {
-            job: lease.job.clone(),
-            tile: lease.tile,
-            epoch: lease.epoch,
-            non_finite: accum.non_finite,
-            payload,
-        });
+        let mut stored = None;
+        let mut in_file = false;
+        if let Ok((accum, _)) = &verdict {
+            if payload.len() >= self.cfg.result_file_bytes {
+                // synced before the acceptance is committed, outside the lock
+                self.blobs.put_result(&lease.job, lease.tile, lease.epoch, accum.non_finite, &payload)?;
+                in_file = true;
+            } else {
+                // the payload moves into the row it is stored in, not copied
+                stored = Some(Extra::Result {
+                    job: lease.job.clone(),
+                    tile: lease.tile,
+                    epoch: lease.epoch,
+                    non_finite: accum.non_finite,
+                    payload,
+                });
+            }
+        }
         let mut inner = self.lock();
         let (outcome, changes) =
             inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
+        if in_file && outcome == ResultOutcome::Stale {
+            // the tile moved on to another epoch meanwhile: nothing names this file (a
+            // duplicate's file is the accepted one's, the same bytes under the same name)
+            if let Err(e) = self.blobs.remove_result(&lease.job, lease.tile, lease.epoch) {
+                tracing::warn!(job_id = %lease.job, tile = lease.tile, error = %e, "cannot remove an unused result file");
+            }
+        }
         match (&outcome, verdict) {
             (ResultOutcome::Accepted, Ok(result)) => {
                 inner.counters.results_accepted += 1;
-                inner.job(&lease.job).held.insert(lease.tile, result);
+                let runtime = inner.job(&lease.job);
+                runtime.held.insert(lease.tile, result);
+                runtime.result_files |= in_file;
                 // the result and its acceptance are committed in the merge's transaction: one
                 // commit (one fsync) per result, still before anyone is answered
                 let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());

@@ -120,6 +120,13 @@ impl JobService {
             self.sync(inner)?;
             self.blobs.remove_checkpoint(&old);
         }
+        if inner.job(job).result_files {
+            // needed until the checkpoint holding them is committed
+            self.sync(inner)?;
+            if let Err(e) = self.blobs.remove_results_below(job, upto) {
+                tracing::warn!(job_id = %job, error = %e, "cannot remove result files a checkpoint holds");
+            }
+        }
         Ok(())
     }
 
@@ -282,6 +289,12 @@ impl JobService {
             // the database names the old file until the outputs are committed
             self.sync(inner)?;
             self.blobs.remove_checkpoint(&old);
+        }
+        if std::mem::take(&mut inner.job(job).result_files) {
+            self.sync(inner)?;
+            if let Err(e) = self.blobs.remove_results(job) {
+                tracing::warn!(job_id = %job, error = %e, "cannot remove the result files of a finished job");
+            }
         }
         let j = &inner.model.jobs[job];
         tracing::info!(

@@ -60,9 +60,12 @@ pub struct ServiceConfig {
     /// The most tiles a job may plan (a full-frame integrator's sample budget plans one per
     /// iteration, each a row in memory and in the database).
     pub max_tiles: u64,
+    /// Accepted results of at least this many bytes are stored as files instead of database
+    /// rows ([`crate::serve::storage::blobs::RESULT_FILE_BYTES`] outside tests).
+    pub result_file_bytes: usize,
 }
 
-/// [`ServiceConfig::max_tiles`] unless `tessera serve --max-tiles` says otherwise.
+/// [`ServiceConfig::max_tiles`] unless `tessera serve --max-job-tiles` says otherwise.
 pub const DEFAULT_MAX_TILES: u64 = 1_000_000;
 
 /// [`ServiceConfig::max_pixels`] unless `tessera serve --max-pixels` says otherwise: 8192².
@@ -236,12 +239,22 @@ impl JobService {
             };
             let mut runtime = JobRuntime { files, ..JobRuntime::default() };
             // a finished EMIS job's state is gone with its checkpoint: its decisions come back
-            // from the report stored with its outputs
-            runtime.decisions = runtime.files.emis_json.as_ref().and_then(|d| stored_decisions(&blobs, &job.id, d));
+            // from the report stored with its outputs; a cancelled or failed one's from the
+            // head of its last checkpoint
+            runtime.decisions = match (&runtime.files.emis_json, &runtime.files.checkpoint) {
+                (Some(report), _) => stored_decisions(&blobs, &job.id, report),
+                (None, Some(checkpoint))
+                    if job.state.is_terminal() && job.spec.settings.integrator.emis_method().is_some() =>
+                {
+                    checkpoint_decisions(&blobs, &job.id, checkpoint)
+                }
+                _ => None,
+            };
             if !job.state.is_terminal() {
                 match restore_running(&blobs, &job.id, &job.spec, &runtime.files) {
                     Ok((film, emis)) => {
                         (runtime.film, runtime.emis) = (film, emis);
+                        runtime.result_files = true;
                         ids.push(job.id.clone());
                     }
                     Err(e) => broken.push((job.id.clone(), e)),
@@ -367,6 +380,7 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
         tiles: Vec::new(),
         merged: 0,
         worker_failures: BTreeMap::new(),
+        last_failure: None,
         error: Some(error),
         created_ms: now_ms,
         started_ms: None,
@@ -397,6 +411,27 @@ fn stored_decisions(blobs: &BlobStore, id: &str, digest: &str) -> Option<Strateg
         Ok(report) => StrategyView::from_report(report),
         Err(error) => {
             tracing::warn!(job_id = %id, blob = %digest, %error, "cannot read the EMIS report of a finished job");
+            None
+        }
+    }
+}
+
+/// The EMIS decisions in the checkpoint of a job that ended without outputs, read without its
+/// film; a checkpoint that cannot be read is logged and the job shown without them.
+fn checkpoint_decisions(blobs: &BlobStore, id: &str, name: &str) -> Option<StrategyView> {
+    let read = blobs
+        .checkpoint_trailer(name)
+        .map_err(|e| e.to_string())
+        .and_then(|mut file| tessera_common::emis::EmisState::read_decisions(&mut file));
+    match read {
+        Ok(d) => Some(StrategyView {
+            nu: d.nu,
+            connections: d.connections,
+            mean_merge_probability: d.reports.last()?.mean_merge_probability,
+            updates: d.reports,
+        }),
+        Err(error) => {
+            tracing::warn!(job_id = %id, checkpoint = %name, %error, "cannot read the EMIS decisions of an ended job");
             None
         }
     }

@@ -38,6 +38,9 @@ pub(super) struct JobRuntime {
     /// EMIS: digests of the merge masks it stored (deleted with the job; not persisted, so
     /// after a restart those of earlier passes go with the start-up sweep instead).
     pub(super) masks: BTreeSet<String>,
+    /// Some accepted results are files (large ones), which go once a checkpoint holds them;
+    /// set after a restart too, since files may be left from before it.
+    pub(super) result_files: bool,
     /// The last checkpoint's time and cost; `None` until the first merge after submission or
     /// a restart, which starts the clock.
     pub(super) checkpoint: Option<CheckpointState>,

@@ -123,7 +123,7 @@ impl JobService {
         };
         if tiles > self.cfg.max_tiles {
             return Err(ServiceError::InvalidArgument(format!(
-                "{} spp plans {tiles} tiles ({}), over this coordinator's limit of {} per job (tessera serve --max-tiles)",
+                "{} spp plans {tiles} tiles ({}), over this coordinator's limit of {} per job (tessera serve --max-job-tiles)",
                 integrator_settings.spp.unwrap_or(0),
                 if full_frame { "one full frame per iteration" } else { "64² rectangles" },
                 self.cfg.max_tiles
