@@ -1,7 +1,10 @@
 //! Every scene in `scenes/`, rendered at 32 samples (16 iterations) per pixel with two seeds,
 //! agrees with its Mitsuba 3.9.1 reference by the method of the shared `tools/exrcompare.py`
 //! (ported to `film::compare`), with `pt`, `bdpt`, `vcm`, `emis-bdpt` and `emis-vcm`, and with
-//! `lt` where no delta surface is seen directly. `pt`:
+//! `lt` where no delta surface is seen directly. Films larger than 256 × 256 (living-room, pool,
+//! kitchen: 640 × 480, box filter) are rendered at a quarter of their width and height against
+//! the reference averaged over 4 × 4 blocks, which is exactly the small pixels' expectation
+//! (`scene_and_reference`). `pt`:
 //!
 //! * bias: each channel's relative bias of the image mean is below 1 % or not significant
 //!   (|z| ≤ 4, z from the spread of the two renders and the reference's own error);
@@ -26,6 +29,7 @@ use common::{
 use tessera_common::film::Film;
 use tessera_common::film::compare::compare;
 use tessera_common::film::exr::read_rgb;
+use tessera_common::film::filter::FilterKind;
 use tessera_common::scene::Scene;
 
 const SPP: u32 = 32;
@@ -68,12 +72,49 @@ fn check_scene(name: &str) {
     check_scene_with(name, render_pt, SPP, MAX_BIAS, ratio_bound(name));
 }
 
-fn check_scene_with(name: &str, render: fn(&Scene, u32, u64, usize) -> Film, spp: u32, max_bias: f64, bound: f64) {
+/// Films of more pixels than this (the 640 × 480 scenes) are checked at a quarter of their width
+/// and height, so that CI's time stays near that of a 256 × 256 scene.
+const MAX_CHECKED_PIXELS: u32 = 256 * 256;
+const REDUCTION: u32 = 4;
+
+/// The scene as the tests render it and the reference it is compared with. A large film with a
+/// box filter is rendered at 1/`REDUCTION` of its width and height: a small pixel then covers
+/// exactly `REDUCTION`² reference pixels, so the mean of those is its expectation (the box
+/// filter averages radiance over the pixel's area), and the image mean, whose relative error
+/// `reference.json` gives, is unchanged. Merge radii come from the small film's pixel footprint
+/// (`merge_radius_max`), as they would for a scene of that size.
+fn scene_and_reference(name: &str) -> (Scene, Vec<[f32; 3]>) {
     let scene = Scene::load(&scene_path(name)).expect("scene loads");
     let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference loads");
+    let (w, h) = (scene.film.width, scene.film.height);
+    assert_eq!((reference.width, reference.height), (w, h), "{name}: reference size");
+    if w * h <= MAX_CHECKED_PIXELS {
+        return (scene, reference.pixels);
+    }
+    assert!(matches!(scene.film.filter.kind, FilterKind::Box), "{name}: only a box film can be reduced");
+    assert!(w % REDUCTION == 0 && h % REDUCTION == 0, "{name}: {w} x {h} is not a multiple of {REDUCTION}");
+    let (sw, sh) = (w / REDUCTION, h / REDUCTION);
+    let scene = scene.with_resolution(sw, sh).expect("same proportions");
+    let mut small = vec![[0.0f32; 3]; (sw * sh) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let (p, q) =
+                (&reference.pixels[(y * w + x) as usize], &mut small[((y / REDUCTION) * sw + x / REDUCTION) as usize]);
+            for c in 0..3 {
+                q[c] += p[c];
+            }
+        }
+    }
+    let n = (REDUCTION * REDUCTION) as f32;
+    small.iter_mut().flatten().for_each(|v| *v /= n);
+    (scene, small)
+}
+
+fn check_scene_with(name: &str, render: fn(&Scene, u32, u64, usize) -> Film, spp: u32, max_bias: f64, bound: f64) {
+    let (scene, reference) = scene_and_reference(name);
     let a = render(&scene, spp, 1, 0).average();
     let b = render(&scene, spp, 2, 0).average();
-    let full = compare(&a, &reference.pixels, Some(&b), reference_rel_err(name));
+    let full = compare(&a, &reference, Some(&b), reference_rel_err(name));
     assert_eq!(full.non_finite, 0, "{name}: non-finite pixels");
     assert!(full.bias_ok(max_bias), "{name}: biased: {full:?}");
     let ratio = full.ratio.expect("two renders");
@@ -104,6 +145,9 @@ macro_rules! all_scenes {
             spot_directional => "spot-directional",
             textured_room => "textured-room",
             textured_emitters => "textured-emitters",
+            living_room => "living-room",
+            pool => "pool",
+            kitchen => "kitchen",
         );
     };
 }
@@ -170,6 +214,9 @@ mod light_tracing {
             "legacy-v06",
             "masked-leaves",
             "textured-room",
+            "living-room",
+            "pool",
+            "kitchen",
         ];
         for name in scenes {
             let scene = Scene::load(&scene_path(name)).expect("scene loads");
