@@ -234,6 +234,42 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
     }
 }
 
+/// Per-pixel connection counts on the farm: after the update at iteration 1 a bidirectional
+/// strategy renders with an expected count per pixel, which the workers fetch as a blob and
+/// round at each camera vertex as a local render does: the same image bit for bit, the same
+/// connection layer and report.
+#[test]
+fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
+    use tessera_common::film::exr::{read_attribute, read_layer};
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _w) = farm(dir.path(), 2);
+    let xml = std::fs::read(scene("indirect-room")).unwrap();
+    let settings = json!({"integrator": "emis-bdpt", "spp": 12, "seed": 3, "emis_updates": [1, 4], "emis_connections": "per-pixel"});
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&c, id, None);
+    let strategy = &done["strategy"];
+    assert!(strategy["nu"].as_f64().unwrap() > 0.0, "a bidirectional strategy: {strategy}");
+    assert!(strategy["mean_connections"].as_f64().is_some(), "per-pixel connections: {strategy}");
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    for name in ["strategy.png", "emis.json"] {
+        let (status, bytes) = rest::get(&format!("{}/{name}", job_url(&c, id)), None);
+        assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&bytes));
+        std::fs::write(out.with_extension(name), &bytes).unwrap();
+    }
+    let more = ["--emis-updates", "1,4", "--emis-connections", "per-pixel"];
+    let local = local_render_with(dir.path(), &scene("indirect-room"), "emis-bdpt", 12, 3, &more);
+    assert_same_image(&out, &local);
+    let (farm_c, local_c) = (read_layer(&out, "connections").unwrap(), read_layer(&local, "connections").unwrap());
+    assert!(farm_c.iter().zip(&local_c).all(|(a, b)| a.to_bits() == b.to_bits()), "same connection mask");
+    assert!(farm_c.iter().any(|&c| c > 0.0), "connections somewhere");
+    let key = "tessera/emis_mean_connections";
+    assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap());
+    assert_same_emis_outputs(&out, &local);
+}
+
 #[test]
 fn scene_with_assets_renders_over_rest() {
     // caustic-glass references gem.obj: the bundle must carry it to the workers

@@ -16,7 +16,7 @@
 
 use crate::emis::cost::CostModel;
 use crate::emis::estimator::{MergeKernel, MergeRatio, MomentSettings};
-use crate::emis::optimize::{MomentFilter, OutlierStage};
+use crate::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use crate::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
@@ -136,6 +136,8 @@ pub struct RenderSettings {
     pub moment_outliers: OutlierStage,
     /// EMIS: the method's own pilot, or path tracing first.
     pub emis_pilot: PilotStart,
+    /// EMIS: one connection count for the image, or one per pixel.
+    pub emis_connections: ConnectionScope,
 }
 
 impl Default for RenderSettings {
@@ -158,6 +160,7 @@ impl Default for RenderSettings {
             moment_filter: MomentFilter::default(),
             moment_outliers: OutlierStage::default(),
             emis_pilot: PilotStart::default(),
+            emis_connections: ConnectionScope::default(),
         }
     }
 }
@@ -306,6 +309,7 @@ impl RenderSettings {
         config.filters.order = self.moment_filter;
         config.filters.outliers = self.moment_outliers;
         config.pilot = self.emis_pilot;
+        config.connection_scope = self.emis_connections;
         config
     }
 }

@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
-use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
 use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::{Film, Rect, TileAccum};
 use tessera_common::integrator::observer::{SampleObserver, SampleRecord};
@@ -70,6 +70,7 @@ fn bench_mask(scene: &Scene, reference: &[[f64; 3]]) -> MergeMask {
         constants: config.constants,
         filters: config.filters,
         merge_scope: MergeScope::PerPixel,
+        connection_scope: ConnectionScope::Image,
     });
     MergeMask::PerPixel(Arc::new(decision.merge_mask.data))
 }
@@ -133,7 +134,11 @@ fn caustic_glass_variance_by_connections_and_seed() {
     let nu = env_list::<f32>("NU", "1")[0];
     for seed in env_list::<u64>("SEEDS", "1000,1001,1002") {
         for c in env_list::<u32>("CS", "1,2,4") {
-            let strategy = Strategy { nu, connections: c, merge: Some(mask.clone()) };
+            let strategy = Strategy {
+                nu,
+                connections: tessera_common::integrator::path::connections::Connections::Fixed(c),
+                merge: Some(mask.clone()),
+            };
             let mut per_pixel = measure(&scene, &strategy, seed, iterations, &reference);
             let n = per_pixel.len() as f64;
             let whole = per_pixel.iter().sum::<f64>() / n;

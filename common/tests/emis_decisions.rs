@@ -95,19 +95,21 @@ fn judge(name: &str) -> Vec<Judged> {
 /// Every candidate's predicted relative moment × cost at an update beside its truth, for
 /// finding out why a decision went wrong (`EMIS_DIAG=1`).
 fn print_predictions(truth: &SceneTruth, report: &UpdateReport) {
+    // the default, image-level connections: every candidate has its c
     for c in &report.candidates {
-        let t = truth.candidate(c.nu, c.connections).expect("the prediction is a candidate");
+        let connections = c.connections.expect("an image-level c");
+        let t = truth.candidate(c.nu, connections).expect("the prediction is a candidate");
         eprintln!(
             "  update {} ν {} c {}: predicted {:.3e} × cost {:.2} = {:.3e}; truth {:.3e} × {:.2} ms, regret {:.2}",
             report.iteration,
             c.nu,
-            c.connections,
+            connections,
             c.relative_moment,
             c.cost,
             c.work_normalised,
             t.relative_variance,
             t.seconds * 1e3,
-            truth.regret(c.nu, c.connections).unwrap_or(f64::NAN)
+            truth.regret(c.nu, connections).unwrap_or(f64::NAN)
         );
     }
 }

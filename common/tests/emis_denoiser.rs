@@ -8,7 +8,7 @@ mod common;
 use common::scene_path;
 use tessera_common::emis::denoise::{Guides, denoised_intensity};
 use tessera_common::emis::filter::Image;
-use tessera_common::emis::optimize::{Decision, MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::optimize::{ConnectionScope, Decision, MergeScope, OptimizerInput, optimize};
 use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
 use tessera_common::film::Film;
 use tessera_common::film::exr::read_rgb;
@@ -42,6 +42,7 @@ fn check(name: &str) {
             constants: config.constants,
             filters: config.filters,
             merge_scope: MergeScope::PerPixel,
+            connection_scope: ConnectionScope::Image,
         })
     };
     let (ours, truth) = (decide(&denoised), decide(&converged));

@@ -18,6 +18,7 @@ use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::estimator::{MomentEstimator, MomentSettings};
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::{Bidir, Integrator, PathSettings, TileRequest};
 use tessera_common::scene::Scene;
 
@@ -126,7 +127,7 @@ fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
-    let pt = Strategy { nu: 0.0, connections: 0, merge: None };
+    let pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: None };
     for skipped in [1, 3, 4, 5, 8] {
         let (_, none) =
             render_iterations(&scene, settings, &config, &pt, 3, skipped..skipped + 1, Some(CandidateSet::Full));
@@ -211,7 +212,7 @@ fn path_tracing_with_a_merge_mask_counts_no_merge_queries() {
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
-    let merging_pt = Strategy { nu: 0.0, connections: 0, merge: Some(MergeMask::Constant(1.0)) };
+    let merging_pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: Some(MergeMask::Constant(1.0)) };
     let (image, data) = render_iterations(&scene, settings, &config, &merging_pt, 3, 2..3, Some(CandidateSet::Full));
     let statistics = data.expect("iteration 2 records").statistics;
     assert_eq!((statistics.light_paths, statistics.merge_queries), (0, 0), "{statistics:?}");

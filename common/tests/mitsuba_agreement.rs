@@ -257,6 +257,27 @@ mod bidirectional {
         check_scene_with("glossy-interreflection", dense, 16, MAX_BIAS, MAX_RATIO);
         check_scene_with("glossy-interreflection", path_tracing, 16, MAX_BIAS, MAX_RATIO);
     }
+
+    /// Per-pixel connection counts, rounded stochastically at each camera vertex, change noise,
+    /// not the mean: a mask of 0, fractional and whole counts up to 4.2 in bands across the
+    /// image, so that neighbouring pixels (and the light-tracing splats landing in them) use
+    /// different counts.
+    #[test]
+    fn per_pixel_connection_counts_do_not_change_the_mean() {
+        use common::render_with;
+        use std::sync::Arc;
+        use tessera_common::integrator::path::connections::Connections;
+        use tessera_common::integrator::{Bidir, PathSettings};
+        fn banded(scene: &Scene, spp: u32, seed: u64, threads: usize) -> Film {
+            let (w, h) = (scene.camera.width, scene.camera.height);
+            let mask = (0..w * h).map(|p| [0.0, 0.3, 1.0, 1.7, 4.2][((p % w + p / w) / 3 % 5) as usize]).collect();
+            let bdpt = Bidir::bdpt(PathSettings::from_scene(scene, None), 1.0, 0)
+                .with_connections(Connections::PerPixel(Arc::new(mask)));
+            render_with(scene, &bdpt, spp, seed, threads)
+        }
+        check_scene_with("glossy-interreflection", banded, 16, MAX_BIAS, MAX_RATIO);
+        check_scene_with("indirect-room", banded, 16, MAX_BIAS, MAX_RATIO);
+    }
 }
 
 /// `vcm` (ν = 1, c = 1, χ = 1, correlation-aware) at 16 iterations on every scene. A fixed

@@ -9,7 +9,7 @@ use std::path::Path;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
-use tessera_common::emis::optimize::{MomentFilter, OutlierStage};
+use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings, Renderer, SettingsError};
 
@@ -100,6 +100,10 @@ pub struct IntegratorArgs {
     /// bidirectional strategy wins.
     #[arg(long, value_enum, default_value = "bidirectional")]
     pub emis_pilot: EmisPilotArg,
+    /// emis-*: choose one connection count for the image, or one per pixel (filtered like the
+    /// merge mask, with ν the only image-level choice).
+    #[arg(long, value_enum, default_value = "image")]
+    pub emis_connections: EmisConnectionsArg,
 }
 
 /// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
@@ -126,6 +130,24 @@ impl EmisModelArgs {
         settings.cost_model = self.cost_model.into();
         settings.moment_filter = self.moment_filter.into();
         settings.moment_outliers = self.moment_outliers.into();
+    }
+}
+
+/// Where EMIS decides the connection count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EmisConnectionsArg {
+    /// One count for the image, beside ν.
+    Image,
+    /// An expected count per pixel, rounded stochastically at each camera vertex.
+    PerPixel,
+}
+
+impl From<EmisConnectionsArg> for ConnectionScope {
+    fn from(arg: EmisConnectionsArg) -> ConnectionScope {
+        match arg {
+            EmisConnectionsArg::Image => ConnectionScope::Image,
+            EmisConnectionsArg::PerPixel => ConnectionScope::PerPixel,
+        }
     }
 }
 
@@ -267,6 +289,7 @@ impl IntegratorArgs {
         };
         self.model.apply(settings);
         settings.emis_pilot = self.emis_pilot.into();
+        settings.emis_connections = self.emis_connections.into();
     }
 }
 

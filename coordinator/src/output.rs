@@ -10,6 +10,7 @@ use tessera_common::emis::{EmisState, UpdateReport};
 use tessera_common::film::Film;
 use tessera_common::film::exr::{Attribute, ExrExtras, write_exr};
 use tessera_common::film::png::linear_to_srgb;
+use tessera_common::integrator::path::connections::Connections;
 
 /// Writing an output file failed.
 #[derive(Debug, thiserror::Error)]
@@ -76,7 +77,15 @@ impl<'a> Outputs<'a> {
         attributes.extend(provenance.extra.iter().map(|(k, v)| text(k, v.clone())));
         if let Some(e) = emis {
             attributes.push(("tessera/emis_nu".into(), Attribute::Float(e.strategy.nu)));
-            attributes.push(("tessera/emis_connections".into(), Attribute::Int(e.strategy.connections as i32)));
+            match &e.strategy.connections {
+                Connections::Fixed(c) => {
+                    attributes.push(("tessera/emis_connections".into(), Attribute::Int(*c as i32)))
+                }
+                Connections::PerPixel(mask) => {
+                    let mean = e.strategy.connections.mean(mask.len()) as f32;
+                    attributes.push(("tessera/emis_mean_connections".into(), Attribute::Float(mean)));
+                }
+            }
             attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
             // a path-tracing start's discarded iterations: the image holds kept_from.. only
             attributes.push(("tessera/emis_kept_from".into(), Attribute::Int(e.kept_from as i32)));
@@ -95,6 +104,9 @@ impl<'a> Outputs<'a> {
             ExrExtras { counts: Some(&self.film.count), layers: Vec::new(), attributes: self.attributes.clone() };
         if let Some((e, mask)) = &self.emis {
             extras.layers.push(("merge_mask", mask));
+            if let Connections::PerPixel(connections) = &e.strategy.connections {
+                extras.layers.push(("connections", connections));
+            }
             if let Some(relative) = &e.relative_moment {
                 extras.layers.push(("relative_moment", &relative.data));
             }
@@ -122,7 +134,14 @@ impl<'a> Outputs<'a> {
             "integrator": integrator,
             "iterations": iterations,
             "kept_from": e.kept_from,
-            "final": { "nu": e.strategy.nu, "connections": e.strategy.connections },
+            "final": match &e.strategy.connections {
+                Connections::Fixed(c) => serde_json::json!({ "nu": e.strategy.nu, "connections": c }),
+                Connections::PerPixel(mask) => serde_json::json!({
+                    "nu": e.strategy.nu,
+                    "connections": 0,
+                    "mean_connections": e.strategy.connections.mean(mask.len()),
+                }),
+            },
             "candidates": e.candidates,
             "updates": e.reports,
         }))
@@ -169,7 +188,7 @@ pub struct ReportDecisions {
 pub struct FinalStrategy {
     /// Light paths per pixel per iteration (0: path tracing).
     pub nu: f32,
-    /// Connections per camera vertex.
+    /// Connections per camera vertex (0 with per-pixel connections).
     pub connections: u32,
 }
 

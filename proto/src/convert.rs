@@ -6,7 +6,7 @@ use crate::v1 as pb;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
-use tessera_common::emis::optimize::{MomentFilter, OutlierStage};
+use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
 
@@ -67,6 +67,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<PilotStart>("emis_pilot", v)?,
             None => d.emis_pilot,
         },
+        emis_connections: match &s.emis_connections {
+            Some(v) => parse_json_name::<ConnectionScope>("emis_connections", v)?,
+            None => d.emis_connections,
+        },
     })
 }
 
@@ -90,6 +94,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         moment_filter: Some(json_name(&s.moment_filter)),
         moment_outliers: Some(json_name(&s.moment_outliers)),
         emis_pilot: Some(json_name(&s.emis_pilot)),
+        emis_connections: Some(json_name(&s.emis_connections)),
     }
 }
 
@@ -121,6 +126,7 @@ mod tests {
             merge_ratio: MergeRatio::Reference,
             cost_model: CostModel::Reference,
             emis_pilot: PilotStart::PathTracing,
+            emis_connections: ConnectionScope::PerPixel,
             ..RenderSettings::default()
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);

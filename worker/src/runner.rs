@@ -12,6 +12,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tessera_common::emis::{CandidateSet, Strategy};
 use tessera_common::integrator::Stop;
+use tessera_common::integrator::path::connections::{self, Connections};
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::settings::Renderer;
 use tessera_proto::v1 as pb;
@@ -167,12 +168,20 @@ async fn emis_work(
     let merge = match &s.merge {
         None => None,
         Some(Merge::MergeConstant(c)) => Some(MergeMask::Constant(*c)),
-        Some(Merge::MergeMaskDigest(d)) => Some(MergeMask::PerPixel(masks.get(client, d, pixels).await?)),
+        Some(Merge::MergeMaskDigest(d)) => {
+            Some(MergeMask::PerPixel(masks.get(client, d, pixels, "merge mask", 0.0..=1.0).await?))
+        }
+    };
+    let connections = if s.connection_mask_digest.is_empty() {
+        Connections::Fixed(s.connections)
+    } else {
+        let range = 0.0..=connections::MAX_PER_PIXEL;
+        Connections::PerPixel(masks.get(client, &s.connection_mask_digest, pixels, "connection mask", range).await?)
     };
     if !(s.light_paths_per_pixel >= 0.0 && s.light_paths_per_pixel.is_finite()) {
         anyhow::bail!("lease strategy has light_paths_per_pixel {}", s.light_paths_per_pixel);
     }
-    let strategy = Strategy { nu: s.light_paths_per_pixel, connections: s.connections, merge };
+    let strategy = Strategy { nu: s.light_paths_per_pixel, connections, merge };
     let set = if s.reduced_candidates { CandidateSet::Reduced } else { CandidateSet::Full };
     Ok(EmisWork { strategy, collect: s.collect_moments.then_some(set) })
 }

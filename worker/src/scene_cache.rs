@@ -168,31 +168,43 @@ async fn fetch_verified(client: &mut Client, digest: &str) -> anyhow::Result<Vec
     Ok(bytes)
 }
 
-/// The most recent EMIS merge mask, kept in memory: every tile of a pass uses the same one.
+/// The most recent EMIS masks (merge probabilities, connection counts), kept in memory: every
+/// tile of a pass uses the same ones.
 #[derive(Default)]
 pub struct MaskCache {
-    last: Option<(String, Arc<Vec<f32>>)>,
+    recent: Vec<(String, Arc<Vec<f32>>)>,
 }
 
+/// Masks a pass may use at once: its merge mask and its connection mask.
+const MASKS_KEPT: usize = 2;
+
 impl MaskCache {
-    /// The per-pixel merge probabilities of blob `digest` (`pixels` little-endian f32).
-    pub async fn get(&mut self, client: &mut Client, digest: &str, pixels: usize) -> anyhow::Result<Arc<Vec<f32>>> {
-        if let Some((d, mask)) = &self.last
-            && d == digest
-        {
+    /// The `what` mask of blob `digest`: `pixels` little-endian f32, each within `range`.
+    pub async fn get(
+        &mut self,
+        client: &mut Client,
+        digest: &str,
+        pixels: usize,
+        what: &str,
+        range: std::ops::RangeInclusive<f32>,
+    ) -> anyhow::Result<Arc<Vec<f32>>> {
+        if let Some((_, mask)) = self.recent.iter().find(|(d, _)| d == digest) {
             return Ok(mask.clone());
         }
         let bytes = fetch_verified(client, digest).await?;
         if bytes.len() != pixels * 4 {
-            anyhow::bail!("merge mask {digest} has {} bytes, expected {} for {pixels} pixels", bytes.len(), pixels * 4);
+            anyhow::bail!("{what} {digest} has {} bytes, expected {} for {pixels} pixels", bytes.len(), pixels * 4);
         }
         let mask: Vec<f32> =
             bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("invariant: 4 bytes"))).collect();
-        if mask.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            anyhow::bail!("merge mask {digest} has values outside [0, 1]");
+        if mask.iter().any(|v| !range.contains(v)) {
+            anyhow::bail!("{what} {digest} has values outside [{}, {}]", range.start(), range.end());
         }
         let mask = Arc::new(mask);
-        self.last = Some((digest.to_string(), mask.clone()));
+        if self.recent.len() >= MASKS_KEPT {
+            self.recent.remove(0);
+        }
+        self.recent.push((digest.to_string(), mask.clone()));
         Ok(mask)
     }
 }

@@ -38,6 +38,11 @@ impl Image {
         Image { width, height, data }
     }
 
+    /// The mean value (0 for an empty image).
+    pub fn mean(&self) -> f64 {
+        self.data.iter().map(|&v| v as f64).sum::<f64>() / self.data.len().max(1) as f64
+    }
+
     /// One 3×3 box pass with border renormalisation (its divisor, the number of in-image taps,
     /// factorises into row taps × column taps, so a row pass and a column pass compute it).
     pub fn box3(&self) -> Image {

@@ -15,6 +15,12 @@
 //!    argmin wins. Before step 0, [`OutlierStage::Shared`] (the default) takes out the outliers
 //!    of the part of each pixel's moment that all candidates share.
 //!
+//! With [`ConnectionScope::PerPixel`] the pixel level also keeps the winner's c, dilated
+//! (radius 3) and blurred (box radius 16) into an expected count per pixel, both radii for
+//! 640×480 as the merge mask's; the image-level candidates are then ν alone, and each pixel is
+//! judged with the smallest candidate count at least its expected one (docs/emis.md §5.6 and
+//! §6, the reference's experimental per-pixel connections).
+//!
 //! With [`MergeScope::Global`] (the path-tracing start's first decisions, docs/emis.md §1.2
 //! and §4) there is no pixel level: every candidate (ν, c, merge) is an image-level candidate
 //! that merges everywhere or nowhere, and χ is 1 or 0 in every pixel.
@@ -35,8 +41,11 @@ use super::moments::MomentBuffer;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+mod image_level;
 mod planes;
 
+pub use image_level::ImageLevelScore;
+use image_level::{class_of, connection_classes, image_level_groups, image_level_scores};
 pub use planes::remove_shared_outliers;
 
 /// Filter radii (docs/emis.md, decision 6).
@@ -48,6 +57,10 @@ pub struct FilterSettings {
     pub mask_dilate: usize,
     /// Box passes on the dilated mask at 640×480.
     pub mask_box: usize,
+    /// Dilation of the per-pixel connection counts at 640×480.
+    pub connection_dilate: usize,
+    /// Box passes on the dilated connection counts at 640×480.
+    pub connection_box: usize,
     /// Quantile above which pixel moments are zeroed in the image-level sums.
     pub outlier_quantile: f64,
     /// Whether moments are made relative before or after the box filter.
@@ -124,10 +137,22 @@ impl FilterSettings {
     /// square root of its pixel count over 640×480's, so that χ covers the same part of the
     /// picture at any resolution (256²: 7 px; 1920×1080: 42 px). At least 1 where configured.
     pub fn mask_radii(&self, width: usize, height: usize) -> (usize, usize) {
-        let scale = ((width * height) as f64 / (640.0 * 480.0)).sqrt();
-        let radius = |r: usize| if r == 0 { 0 } else { ((r as f64 * scale).round() as usize).max(1) };
-        (radius(self.mask_dilate), radius(self.mask_box))
+        scaled_radii((self.mask_dilate, self.mask_box), width, height)
     }
+
+    /// The connection mask's dilation and box radii for a `width`×`height` image, scaled as
+    /// [`FilterSettings::mask_radii`] scales the merge mask's.
+    pub fn connection_radii(&self, width: usize, height: usize) -> (usize, usize) {
+        scaled_radii((self.connection_dilate, self.connection_box), width, height)
+    }
+}
+
+/// Radii chosen for 640×480, scaled by the linear size of a `width`×`height` image, at least 1
+/// where not 0.
+fn scaled_radii((dilate, blur): (usize, usize), width: usize, height: usize) -> (usize, usize) {
+    let scale = ((width * height) as f64 / (640.0 * 480.0)).sqrt();
+    let radius = |r: usize| if r == 0 { 0 } else { ((r as f64 * scale).round() as usize).max(1) };
+    (radius(dilate), radius(blur))
 }
 
 impl Default for FilterSettings {
@@ -136,6 +161,8 @@ impl Default for FilterSettings {
             moment_box: 3,
             mask_dilate: 16,
             mask_box: 16,
+            connection_dilate: 3,
+            connection_box: 16,
             outlier_quantile: 0.999,
             order: MomentFilter::Relative,
             outliers: OutlierStage::default(),
@@ -151,6 +178,20 @@ pub enum MergeScope {
     /// For the whole image: merging everywhere and nowhere are separate image-level
     /// candidates (the path-tracing start's reduced set).
     Global,
+}
+
+/// Where the connection count is decided (docs/emis.md, decision 1; the reference's
+/// experimental per-pixel connections, §1.1 and §5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConnectionScope {
+    /// One c for the image, an image-level parameter beside ν.
+    #[default]
+    Image,
+    /// An expected c per pixel from the pixel level, filtered like the merge mask and rounded
+    /// stochastically at each camera vertex; the image level chooses ν alone. Only with
+    /// per-pixel merge decisions ([`MergeScope::PerPixel`]).
+    PerPixel,
 }
 
 /// Everything the optimiser reads.
@@ -169,21 +210,8 @@ pub struct OptimizerInput<'a> {
     pub filters: FilterSettings,
     /// Per-pixel or global merge decisions.
     pub merge_scope: MergeScope,
-}
-
-/// One image-level candidate's score, for reports.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct ImageLevelScore {
-    /// Light paths per pixel (0: path tracing).
-    pub nu: f32,
-    /// Connections.
-    pub connections: u32,
-    /// With [`MergeScope::Global`]: whether this candidate merges (everywhere).
-    pub merge: Option<bool>,
-    /// Mean relative second moment.
-    pub relative_moment: f64,
-    /// Mean pixel cost.
-    pub cost: f64,
+    /// Image-level or per-pixel connection counts (per pixel only with per-pixel merging).
+    pub connection_scope: ConnectionScope,
 }
 
 /// The optimiser's decision.
@@ -191,8 +219,11 @@ pub struct ImageLevelScore {
 pub struct Decision {
     /// Light paths per pixel (0: path tracing).
     pub nu: f32,
-    /// Connections per camera vertex.
+    /// Connections per camera vertex (0 where [`Decision::connection_mask`] is given).
     pub connections: u32,
+    /// With [`ConnectionScope::PerPixel`] and a bidirectional winner: the expected
+    /// connections per camera vertex of each pixel.
+    pub connection_mask: Option<Image>,
     /// Per-pixel merge probability χ.
     pub merge_mask: Image,
     /// Scores of every image-level candidate.
@@ -217,21 +248,40 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     }
     let thresholds = planes::filter_planes(&mut filtered, &norm, order, input.filters.moment_box, quantile);
     let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);
-    // ---- pixel level: the merge bit of the best full candidate ----
-    let pixel_mask = match input.merge_scope {
-        MergeScope::PerPixel => Some(pixel_level(input, &filtered, &costs)),
-        MergeScope::Global => None,
+    // ---- pixel level: the merge bit (and c) of the best full candidate ----
+    let per_pixel_c = input.merge_scope == MergeScope::PerPixel && input.connection_scope == ConnectionScope::PerPixel;
+    let (pixel_mask, connection_mask) = match input.merge_scope {
+        MergeScope::PerPixel => {
+            let (merge, connections) = pixel_level(input, &filtered, &costs, per_pixel_c);
+            (Some(merge), connections)
+        }
+        MergeScope::Global => (None, None),
     };
+    let class_counts = connection_classes(input.candidates);
+    let classes: Option<Vec<u8>> =
+        connection_mask.as_ref().map(|m| m.data.iter().map(|&c| class_of(&class_counts, c)).collect());
     // ---- image level ----
-    let groups = image_level_groups(input.candidates, input.merge_scope);
-    let scores = image_level_scores(input, &groups, &filtered, &norm, &costs, pixel_mask.as_ref(), &thresholds);
+    let groups = image_level_groups(input.candidates, input.merge_scope, classes.as_ref().map(|_| &class_counts[..]));
+    let scores = image_level_scores(
+        input,
+        &groups,
+        &filtered,
+        &norm,
+        &costs,
+        pixel_mask.as_ref(),
+        classes.as_deref(),
+        &thresholds,
+    );
     let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
         let score = |g: usize| scores[g].relative_moment * scores[g].cost;
         score(a).total_cmp(&score(b))
     });
     // nothing finite: path tracing (as every candidate, it cannot sample some pixel's paths)
     let chosen = best.or_else(|| groups.iter().position(|g| g.nu == 0.0));
-    let (nu, connections) = chosen.map_or((0.0, 0), |g| (groups[g].nu, groups[g].connections));
+    let (nu, connections) = chosen.map_or((0.0, Some(0)), |g| (groups[g].nu, groups[g].connections));
+    // a per-pixel group (never path tracing) renders with the mask
+    let connection_mask = connection_mask.filter(|_| connections.is_none());
+    let connections = connections.unwrap_or(0);
     let merge_mask = match pixel_mask {
         Some(mask) => mask,
         None => Image::filled(w, h, chosen.is_some_and(|g| groups[g].merge == Some(true)) as u8 as f32),
@@ -243,146 +293,50 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
             .into_par_iter()
             .map(|p| {
                 let merge = merge_mask.data[p] > 0.1;
+                let class = classes.as_ref().map_or(0, |c| c[p]);
                 let i = input.image.data[p] as f64;
                 chosen
-                    .and_then(|g| groups[g].variant(merge))
+                    .and_then(|g| groups[g].variant(merge, class))
                     .map_or(0.0, |c| (filtered[c].data[p] as f64 / (i * i + 1e-4)) as f32)
             })
             .collect(),
     );
-    Decision { nu, connections, merge_mask, scores, relative_moment }
-}
-
-/// Every image-level group's relative moment (outliers above each candidate's `thresholds`
-/// zeroed) and cost, each pixel taking the group's merging or non-merging variant by its χ
-/// (`pixel_mask`, or the group's own global choice).
-fn image_level_scores(
-    input: &OptimizerInput,
-    groups: &[Group],
-    filtered: &[Image],
-    norm: &[f32],
-    costs: &[CostTerms],
-    pixel_mask: Option<&Image>,
-    thresholds: &[f32],
-) -> Vec<ImageLevelScore> {
-    // merging is accounted as binary, as its moment is: a pixel merging with χ = 0.2 is priced
-    // and judged as merging always; runs of pixels that merge alike, in pixel order
-    let n = input.image.data.len();
-    let runs: Vec<Run> = match pixel_mask {
-        Some(mask) => {
-            let mut runs: Vec<Run> = Vec::new();
-            for (p, &chi) in mask.data.iter().enumerate() {
-                let merge = chi as f64 > 0.1;
-                match runs.last_mut() {
-                    Some(run) if run.merge == merge => run.end = p + 1,
-                    _ => runs.push(Run { start: p, end: p + 1, merge }),
-                }
-            }
-            runs
-        }
-        None => Vec::new(),
-    };
-    // a per-pixel group builds the photon map when its mask merges anywhere, and then pays
-    // for it in every pixel, merging or not
-    let map_built = pixel_mask.is_some_and(|mask| mask.data.iter().any(|&chi| chi > 0.1));
-    groups
-        .par_iter()
-        .map(|g| {
-            let sums = |map_built: bool, runs: &[Run]| {
-                group_sums(input, g, filtered, norm, costs, thresholds, map_built, runs)
-            };
-            let (relative_moment, cost) = match (g.merge, pixel_mask) {
-                (Some(merge), _) => sums(false, &[Run { start: 0, end: n, merge }]),
-                (None, Some(_)) => sums(map_built, &runs),
-                (None, None) => unreachable!("invariant: per-pixel groups come with the pixel-level mask"),
-            };
-            ImageLevelScore { nu: g.nu, connections: g.connections, merge: g.merge, relative_moment, cost }
-        })
-        .collect()
-}
-
-/// Pixels `start..end`, which all merge or all do not.
-struct Run {
-    start: usize,
-    end: usize,
-    merge: bool,
-}
-
-/// One group's image-level sums (relative moment, cost) over `runs`, which cover the image in
-/// pixel order. Per block of pixels of a run, the terms are computed first without branches
-/// (vector code), then added in pixel order, as one sum over the pixels.
-#[allow(clippy::too_many_arguments)]
-fn group_sums(
-    input: &OptimizerInput,
-    g: &Group,
-    filtered: &[Image],
-    norm: &[f32],
-    costs: &[CostTerms],
-    thresholds: &[f32],
-    map_built: bool,
-    runs: &[Run],
-) -> (f64, f64) {
-    let image = &input.image.data;
-    let pixels = image.len() as f64;
-    let order = input.filters.order;
-    let shared_build = match (map_built, g.variant(true)) {
-        (true, Some(on)) if input.candidates[on].merge => costs[on].build(),
-        _ => 0.0,
-    };
-    const BLOCK: usize = 256;
-    let (mut rel, mut total_cost) = (0.0f64, 0.0f64);
-    let (mut rel_terms, mut cost_terms) = ([0.0f64; BLOCK], [0.0f64; BLOCK]);
-    for run in runs {
-        // a group without the variant a pixel needs leaves the pixel out (never, as groups
-        // are built)
-        let Some(c) = g.variant(run.merge) else { continue };
-        let merges = input.candidates[c].merge;
-        let cost = (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / pixels;
-        let (plane, threshold) = (&filtered[c].data, thresholds[c]);
-        for start in (run.start..run.end).step_by(BLOCK) {
-            let range = start..(start + BLOCK).min(run.end);
-            let len = range.len();
-            let pixels_in = plane[range.clone()].iter().zip(&norm[range.clone()]).zip(&image[range]);
-            for ((r, k), ((&moment, &n), &i)) in rel_terms.iter_mut().zip(cost_terms.iter_mut()).zip(pixels_in) {
-                // outliers are zeroed, but an infinite moment (the candidate cannot sample this
-                // pixel's paths) stays infinite, so that candidate cannot win
-                // (docs/emis.md, decision 4)
-                let outlier = order.outlier_basis(moment, n) > threshold && moment.is_finite();
-                let moment = if outlier { 0.0 } else { moment };
-                // black pixels carry no relative moment, so they are left out of the cost too;
-                // a pixel left out adds +0, which leaves a sum of non-negative terms as it is
-                let i = i as f64;
-                *r = if i == 0.0 { 0.0 } else { moment as f64 / (i * i + 1e-4) / pixels };
-                *k = if i == 0.0 { 0.0 } else { cost };
-            }
-            for (r, k) in rel_terms[..len].iter().zip(&cost_terms[..len]) {
-                rel += r;
-                total_cost += k;
-            }
-        }
-    }
-    (rel, total_cost)
+    Decision { nu, connections, connection_mask, merge_mask, scores, relative_moment }
 }
 
 /// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered
-/// moment × cost, dilated and blurred into χ.
-fn pixel_level(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Image {
+/// moment × cost, dilated and blurred into χ; with `connections`, also its c, dilated and
+/// blurred into an expected count.
+fn pixel_level(
+    input: &OptimizerInput,
+    filtered: &[Image],
+    terms: &[CostTerms],
+    connections: bool,
+) -> (Image, Option<Image>) {
     let (w, h) = (input.moments.width as usize, input.moments.height as usize);
+    let winners = pixel_winners(input, filtered, terms);
     let (dilate, blur) = input.filters.mask_radii(w, h);
-    Image::from_data(w, h, merge_bits(input, filtered, terms)).dilate(dilate).box_blur(blur)
+    let bits = winners.iter().map(|w| w.is_some_and(|c| input.candidates[c].merge) as u8 as f32).collect();
+    let merge = Image::from_data(w, h, bits).dilate(dilate).box_blur(blur);
+    let connections = connections.then(|| {
+        let (dilate, blur) = input.filters.connection_radii(w, h);
+        let counts = winners.iter().map(|w| w.map_or(0.0, |c| input.candidates[c].connections as f32)).collect();
+        Image::from_data(w, h, counts).dilate(dilate).box_blur(blur)
+    });
+    (merge, connections)
 }
 
-/// Per pixel, 1 where the first candidate with the lowest filtered moment × cost merges and
-/// that value is above 0, else 0.
-fn merge_bits(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Vec<f32> {
+/// Per pixel, the first candidate with the lowest filtered moment × cost, where that value is
+/// above 0 (a pixel whose best is 0 gets nothing: no merging, no connections).
+fn pixel_winners(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Vec<Option<usize>> {
     let (w, h) = (input.moments.width as usize, input.moments.height as usize);
     let costs: Vec<f64> =
         input.candidates.iter().zip(terms).map(|(c, t)| t.at(if c.merge { 1.0 } else { 0.0 })).collect();
     // per block of pixels, candidate by candidate, the first candidate with the lowest value
     const BLOCK: usize = 256;
     const NONE: usize = usize::MAX;
-    let mut bits = vec![0.0f32; w * h];
-    bits.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+    let mut winners = vec![None; w * h];
+    winners.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
         let start = b * BLOCK;
         let (mut best, mut which) = ([f64::INFINITY; BLOCK], [NONE; BLOCK]);
         let (best, which) = (&mut best[..out.len()], &mut which[..out.len()]);
@@ -394,52 +348,11 @@ fn merge_bits(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -
                 *i = if lower { c } else { *i };
             }
         }
-        for ((bit, &v), &c) in out.iter_mut().zip(best.iter()).zip(which.iter()) {
-            *bit = if c != NONE && v > 0.0 && input.candidates[c].merge { 1.0 } else { 0.0 };
+        for ((winner, &v), &c) in out.iter_mut().zip(best.iter()).zip(which.iter()) {
+            *winner = (c != NONE && v > 0.0).then_some(c);
         }
     });
-    bits
-}
-
-/// An image-level candidate.
-struct Group {
-    nu: f32,
-    connections: u32,
-    /// `Some`: merges everywhere or nowhere; `None`: where the pixel-level mask says.
-    merge: Option<bool>,
-    /// The candidate a pixel uses where it does not merge and where it does.
-    variants: [Option<usize>; 2],
-}
-
-impl Group {
-    fn variant(&self, merge: bool) -> Option<usize> {
-        self.variants[merge as usize]
-    }
-}
-
-/// The image-level candidates: per distinct (ν, c) with per-pixel merging, or every candidate
-/// with global merging.
-fn image_level_groups(candidates: &[Candidate], scope: MergeScope) -> Vec<Group> {
-    if scope == MergeScope::Global {
-        return candidates
-            .iter()
-            .enumerate()
-            .map(|(i, c)| Group { nu: c.nu, connections: c.connections, merge: Some(c.merge), variants: [Some(i); 2] })
-            .collect();
-    }
-    let position = |nu: f32, conn: u32, merge: bool| {
-        candidates.iter().position(|c| c.nu == nu && c.connections == conn && (c.merge == merge || c.is_path_tracing()))
-    };
-    let mut groups: Vec<Group> = Vec::new();
-    for c in candidates {
-        if groups.iter().any(|g| (g.nu, g.connections) == (c.nu, c.connections)) {
-            continue;
-        }
-        // a group without the variant a pixel needs falls back to its other one
-        let (off, on) = (position(c.nu, c.connections, false), position(c.nu, c.connections, true));
-        groups.push(Group { nu: c.nu, connections: c.connections, merge: None, variants: [off.or(on), on.or(off)] });
-    }
-    groups
+    winners
 }
 
 #[cfg(test)]

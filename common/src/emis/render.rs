@@ -33,8 +33,9 @@ use super::denoise::DenoiseSettings;
 use super::estimator::{MomentEstimator, MomentSettings};
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
-use super::optimize::FilterSettings;
+use super::optimize::{ConnectionScope, FilterSettings};
 use crate::film::{Film, Rect, TileAccum};
+use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, Stop, TileRequest};
 use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
@@ -158,6 +159,8 @@ pub struct EmisConfig {
     pub denoise: DenoiseSettings,
     /// The pilot: the method's own, or path tracing first.
     pub pilot: PilotStart,
+    /// One c for the image or one per pixel (the reduced set's decisions are image-level).
+    pub connection_scope: ConnectionScope,
 }
 
 impl EmisConfig {
@@ -179,6 +182,7 @@ impl EmisConfig {
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
             pilot: PilotStart::default(),
+            connection_scope: ConnectionScope::default(),
         }
     }
 
@@ -204,8 +208,8 @@ impl EmisConfig {
 pub struct Strategy {
     /// Light paths per pixel per iteration (0: path tracing).
     pub nu: f32,
-    /// Connections per camera vertex.
-    pub connections: u32,
+    /// Connections per camera vertex, for the image or per pixel.
+    pub connections: Connections,
     /// Per-pixel merge probability (`None`: no merging, BDPT).
     pub merge: Option<MergeMask>,
 }
@@ -213,7 +217,7 @@ pub struct Strategy {
 impl Strategy {
     /// Pure path tracing (rendered by the `pt` integrator when no moments are collected).
     pub fn path_tracing() -> Self {
-        Strategy { nu: 0.0, connections: 0, merge: None }
+        Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: None }
     }
 
     /// Path tracing as the start of `method`: rendered by the VCM engine with χ = 0 for
@@ -242,7 +246,7 @@ impl Strategy {
     pub fn pilot(method: EmisMethod) -> Self {
         Strategy {
             nu: 1.0,
-            connections: 1,
+            connections: Connections::Fixed(1),
             merge: match method {
                 EmisMethod::Bdpt => None,
                 EmisMethod::Vcm => Some(MergeMask::Constant(1.0)),
@@ -252,12 +256,11 @@ impl Strategy {
 
     /// The bidirectional integrator rendering with this strategy.
     pub fn integrator(&self, settings: PathSettings, correlation_aware: bool) -> Bidir {
-        match &self.merge {
-            None => Bidir::bdpt(settings, self.nu, self.connections),
-            Some(mask) => {
-                Bidir::vcm(settings, self.nu, self.connections, MergeConfig { mask: mask.clone(), correlation_aware })
-            }
-        }
+        let bidir = match &self.merge {
+            None => Bidir::bdpt(settings, self.nu, 0),
+            Some(mask) => Bidir::vcm(settings, self.nu, 0, MergeConfig { mask: mask.clone(), correlation_aware }),
+        };
+        bidir.with_connections(self.connections.clone())
     }
 }
 

@@ -16,6 +16,7 @@ use super::guides::GuideBuffer;
 use super::moments::MomentBuffer;
 use super::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
+use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -34,8 +35,11 @@ pub struct UpdateReport {
     pub restarted: bool,
     /// Chosen light paths per pixel (0: path tracing).
     pub nu: f32,
-    /// Chosen connections per camera vertex.
+    /// Chosen connections per camera vertex (0 with per-pixel connections).
     pub connections: u32,
+    /// With per-pixel connections: the mean expected count over the image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_connections: Option<f64>,
     /// Mean merge probability χ over the image.
     pub mean_merge_probability: f64,
     /// Fraction of pixels with χ > 0.1.
@@ -55,8 +59,9 @@ pub struct UpdateReport {
 pub struct ScoreReport {
     /// ν (0: path tracing).
     pub nu: f32,
-    /// c.
-    pub connections: u32,
+    /// c (absent: per pixel, as the connection mask says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connections: Option<u32>,
     /// Reduced set only: whether the candidate merges (everywhere).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub merge: Option<bool>,
@@ -191,6 +196,7 @@ impl EmisState {
             constants: self.config.constants,
             filters: self.config.filters,
             merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
+            connection_scope: self.config.connection_scope,
         });
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
@@ -201,6 +207,7 @@ impl EmisState {
             restarted,
             nu: decision.nu,
             connections: decision.connections,
+            mean_connections: decision.connection_mask.as_ref().map(|m| m.mean()),
             mean_merge_probability: mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len().max(1) as f64,
             merging_pixels: mask.iter().filter(|&&v| v > 0.1).count() as f64 / mask.len().max(1) as f64,
             statistics,
@@ -212,6 +219,7 @@ impl EmisState {
             iteration,
             nu = decision.nu,
             connections = decision.connections,
+            mean_connections = report.mean_connections,
             merging = report.merging_pixels,
             restarted,
             "emis update"
@@ -222,7 +230,11 @@ impl EmisState {
             (EmisMethod::Vcm, true) => Some(MergeMask::Constant(mask.first().copied().unwrap_or(0.0))),
             (EmisMethod::Vcm, false) => Some(MergeMask::PerPixel(Arc::new(decision.merge_mask.data.clone()))),
         };
-        self.strategy = Strategy { nu: decision.nu, connections: decision.connections, merge };
+        let connections = match decision.connection_mask {
+            Some(mask) => Connections::PerPixel(Arc::new(mask.data)),
+            None => Connections::Fixed(decision.connections),
+        };
+        self.strategy = Strategy { nu: decision.nu, connections, merge };
         if restarted {
             // the path-tracing start is over: what follows is sampled with a bidirectional
             // strategy, and later updates choose from the full set on its moments alone
@@ -294,7 +306,7 @@ mod tests {
         assert!(report.reduced && report.restarted, "{report:?}");
         assert_eq!(
             state.strategy,
-            Strategy { nu: 1.0, connections: 0, merge: Some(MergeMask::Constant(1.0)) },
+            Strategy { nu: 1.0, connections: Connections::Fixed(0), merge: Some(MergeMask::Constant(1.0)) },
             "merging everywhere"
         );
         assert_eq!((state.candidate_set, state.candidates.len(), state.kept_from), (CandidateSet::Full, 51, 4));
@@ -305,7 +317,7 @@ mod tests {
         state.absorb(&pilot(&state, |c| if c.nu == 0.5 && c.connections == 2 { 1e-3 } else { 1.0 })).unwrap();
         let report = state.update(&image, 16).clone();
         assert!(!report.reduced && !report.restarted, "{report:?}");
-        assert_eq!((state.strategy.nu, state.strategy.connections, state.kept_from), (0.5, 2, 4));
+        assert_eq!((state.strategy.nu, &state.strategy.connections, state.kept_from), (0.5, &Connections::Fixed(2), 4));
         assert!(matches!(state.strategy.merge, Some(MergeMask::PerPixel(_))));
     }
 

@@ -9,6 +9,7 @@ use super::filter::Image;
 use super::guides::GuideBuffer;
 use super::moments::MomentBuffer;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
+use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -235,7 +236,7 @@ impl PilotData {
 pub struct Decisions {
     /// Light paths per pixel per iteration.
     pub nu: f32,
-    /// Connections per camera vertex.
+    /// Connections per camera vertex (0 with per-pixel connections: see the reports).
     pub connections: u32,
     /// Every update so far.
     pub reports: Vec<UpdateReport>,
@@ -260,6 +261,9 @@ struct StateMeta {
     /// The first iteration the image keeps.
     #[serde(default)]
     kept_from: u32,
+    /// Connections per pixel follow the merge mask (`connections` is then 0).
+    #[serde(default)]
+    connection_mask: bool,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -274,7 +278,10 @@ impl EmisState {
     pub fn encode(&self) -> Vec<u8> {
         let meta = StateMeta {
             nu: self.strategy.nu,
-            connections: self.strategy.connections,
+            connections: match &self.strategy.connections {
+                Connections::Fixed(c) => *c,
+                Connections::PerPixel(_) => 0,
+            },
             merge: match &self.strategy.merge {
                 None => MergeKind::None,
                 Some(MergeMask::Constant(c)) => MergeKind::Constant(*c),
@@ -286,6 +293,7 @@ impl EmisState {
             reports: self.reports.clone(),
             reduced: self.candidate_set == CandidateSet::Reduced,
             kept_from: self.kept_from,
+            connection_mask: matches!(self.strategy.connections, Connections::PerPixel(_)),
         };
         let json = serde_json::to_vec(&meta).expect("invariant: plain data serialises");
         let mut w = Writer(Vec::new());
@@ -294,6 +302,9 @@ impl EmisState {
         w.0.extend_from_slice(&json);
         write_pilot(&mut w, SumPrecision::F32, &self.moments, &self.statistics, &self.guides);
         if let Some(MergeMask::PerPixel(mask)) = &self.strategy.merge {
+            w.f32s(mask.iter().copied());
+        }
+        if let Connections::PerPixel(mask) = &self.strategy.connections {
             w.f32s(mask.iter().copied());
         }
         if let Some(image) = &self.relative_moment {
@@ -345,6 +356,13 @@ impl EmisState {
             MergeKind::Constant(c) => Some(MergeMask::Constant(c)),
             MergeKind::PerPixel => Some(MergeMask::PerPixel(Arc::new(r.f32s(pixels, "the merge mask")?))),
         };
+        let connections = if meta.connection_mask {
+            let mask = r.f32s(pixels, "the connection mask")?;
+            Connections::check_mask(&mask, pixels).map_err(|e| format!("EMIS checkpoint: {e}"))?;
+            Connections::PerPixel(Arc::new(mask))
+        } else {
+            Connections::Fixed(meta.connections)
+        };
         if meta.relative_moment {
             let data = r.f32s(pixels, "the relative moment")?;
             state.relative_moment = Some(Image { width: width as usize, height: height as usize, data });
@@ -352,7 +370,7 @@ impl EmisState {
         if !r.0.is_empty() {
             return Err(format!("EMIS checkpoint has {} bytes too many", r.0.len()));
         }
-        state.strategy = Strategy { nu: meta.nu, connections: meta.connections, merge };
+        state.strategy = Strategy { nu: meta.nu, connections, merge };
         state.moments = pilot.moments;
         state.statistics = pilot.statistics;
         state.guides = pilot.guides;
@@ -447,7 +465,10 @@ mod tests {
         state.update(&[[0.5; 3]; 12], 1);
         let bytes = state.encode();
         let d = EmisState::read_decisions(&mut &bytes[..]).unwrap();
-        assert_eq!((d.nu, d.connections, d.reports.len()), (state.strategy.nu, state.strategy.connections, 1));
+        assert_eq!(
+            (d.nu, Connections::Fixed(d.connections), d.reports.len()),
+            (state.strategy.nu, state.strategy.connections, 1)
+        );
         assert_eq!(d.reports[0].iteration, 1);
         // the head is enough: the buffers after it are not read
         let meta_len = 8 + u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
@@ -463,7 +484,7 @@ mod tests {
         state.absorb(&pilot(3, 2, state.candidates.len())).unwrap();
         state.strategy = Strategy {
             nu: 0.5,
-            connections: 2,
+            connections: Connections::Fixed(2),
             merge: Some(MergeMask::PerPixel(Arc::new(vec![0.0, 1.0, 0.5, 0.25, 1.0, 0.0]))),
         };
         state.relative_moment = Some(Image { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] });
@@ -471,6 +492,15 @@ mod tests {
         state.stop_collecting();
         let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
         assert_eq!(back.strategy, state.strategy);
+        // per-pixel connections travel after the merge mask, and are checked
+        let mut per_pixel = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
+        per_pixel.strategy.connections = Connections::PerPixel(Arc::new(vec![0.0, 1.5, 8.0, 0.25, 4.0, 2.0]));
+        let back = EmisState::decode(config.clone(), 3, 2, &per_pixel.encode()).unwrap();
+        assert_eq!(back.strategy, per_pixel.strategy);
+        assert_eq!(back.relative_moment.as_ref().map(|i| &i.data), state.relative_moment.as_ref().map(|i| &i.data));
+        per_pixel.strategy.connections = Connections::PerPixel(Arc::new(vec![0.0, 1.5, f32::NAN, 0.25, 4.0, 2.0]));
+        let err = EmisState::decode(config.clone(), 3, 2, &per_pixel.encode()).map(|_| ()).unwrap_err();
+        assert!(err.contains("connection mask value NaN at pixel 2"), "{err}");
         assert_eq!(back.moments, state.moments);
         assert_eq!(back.statistics, state.statistics);
         assert_eq!(back.guides, state.guides);

@@ -21,6 +21,7 @@
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
 use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver};
+use super::path::connections::Connections;
 use super::path::light_cache::LightCache;
 use super::path::light_path::{MAX_BIDIR_EDGES, light_path_count};
 use super::path::merge::{MergeConfig, merge, merge_radius_max, path_radius};
@@ -45,8 +46,8 @@ pub struct Bidir<O: SampleObserver = NoObserver> {
     pub settings: PathSettings,
     /// Light paths per pixel per iteration (ν).
     pub light_paths_per_pixel: f32,
-    /// Connections per camera vertex (c).
-    pub connections: u32,
+    /// Connections per camera vertex (c), fixed or per pixel.
+    pub connections: Connections,
     /// Merging (`vcm`), or none (`bdpt`).
     pub merge: Option<MergeConfig>,
     /// Receives every sample.
@@ -66,12 +67,29 @@ pub struct Iteration {
 impl Bidir<NoObserver> {
     /// `bdpt` with ν light paths per pixel and c connections.
     pub fn bdpt(settings: PathSettings, light_paths_per_pixel: f32, connections: u32) -> Self {
-        Bidir { settings, light_paths_per_pixel, connections, merge: None, observer: NoObserver }
+        Bidir {
+            settings,
+            light_paths_per_pixel,
+            connections: Connections::Fixed(connections),
+            merge: None,
+            observer: NoObserver,
+        }
     }
 
     /// `vcm`: `bdpt` plus merging.
     pub fn vcm(settings: PathSettings, light_paths_per_pixel: f32, connections: u32, merge: MergeConfig) -> Self {
-        Bidir { settings, light_paths_per_pixel, connections, merge: Some(merge), observer: NoObserver }
+        Bidir {
+            settings,
+            light_paths_per_pixel,
+            connections: Connections::Fixed(connections),
+            merge: Some(merge),
+            observer: NoObserver,
+        }
+    }
+
+    /// The same integrator with `connections` per camera vertex (per pixel, say).
+    pub fn with_connections(self, connections: Connections) -> Self {
+        Bidir { connections, ..self }
     }
 
     /// The same integrator reporting its samples to `observer`.
@@ -95,8 +113,11 @@ impl<O: SampleObserver> Bidir<O> {
     pub fn counts(&self, it: &Iteration, pixel: u32, d1: f32) -> SampleCounts {
         let cache = &it.cache;
         let n = cache.paths as f32;
-        let connect =
-            if cache.selectable.is_empty() { 0.0 } else { self.connections as f32 * n / cache.selectable.len() as f32 };
+        let connect = if cache.selectable.is_empty() {
+            0.0
+        } else {
+            self.connections.at(pixel) * n / cache.selectable.len() as f32
+        };
         let merge = self.merge.as_ref().map(|m| {
             let r = path_radius(d1, it.radius_max);
             let rc = d1 * (1.0f32).to_radians().tan();
@@ -256,7 +277,7 @@ impl<O: SampleObserver> Bidir<O> {
                 }
             }
             // ---- connections to cached light vertices ----
-            for _ in 0..self.connections {
+            for _ in 0..self.connections.draw(pixel, &mut sampler) {
                 let u = sampler.next_1d();
                 if cache.selectable.is_empty() || !material.has_smooth_lobe() {
                     continue;

@@ -15,6 +15,7 @@ use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::cost::{CostConstants, pixel_cost};
 use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::{Rect, TileAccum};
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::scene::Scene;
@@ -71,7 +72,7 @@ fn measure_scene(scene: &Scene, iterations: u32, repeats: u32, pool: &rayon::Thr
         .iter()
         .map(|c| {
             let merge = c.merge.then_some(MergeMask::Constant(1.0));
-            Strategy { nu: c.nu, connections: c.connections, merge }.integrator(settings, true)
+            Strategy { nu: c.nu, connections: Connections::Fixed(c.connections), merge }.integrator(settings, true)
         })
         .collect();
     let mut best = vec![f64::INFINITY; configs.len()];

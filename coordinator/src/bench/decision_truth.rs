@@ -30,13 +30,14 @@ use std::sync::Arc;
 use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth};
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
-use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
+use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
 use tessera_common::emis::{
     CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, render_iterations,
 };
 use tessera_common::film::Film;
 use tessera_common::film::compare::relmse;
 use tessera_common::integrator::PathSettings;
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::scene::Scene;
 
@@ -134,9 +135,10 @@ fn reference_decision(s: &Subject, iterations: u32, pool: &rayon::ThreadPool) ->
             constants: s.config.constants,
             filters: s.config.filters,
             merge_scope: MergeScope::PerPixel,
+            connection_scope: ConnectionScope::Image,
         })
     });
-    let costs = decision.scores.iter().map(|g| (g.nu, g.connections, g.cost)).collect();
+    let costs = decision.scores.iter().map(|g| (g.nu, g.connections.unwrap_or(0), g.cost)).collect();
     (decision.merge_mask.data, costs)
 }
 
@@ -144,7 +146,7 @@ fn strategy(nu: f32, connections: u32, mask: &Arc<Vec<f32>>) -> Strategy {
     if nu == 0.0 {
         return Strategy::path_tracing();
     }
-    Strategy { nu, connections, merge: Some(MergeMask::PerPixel(mask.clone())) }
+    Strategy { nu, connections: Connections::Fixed(connections), merge: Some(MergeMask::PerPixel(mask.clone())) }
 }
 
 /// Per-iteration variance relative to the reference from `iterations` single-iteration

@@ -36,6 +36,7 @@ use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_shared_o
 use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::compare::relmse;
 use tessera_common::film::{Film, Rect, TileAccum};
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
 use tessera_common::scene::Scene;
@@ -120,7 +121,11 @@ fn spearman(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn strategy_of(c: &Candidate) -> Strategy {
-    Strategy { nu: c.nu, connections: c.connections, merge: Some(MergeMask::Constant(if c.merge { 1.0 } else { 0.0 })) }
+    Strategy {
+        nu: c.nu,
+        connections: Connections::Fixed(c.connections),
+        merge: Some(MergeMask::Constant(if c.merge { 1.0 } else { 0.0 })),
+    }
 }
 
 /// One scene with its reference, as the measurements need it.

@@ -117,6 +117,7 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
         constants: config.constants,
         filters: config.filters,
         merge_scope: MergeScope::PerPixel,
+        connection_scope: config.connection_scope,
     });
     std::hint::black_box(decision);
     (t.elapsed().as_secs_f64(), denoise, moments.sums.len() * 4)

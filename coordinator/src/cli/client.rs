@@ -97,6 +97,7 @@ pub fn job_json(j: &pb::Job) -> serde_json::Value {
         "samples_done": j.samples_done, "eta_s": j.eta_s, "error": j.error,
         "strategy": j.strategy.as_ref().map(|s| serde_json::json!({
             "nu": s.light_paths_per_pixel, "connections": s.connections,
+            "mean_connections": s.mean_connections,
             "mean_merge_probability": s.mean_merge_probability, "updates": s.updates,
         })),
         "priority": j.priority, "width": j.width, "height": j.height,

@@ -36,6 +36,7 @@ fn run_with(candidates: &[Candidate], moments: &MomentBuffer, image: &Image, fil
         constants: CostConstants::default(),
         filters,
         merge_scope: MergeScope::PerPixel,
+        connection_scope: ConnectionScope::Image,
     })
 }
 
@@ -151,6 +152,7 @@ fn global_merge_scope_scores_every_candidate_and_gives_a_constant_mask() {
             constants: CostConstants::default(),
             filters: FilterSettings::default(),
             merge_scope: MergeScope::Global,
+            connection_scope: ConnectionScope::Image,
         });
         assert_eq!((d.nu, d.connections), (target.nu, target.connections), "{target:?}");
         assert_eq!(d.scores.len(), 9);
@@ -229,6 +231,7 @@ fn bdpt_candidates_pay_nothing_for_a_photon_map() {
         constants: k,
         filters: FilterSettings::default(),
         merge_scope: MergeScope::PerPixel,
+        connection_scope: ConnectionScope::Image,
     });
     assert_eq!((d.nu, d.connections), (1.0, 1));
     let terms = CostTerms::of_candidates(&k, &stats, &candidates, 32 * 32);
@@ -257,30 +260,31 @@ fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
         constants: k,
         filters: FilterSettings::default(),
         merge_scope: MergeScope::PerPixel,
+        connection_scope: ConnectionScope::Image,
     };
     let norm: Vec<f32> = image.data.iter().map(|&i| i * i + 1e-4).collect();
     let (filtered, _) = planes::moment_planes(&moments, false);
     let order = input.filters.order;
     let thresholds = planes::thresholds(&filtered, &norm, order, input.filters.outlier_quantile);
     let costs = CostTerms::of_candidates(&k, &stats, &candidates, (w * h) as u32);
-    let groups = image_level_groups(&candidates, MergeScope::PerPixel);
+    let groups = image_level_groups(&candidates, MergeScope::PerPixel, None);
     let score = |chi: f32| {
         let mask = Image::filled(w, h, chi);
-        image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask), &thresholds)
+        image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask), None, &thresholds)
     };
     let (partial, full) = (score(0.2), score(1.0));
-    let g = groups.iter().position(|g| (g.nu, g.connections) == (1.0, 1)).expect("a ν = 1, c = 1 group");
+    let g = groups.iter().position(|g| (g.nu, g.connections) == (1.0, Some(1))).expect("a ν = 1, c = 1 group");
     assert_eq!(partial[g].cost, full[g].cost, "χ = 0.2 priced as merging always");
-    let on = groups[g].variant(true).unwrap();
+    let on = groups[g].variant(true, 0).unwrap();
     let judged = (w * h / 2) as f64 / (w * h) as f64;
     assert!((full[g].cost - costs[on].at(1.0) * judged).abs() < 1e-9 * full[g].cost, "{:?}", full[g]);
     // nowhere merging: the merge-off variant, without a map
-    let off = groups[g].variant(false).unwrap();
+    let off = groups[g].variant(false, 0).unwrap();
     assert!((score(0.0)[g].cost - costs[off].at(0.0) * judged).abs() < 1e-9 * full[g].cost);
     // merging in one pixel only: the map is built, and every judged pixel pays for it
     let mut one = Image::filled(w, h, 0.0);
     one.data[w * h - 1] = 1.0;
-    let with_map = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&one), &thresholds)[g].cost;
+    let with_map = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&one), None, &thresholds)[g].cost;
     let expected =
         (costs[off].at(0.0) + costs[on].build()) * (judged - 1.0 / (w * h) as f64) + costs[on].at(1.0) / (w * h) as f64;
     assert!((with_map - expected).abs() < 1e-9 * expected, "{with_map} vs {expected}");
@@ -389,15 +393,16 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
             constants,
             filters: FilterSettings::default(),
             merge_scope: scope,
+            connection_scope: ConnectionScope::Image,
         };
-        let groups = image_level_groups(&candidates, scope);
+        let groups = image_level_groups(&candidates, scope, None);
         let pixel_mask = (scope == MergeScope::PerPixel).then_some(&mask);
-        let got = image_level_scores(&input, &groups, &filtered, &norm, &costs, pixel_mask, &thresholds);
+        let got = image_level_scores(&input, &groups, &filtered, &norm, &costs, pixel_mask, None, &thresholds);
         assert!(got.iter().filter(|s| s.relative_moment.is_finite()).count() > groups.len() / 2);
         for (g, score) in groups.iter().zip(&got) {
             // the definition: one pass over the pixels per group
             let map_built = g.merge.is_none() && mask.data.iter().any(|&chi| chi > 0.1);
-            let shared_build = match (map_built, g.variant(true)) {
+            let shared_build = match (map_built, g.variant(true, 0)) {
                 (true, Some(on)) if candidates[on].merge => costs[on].build(),
                 _ => 0.0,
             };
@@ -408,7 +413,7 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
                     continue;
                 }
                 let chi = g.merge.map_or(mask.data[p], |m| m as u8 as f32) as f64;
-                let Some(c) = g.variant(chi > 0.1) else { continue };
+                let Some(c) = g.variant(chi > 0.1, 0) else { continue };
                 let merges = candidates[c].merge;
                 cost += (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / (w * h) as f64;
                 let mut moment = filtered[c].data[p];
@@ -420,7 +425,8 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
             assert_eq!((score.relative_moment.to_bits(), score.cost.to_bits()), (rel.to_bits(), cost.to_bits()));
         }
         // the merge bits: per pixel, the first candidate with the lowest value
-        let bits = merge_bits(&input, &filtered, &costs);
+        let winners = pixel_winners(&input, &filtered, &costs);
+        let bits: Vec<f32> = winners.iter().map(|w| w.is_some_and(|c| candidates[c].merge) as u8 as f32).collect();
         for (p, bit) in bits.iter().enumerate() {
             let mut best = (f64::INFINITY, None);
             for c in 0..k {
@@ -434,3 +440,6 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
         }
     }
 }
+
+#[path = "connection_tests.rs"]
+mod connection_tests;

@@ -3,6 +3,7 @@
 //! arrays and the balance-heuristic MIS weights with sample counts. The integrators use these;
 //! nothing here knows an integrator.
 
+pub mod connections;
 pub mod gather;
 pub mod light_cache;
 pub mod light_path;

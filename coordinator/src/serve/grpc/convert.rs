@@ -57,6 +57,7 @@ fn strategy_to_pb(s: &TileStrategy) -> pb::TileStrategy {
         },
         collect_moments: s.collect,
         reduced_candidates: s.candidates == CandidateSet::Reduced,
+        connection_mask_digest: s.connection_mask.clone().unwrap_or_default(),
     }
 }
 
@@ -96,6 +97,7 @@ pub fn job_to_pb(j: &JobView) -> pb::Job {
             connections: s.connections,
             mean_merge_probability: s.mean_merge_probability,
             updates: s.updates.len() as u32,
+            mean_connections: s.mean_connections,
         }),
     }
 }

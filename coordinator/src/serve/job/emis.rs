@@ -9,6 +9,7 @@ use super::view::StrategyView;
 use crate::serve::storage::BlobStore;
 use tessera_common::emis::{CandidateSet, EmisState, PilotData, collects_moments};
 use tessera_common::film::Film;
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 
 /// Where a tile's merge probability comes from.
@@ -27,8 +28,10 @@ pub enum MergeSpec {
 pub struct TileStrategy {
     /// Light paths per pixel per iteration (0: path tracing).
     pub nu: f32,
-    /// Connections per camera vertex.
+    /// Connections per camera vertex (0 with a connection mask).
     pub connections: u32,
+    /// Per-pixel expected connections stored as a blob (width·height little-endian f32).
+    pub connection_mask: Option<String>,
     /// Merge probability.
     pub merge: MergeSpec,
     /// Record and return pilot data.
@@ -93,19 +96,22 @@ pub struct EmisJob {
     pub state: EmisState,
     /// Digest of the current per-pixel mask blob, once stored.
     mask_digest: Option<String>,
+    /// The blob of the current strategy's connection mask, once stored.
+    connection_digest: Option<String>,
 }
 
 impl EmisJob {
     /// The state before the pilot of an `emis-*` job; `None` for other integrators.
     pub fn new(spec: &JobSpec) -> Option<EmisJob> {
         spec.settings.integrator.emis_method()?;
-        Some(EmisJob { state: EmisState::new(spec.settings.emis_config(), spec.width, spec.height), mask_digest: None })
+        let state = EmisState::new(spec.settings.emis_config(), spec.width, spec.height);
+        Some(EmisJob { state, mask_digest: None, connection_digest: None })
     }
 
     /// Restores a checkpointed state ([`EmisJob::checkpoint`]).
     pub fn restore(spec: &JobSpec, bytes: &[u8]) -> Result<EmisJob, String> {
         let state = EmisState::decode(spec.settings.emis_config(), spec.width, spec.height, bytes)?;
-        Ok(EmisJob { state, mask_digest: None })
+        Ok(EmisJob { state, mask_digest: None, connection_digest: None })
     }
 
     /// The bytes to checkpoint beside the film.
@@ -113,7 +119,7 @@ impl EmisJob {
         self.state.encode()
     }
 
-    /// The strategy of the current pass; stores the per-pixel mask as a blob the first time.
+    /// The strategy of the current pass; stores the per-pixel masks as blobs the first time.
     pub fn strategy(&mut self, blobs: &BlobStore, collect: bool) -> std::io::Result<TileStrategy> {
         let s = &self.state.strategy;
         let merge = match &s.merge {
@@ -132,7 +138,29 @@ impl EmisJob {
                 MergeSpec::Mask(digest)
             }
         };
-        Ok(TileStrategy { nu: s.nu, connections: s.connections, merge, collect, candidates: self.state.candidate_set })
+        let (connections, connection_mask) = match &s.connections {
+            Connections::Fixed(c) => (*c, None),
+            Connections::PerPixel(mask) => {
+                let digest = match &self.connection_digest {
+                    Some(d) => d.clone(),
+                    None => {
+                        let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
+                        let d = blobs.put(&bytes)?;
+                        self.connection_digest = Some(d.clone());
+                        d
+                    }
+                };
+                (0, Some(digest))
+            }
+        };
+        Ok(TileStrategy {
+            nu: s.nu,
+            connections,
+            connection_mask,
+            merge,
+            collect,
+            candidates: self.state.candidate_set,
+        })
     }
 
     /// What this job's pilot data must look like.
@@ -172,6 +200,7 @@ impl EmisJob {
     /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
     pub fn update(&mut self, film: &Film, iterations: u32) -> bool {
         self.mask_digest = None;
+        self.connection_digest = None;
         if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
             return done.restarted;
         }
@@ -183,7 +212,11 @@ impl EmisJob {
         let last = self.state.reports.last()?;
         Some(StrategyView {
             nu: self.state.strategy.nu,
-            connections: self.state.strategy.connections,
+            connections: match &self.state.strategy.connections {
+                Connections::Fixed(c) => *c,
+                Connections::PerPixel(_) => 0,
+            },
+            mean_connections: last.mean_connections,
             mean_merge_probability: last.mean_merge_probability,
             updates: self.state.reports.clone(),
         })

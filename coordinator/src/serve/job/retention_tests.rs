@@ -11,6 +11,7 @@ use super::validate::ResultClaim;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tessera_common::emis::{Strategy, render_iterations};
+use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings, Renderer};
@@ -46,7 +47,14 @@ fn upload_emis(svc: &JobService, scene: &Scene, worker: &str, g: &LeaseGrant, no
             )))
         }
     };
-    let strategy = Strategy { nu: s.nu, connections: s.connections, merge };
+    let floats = |d: &str| -> Arc<Vec<f32>> {
+        Arc::new(svc.blob(d).unwrap().chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect())
+    };
+    let connections = match &s.connection_mask {
+        None => Connections::Fixed(s.connections),
+        Some(d) => Connections::PerPixel(floats(d)),
+    };
+    let strategy = Strategy { nu: s.nu, connections, merge };
     let seed = g.job.settings.seed.unwrap_or(0);
     let collect = s.collect.then_some(s.candidates);
     let (accum, pilot) = render_iterations(scene, settings, &config, &strategy, seed, g.tile.samples.clone(), collect);

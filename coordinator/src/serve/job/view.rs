@@ -11,8 +11,11 @@ use tessera_common::settings::RenderSettings;
 pub struct StrategyView {
     /// Light paths per pixel per iteration (0: path tracing).
     pub nu: f32,
-    /// Connections per camera vertex.
+    /// Connections per camera vertex (0 with per-pixel connections).
     pub connections: u32,
+    /// With per-pixel connections: their mean expected count.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_connections: Option<f64>,
     /// Mean per-pixel merge probability.
     pub mean_merge_probability: f64,
     /// Every update: the chosen counts and every candidate's predicted moment and cost.
@@ -27,6 +30,7 @@ impl StrategyView {
         Some(StrategyView {
             nu: report.last.nu,
             connections: report.last.connections,
+            mean_connections: last.mean_connections,
             mean_merge_probability: last.mean_merge_probability,
             updates: report.updates,
         })

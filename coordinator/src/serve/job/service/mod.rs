@@ -427,6 +427,7 @@ fn checkpoint_decisions(blobs: &BlobStore, id: &str, name: &str) -> Option<Strat
         Ok(d) => Some(StrategyView {
             nu: d.nu,
             connections: d.connections,
+            mean_connections: d.reports.last()?.mean_connections,
             mean_merge_probability: d.reports.last()?.mean_merge_probability,
             updates: d.reports,
         }),
