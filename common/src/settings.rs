@@ -306,6 +306,7 @@ impl RenderSettings {
         config.correlation_aware = self.correlation_aware;
         config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
         config.constants = self.cost_model.constants();
+        config.measured_costs = self.cost_model == CostModel::Measured;
         config.filters.order = self.moment_filter;
         config.filters.outliers = self.moment_outliers;
         config.pilot = self.emis_pilot;

@@ -94,7 +94,7 @@ fn connections_and_merges_do_not_allocate() {
     };
     let counts =
         SampleCounts { hit: 1.0, next_event: 1.0, connect: 0.25, light_trace: 4096.0, merge: Some(merge_counts) };
-    let report = Report { observer: &NoObserver, pixel: 0 };
+    let report = Report { observer: &NoObserver, pixel: 0, clock: None };
     let mut energy = glam::Vec3::ZERO;
     let before = allocations();
     for &i in &cache.selectable {

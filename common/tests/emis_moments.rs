@@ -222,3 +222,40 @@ fn path_tracing_with_a_merge_mask_counts_no_merge_queries() {
     let (same, _) = render_iterations(&scene, settings, &config, &plain, 3, 2..3, Some(CandidateSet::Full));
     assert_eq!(image.sum, same.sum);
 }
+
+/// Costs measured per job: a collecting call times its work as it renders (light vertices and
+/// the photon map every iteration, camera vertices, connections and merges in one pixel of
+/// eight), and the times give constants of plausible size.
+#[test]
+fn collecting_iterations_time_their_work() {
+    use tessera_common::emis::cost::CostConstants;
+    use tessera_common::emis::measured::measured_constants;
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    use tessera_common::integrator::observer::TIMED_PIXEL_STRIDE;
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let settings = PathSettings::from_scene(&scene, None);
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    let pilot = Strategy::pilot(EmisMethod::Vcm);
+    let (_, data) = render_iterations(&scene, settings, &config, &pilot, 2, 0..2, Some(CandidateSet::Full));
+    let s = data.expect("a collecting call").statistics;
+    let t = s.times;
+    assert_eq!((t.iterations, t.light_vertices), (2, s.light_vertices), "{t:?}");
+    let share = t.camera_vertices as f64 / s.camera_vertices as f64;
+    let expected = 1.0 / TIMED_PIXEL_STRIDE as f64;
+    assert!((share - expected).abs() < 0.2 * expected, "timed share {share}");
+    assert!(t.connections > 0 && t.queries > 0 && t.photons > 0 && t.photons_built > 0, "{t:?}");
+    assert!(t.queries <= s.merge_queries && t.photons as f64 <= t.photons_squared, "{t:?}");
+    assert!([t.light_ns, t.build_ns, t.camera_ns, t.connection_ns, t.merge_ns, t.observer_ns].iter().all(|&ns| ns > 0));
+    let k = measured_constants(&t, &CostConstants::calibrated()).expect("enough timed vertices");
+    for (name, v) in [
+        ("light vertex", k.light_vertex),
+        ("connection", k.connection),
+        ("photon shading", k.photon_shading),
+        ("build", k.build),
+    ] {
+        assert!(v.is_finite() && (1e-3..1e3).contains(&v), "{name} {v} camera vertices: {k:?}");
+    }
+    // a call that does not collect times nothing
+    let (_, none) = render_iterations(&scene, settings, &config, &pilot, 2, 0..1, None);
+    assert!(none.is_none());
+}

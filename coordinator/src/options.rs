@@ -109,7 +109,8 @@ pub struct IntegratorArgs {
 /// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
 #[derive(clap::Args, Debug, Clone)]
 pub struct EmisModelArgs {
-    /// emis-*: cost heuristic constants, the reference's or calibrated on this renderer.
+    /// emis-*: cost heuristic constants: calibrated on this renderer, the reference's, or
+    /// measured per job.
     #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: CostModelArg,
     /// emis-*: make moments relative to the image before the box filter, or after it (the
@@ -223,6 +224,9 @@ pub enum MomentOutliersArg {
     Shared,
     /// The reference: each candidate's box-filtered moments above their 99.9 % quantile.
     Filtered,
+    /// First each candidate's own per-pixel outliers before the box filter (as the error
+    /// metric drops each image's worst pixels); then as `filtered`.
+    Each,
 }
 
 impl From<MomentOutliersArg> for OutlierStage {
@@ -230,6 +234,7 @@ impl From<MomentOutliersArg> for OutlierStage {
         match arg {
             MomentOutliersArg::Filtered => OutlierStage::Filtered,
             MomentOutliersArg::Shared => OutlierStage::Shared,
+            MomentOutliersArg::Each => OutlierStage::Each,
         }
     }
 }
@@ -257,6 +262,7 @@ impl From<CostModelArg> for CostModel {
         match arg {
             CostModelArg::Calibrated => CostModel::Calibrated,
             CostModelArg::Reference => CostModel::Reference,
+            CostModelArg::Measured => CostModel::Measured,
         }
     }
 }
@@ -268,6 +274,10 @@ pub enum CostModelArg {
     Calibrated,
     /// The reference implementation's constants (docs/emis.md §2).
     Reference,
+    /// Measured per job from the pilot's own work times on the machine that renders it, the
+    /// calibrated constants filling in what cannot be measured; decisions then vary with
+    /// timing from run to run.
+    Measured,
 }
 
 impl IntegratorArgs {

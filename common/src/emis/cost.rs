@@ -15,6 +15,7 @@
 //! walks to 0 and k_pt to 1, which is exactly the reference formula.
 
 use super::candidate::Candidate;
+use crate::integrator::observer::WorkTimes;
 use serde::{Deserialize, Serialize};
 
 /// The heuristic's relative weights.
@@ -51,13 +52,17 @@ pub enum CostModel {
     Calibrated,
     /// [`CostConstants::reference`]: the reference implementation's constants (docs/emis.md §2).
     Reference,
+    /// Measured per job from the pilot's own work times ([`super::measured`]), with
+    /// [`CostConstants::calibrated`] for what they cannot measure. Decisions then vary with
+    /// the machine's timing from run to run, and a farm's with its workers'.
+    Measured,
 }
 
 impl CostModel {
-    /// The constants of this model.
+    /// The constants of this model (for [`CostModel::Measured`], those it falls back on).
     pub fn constants(self) -> CostConstants {
         match self {
-            CostModel::Calibrated => CostConstants::calibrated(),
+            CostModel::Calibrated | CostModel::Measured => CostConstants::calibrated(),
             CostModel::Reference => CostConstants::reference(),
         }
     }
@@ -139,6 +144,10 @@ pub struct StatisticsSums {
     pub merge_queries: u64,
     /// Σ over iterations of photons found / N of that iteration.
     pub photons_per_path: f64,
+    /// The time the work took (for costs measured per job; not part of equality across
+    /// runs).
+    #[serde(default)]
+    pub times: WorkTimes,
 }
 
 impl StatisticsSums {
@@ -157,6 +166,7 @@ impl StatisticsSums {
         if light_paths > 0 {
             self.photons_per_path += counters.photons_found as f64 / light_paths as f64;
         }
+        self.times += counters.times;
     }
 
     /// Adds another worker's sums.
@@ -168,6 +178,7 @@ impl StatisticsSums {
         self.light_vertices = self.light_vertices.saturating_add(o.light_vertices);
         self.merge_queries = self.merge_queries.saturating_add(o.merge_queries);
         self.photons_per_path += o.photons_per_path;
+        self.times += o.times;
     }
 
     /// The means for `pixels` pixels, with the reference's fallbacks: L̄c = 5 without
@@ -265,8 +276,16 @@ mod tests {
         assert_eq!(s.statistics(100), PathStatistics::default());
         // two iterations of 100 pixels: 350 and 250 camera vertices; 50 and 100 light paths
         // storing 150 and 250 vertices; 10 queries finding 40 photons, then 30 finding 60
-        s.add_iteration(50, 150, &PathCounters { camera_vertices: 350, merge_queries: 10, photons_found: 40 });
-        s.add_iteration(100, 250, &PathCounters { camera_vertices: 250, merge_queries: 30, photons_found: 60 });
+        s.add_iteration(
+            50,
+            150,
+            &PathCounters { camera_vertices: 350, merge_queries: 10, photons_found: 40, ..Default::default() },
+        );
+        s.add_iteration(
+            100,
+            250,
+            &PathCounters { camera_vertices: 250, merge_queries: 30, photons_found: 60, ..Default::default() },
+        );
         let st = s.statistics(100);
         assert!((st.camera_vertices - 3.0).abs() < 1e-12);
         assert!((st.light_vertices - 400.0 / 150.0).abs() < 1e-12);

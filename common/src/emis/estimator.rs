@@ -271,6 +271,11 @@ impl SampleObserver for MomentEstimator {
         self.add_to_pixel(record.pixel, &out[..self.candidates.len]);
     }
 
+    fn wants_times(&self) -> bool {
+        // the work of collecting iterations is timed for costs measured per job
+        true
+    }
+
     fn on_iteration_start(&self, start: &IterationStart) {
         if start.selectable_vertices > 0 {
             let density = PROXY_CONNECTIONS * start.light_paths as f32 / start.selectable_vertices as f32;

@@ -3,10 +3,11 @@
 //! The optimisation, pure and free of rendering and IO so that a coordinator can run it
 //! between passes: the candidate strategies ([`candidate`]), the proxy weights and correction
 //! factor that re-weight a pilot sample for every candidate ([`proxy`], [`delta`]), the moment
-//! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic and its
-//! calibration ([`cost`], [`calibrate`]), the image filters, quantiles and denoiser ([`filter`],
-//! `quantile`, [`denoise`]) and the optimiser ([`optimize`]), plus the cached brute-force truth its
-//! decisions are tested against ([`decision_truth`]).
+//! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic, its
+//! calibration and its constants measured per job ([`cost`], [`calibrate`], [`measured`]),
+//! the image filters, quantiles and denoiser ([`filter`], `quantile`, [`denoise`]) and the
+//! optimiser ([`optimize`]), plus the cached brute-force truth its decisions are tested
+//! against ([`decision_truth`]).
 //!
 //! The driver, which renders with the bidirectional integrators: strategies and iteration
 //! ranges ([`render`]), the denoiser's guides ([`guides`]), the merged state and its updates
@@ -24,6 +25,7 @@ pub mod denoise;
 pub mod estimator;
 pub mod filter;
 pub mod guides;
+pub mod measured;
 pub mod moments;
 pub mod optimize;
 pub mod proxy;

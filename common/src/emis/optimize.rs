@@ -46,7 +46,7 @@ mod planes;
 
 pub use image_level::ImageLevelScore;
 use image_level::{class_of, connection_classes, image_level_groups, image_level_scores};
-pub use planes::remove_shared_outliers;
+pub use planes::{remove_each_outliers, remove_shared_outliers};
 
 /// Filter radii (docs/emis.md, decision 6).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,6 +82,10 @@ pub enum OutlierStage {
     /// is above its own 99.9 % quantile (exact); then as [`OutlierStage::Filtered`].
     #[default]
     Shared,
+    /// First, before the box filter, each candidate's own per-pixel relative moments above
+    /// its 99.9 % quantile (exact) are zeroed, as the error metric drops the worst pixels of
+    /// each image; then as [`OutlierStage::Filtered`].
+    Each,
 }
 
 /// The order of the moment filter and the division by the image (docs/emis.md §5.2; why the
@@ -245,6 +249,9 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let (mut filtered, minimum) = planes::moment_planes(m, shared);
     if let Some(minimum) = minimum {
         planes::subtract_shared_outliers(&mut filtered, &minimum, &norm, quantile);
+    }
+    if input.filters.outliers == OutlierStage::Each {
+        planes::remove_each_outliers(&mut filtered, &norm, quantile);
     }
     let thresholds = planes::filter_planes(&mut filtered, &norm, order, input.filters.moment_box, quantile);
     let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);

@@ -153,6 +153,9 @@ pub struct EmisConfig {
     pub moments: MomentSettings,
     /// Cost heuristic constants (docs/emis.md, decision 8).
     pub constants: CostConstants,
+    /// Measure the constants per job from the pilot's work times, `constants` filling in what
+    /// they cannot measure.
+    pub measured_costs: bool,
     /// Filter radii (docs/emis.md, decision 6).
     pub filters: FilterSettings,
     /// The denoiser (docs/emis.md, decision 7).
@@ -179,6 +182,7 @@ impl EmisConfig {
             correlation_aware: true,
             moments: MomentSettings::default(),
             constants: CostConstants::default(),
+            measured_costs: false,
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
             pilot: PilotStart::default(),

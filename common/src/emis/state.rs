@@ -9,10 +9,11 @@
 //! the image keeps.
 
 use super::candidate::Candidate;
-use super::cost::{PathStatistics, StatisticsSums};
+use super::cost::{CostConstants, PathStatistics, StatisticsSums};
 use super::denoise::{Guides, denoised_intensity};
 use super::filter::Image;
 use super::guides::GuideBuffer;
+use super::measured::measured_constants;
 use super::moments::MomentBuffer;
 use super::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
@@ -46,6 +47,10 @@ pub struct UpdateReport {
     pub merging_pixels: f64,
     /// The statistics the costs were computed with.
     pub statistics: PathStatistics,
+    /// With costs measured per job: the constants measured (absent while too little was
+    /// timed, when the fallback's were used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_constants: Option<CostConstants>,
     /// Every image-level candidate: mean relative moment, mean cost, and their product.
     pub candidates: Vec<ScoreReport>,
     /// Time of the denoiser, ms.
@@ -188,12 +193,17 @@ impl EmisState {
         let t1 = Instant::now();
         let statistics = self.statistics.statistics((w * h) as u32);
         let reduced = self.candidate_set == CandidateSet::Reduced;
+        let measured = if self.config.measured_costs {
+            measured_constants(&self.statistics.times, &self.config.constants)
+        } else {
+            None
+        };
         let decision = optimize(&OptimizerInput {
             candidates: &self.candidates,
             moments: &self.moments,
             image: &intensity,
             statistics,
-            constants: self.config.constants,
+            constants: measured.unwrap_or(self.config.constants),
             filters: self.config.filters,
             merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
             connection_scope: self.config.connection_scope,
@@ -211,6 +221,7 @@ impl EmisState {
             mean_merge_probability: mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len().max(1) as f64,
             merging_pixels: mask.iter().filter(|&&v| v > 0.1).count() as f64 / mask.len().max(1) as f64,
             statistics,
+            measured_constants: measured,
             candidates: decision.scores.iter().map(ScoreReport::from).collect(),
             denoise_ms,
             optimize_ms,

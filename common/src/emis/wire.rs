@@ -9,17 +9,24 @@ use super::filter::Image;
 use super::guides::GuideBuffer;
 use super::moments::MomentBuffer;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
+use crate::integrator::observer::WorkTimes;
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
-/// Pilot data with f32 moment sums: the coordinator's checkpoints (and uploads of earlier
-/// versions).
+/// Pilot data with f32 moment sums and without work times (checkpoints and uploads of earlier
+/// versions, still read).
 const PILOT_MAGIC_F32: &[u8; 4] = b"TPD1";
-/// Pilot data with bfloat16 moment sums: uploads, whose sums [`MomentBuffer::round_for_wire`]
-/// rounded, so that the encoding loses nothing.
+/// Pilot data with bfloat16 moment sums and without work times (earlier uploads, still read).
 const PILOT_MAGIC_BF16: &[u8; 4] = b"TPD2";
+/// Pilot data with f32 moment sums and work times: the coordinator's checkpoints.
+const PILOT_MAGIC_F32_TIMED: &[u8; 4] = b"TPD3";
+/// Pilot data with bfloat16 moment sums and work times: uploads, whose sums
+/// [`MomentBuffer::round_for_wire`] rounded, so that the encoding loses nothing.
+const PILOT_MAGIC_BF16_TIMED: &[u8; 4] = b"TPD4";
+/// Bytes of the work times.
+const TIMES_BYTES: usize = 15 * 8;
 const STATE_MAGIC: &[u8; 4] = b"TES1";
 
 /// Little-endian writer.
@@ -113,7 +120,7 @@ fn write_pilot(
     statistics: &StatisticsSums,
     guides: &GuideBuffer,
 ) {
-    w.0.extend_from_slice(if precision == SumPrecision::F32 { PILOT_MAGIC_F32 } else { PILOT_MAGIC_BF16 });
+    w.0.extend_from_slice(if precision == SumPrecision::F32 { PILOT_MAGIC_F32_TIMED } else { PILOT_MAGIC_BF16_TIMED });
     w.u32(moments.width);
     w.u32(moments.height);
     w.u32(moments.candidates as u32);
@@ -128,6 +135,7 @@ fn write_pilot(
     w.u64(statistics.light_vertices);
     w.u64(statistics.merge_queries);
     w.f64(statistics.photons_per_path);
+    write_times(w, &statistics.times);
     w.u32(guides.samples);
     // calls past the guide iterations carry no guides: uploads leave out their zeros
     let empty = guides.is_zero();
@@ -142,10 +150,81 @@ fn write_pilot(
     w.f32s(guides.depth.iter().copied());
 }
 
+fn write_times(w: &mut Writer, t: &WorkTimes) {
+    for v in [
+        t.iterations,
+        t.light_vertices,
+        t.light_ns,
+        t.photons_built,
+        t.build_ns,
+        t.camera_vertices,
+        t.camera_ns,
+        t.connections,
+        t.connection_ns,
+        t.queries,
+        t.photons,
+        t.merge_ns,
+        t.observer_ns,
+    ] {
+        w.u64(v);
+    }
+    w.f64(t.photons_squared);
+    w.f64(t.merge_ns_photons);
+}
+
+fn read_times(r: &mut Reader) -> Result<WorkTimes, String> {
+    let mut u = [0u64; 13];
+    for v in &mut u {
+        *v = r.u64("the work times")?;
+    }
+    let (photons_squared, merge_ns_photons) = (r.f64("the work times")?, r.f64("the work times")?);
+    if !(photons_squared >= 0.0
+        && photons_squared.is_finite()
+        && merge_ns_photons >= 0.0
+        && merge_ns_photons.is_finite())
+    {
+        return Err(format!("work time sums {photons_squared}, {merge_ns_photons} are out of range"));
+    }
+    let [
+        iterations,
+        light_vertices,
+        light_ns,
+        photons_built,
+        build_ns,
+        camera_vertices,
+        camera_ns,
+        connections,
+        connection_ns,
+        queries,
+        photons,
+        merge_ns,
+        observer_ns,
+    ] = u;
+    Ok(WorkTimes {
+        iterations,
+        light_vertices,
+        light_ns,
+        photons_built,
+        build_ns,
+        camera_vertices,
+        camera_ns,
+        connections,
+        connection_ns,
+        queries,
+        photons,
+        photons_squared,
+        merge_ns,
+        merge_ns_photons,
+        observer_ns,
+    })
+}
+
 fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
-    let precision = match r.take(4, "the header")? {
-        m if m == PILOT_MAGIC_F32 => SumPrecision::F32,
-        m if m == PILOT_MAGIC_BF16 => SumPrecision::Bf16,
+    let (precision, timed) = match r.take(4, "the header")? {
+        m if m == PILOT_MAGIC_F32 => (SumPrecision::F32, false),
+        m if m == PILOT_MAGIC_BF16 => (SumPrecision::Bf16, false),
+        m if m == PILOT_MAGIC_F32_TIMED => (SumPrecision::F32, true),
+        m if m == PILOT_MAGIC_BF16_TIMED => (SumPrecision::Bf16, true),
         _ => return Err("pilot data has an unknown format".into()),
     };
     let (w, h, c) = (r.u32("the width")?, r.u32("the height")?, r.u32("the candidate count")? as usize);
@@ -162,14 +241,18 @@ fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Res
     if let Some(i) = sums.iter().position(|s| s.is_nan() || *s < 0.0) {
         return Err(format!("moment sum {i} (pixel {}) is {}", i / candidates.max(1), sums[i]));
     }
-    let statistics = StatisticsSums {
+    let mut statistics = StatisticsSums {
         iterations: r.u64("the statistics")?,
         camera_vertices: r.u64("the statistics")?,
         light_paths: r.u64("the statistics")?,
         light_vertices: r.u64("the statistics")?,
         merge_queries: r.u64("the statistics")?,
         photons_per_path: r.f64("the statistics")?,
+        times: WorkTimes::default(),
     };
+    if timed {
+        statistics.times = read_times(r)?;
+    }
     if !(statistics.photons_per_path >= 0.0 && statistics.photons_per_path.is_finite()) {
         return Err(format!("photons per path {} is out of range", statistics.photons_per_path));
     }
@@ -216,7 +299,7 @@ impl PilotData {
     /// Bytes of [`PilotData::encode`].
     pub fn encoded_len(&self) -> usize {
         let pixels = self.moments.width as usize * self.moments.height as usize;
-        20 + self.moments.sums.len() * 2 + 48 + 8 + if self.guides.is_zero() { 0 } else { pixels * 7 * 4 }
+        20 + self.moments.sums.len() * 2 + 48 + TIMES_BYTES + 8 + if self.guides.is_zero() { 0 } else { pixels * 7 * 4 }
     }
 
     /// Decodes pilot data of a `width`×`height` image with `candidates` candidates; the error
@@ -384,155 +467,5 @@ impl EmisState {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::emis::EmisMethod;
-
-    fn pilot(width: u32, height: u32, candidates: usize) -> PilotData {
-        let pixels = (width * height) as usize;
-        let mut moments = MomentBuffer::new(width, height, candidates);
-        for (i, s) in moments.sums.iter_mut().enumerate() {
-            *s = if i % 7 == 3 { f32::INFINITY } else { i as f32 * 0.25 };
-        }
-        moments.iterations = 2;
-        let mut guides = GuideBuffer::new(width, height);
-        guides.samples = 2;
-        guides.albedo = (0..pixels).map(|i| [i as f32, 0.5, 0.25]).collect();
-        guides.depth = (0..pixels).map(|i| i as f32 * 3.0).collect();
-        let statistics = StatisticsSums {
-            iterations: 2,
-            camera_vertices: 10,
-            light_paths: 12,
-            light_vertices: 30,
-            merge_queries: 8,
-            photons_per_path: 0.75,
-        };
-        PilotData { moments, statistics, guides }
-    }
-
-    #[test]
-    fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
-        let mut p = pilot(3, 2, 5);
-        p.moments.sums[1] = 0.1;
-        let exact = p.clone();
-        p.moments.round_for_wire();
-        let bytes = p.encode();
-        assert_eq!(bytes.len(), p.encoded_len());
-        assert_eq!(&bytes[..4], PILOT_MAGIC_BF16);
-        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
-        // unrounded sums are rounded by the encoding: the decoded data is not the original
-        assert_ne!(PilotData::decode(&exact.encode(), 3, 2, 5).unwrap(), exact);
-        // a checkpoint keeps sums exactly (they are sums of rounded calls, not rounded)
-        let mut w = Writer(Vec::new());
-        write_pilot(&mut w, SumPrecision::F32, &exact.moments, &exact.statistics, &exact.guides);
-        assert_eq!(PilotData::decode(&w.0, 3, 2, 5).unwrap(), exact);
-        assert_eq!(w.0.len(), bytes.len() + 2 * exact.moments.sums.len() - 4);
-        // without guides (calls past the guide iterations) an upload leaves them out
-        p.guides = GuideBuffer::new(3, 2);
-        let bytes = p.encode();
-        assert_eq!(bytes.len(), p.encoded_len());
-        assert_eq!(bytes.len(), pilot(3, 2, 5).encode().len() - 6 * 7 * 4);
-        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
-        // a negative zero is not left out (it would come back positive)
-        p.guides.normal[1][2] = -0.0;
-        let back = PilotData::decode(&p.encode(), 3, 2, 5).unwrap();
-        assert_eq!(back.guides.normal[1][2].to_bits(), (-0.0f32).to_bits());
-    }
-
-    #[test]
-    fn pilot_data_round_trips_and_refuses_bad_sizes_and_values() {
-        let p = pilot(3, 2, 5);
-        let bytes = p.encode();
-        assert_eq!(bytes.len(), p.encoded_len());
-        assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
-        assert!(PilotData::decode(&bytes, 2, 3, 5).unwrap_err().contains("expected 2×3"));
-        assert!(PilotData::decode(&bytes[..bytes.len() - 1], 3, 2, 5).unwrap_err().contains("depth guide"));
-        let mut longer = bytes.clone();
-        longer.push(0);
-        assert!(PilotData::decode(&longer, 3, 2, 5).unwrap_err().contains("too many"));
-        let mut nan = p.clone();
-        nan.moments.sums[7] = f32::NAN;
-        assert!(PilotData::decode(&nan.encode(), 3, 2, 5).unwrap_err().contains("moment sum 7 (pixel 1)"));
-        let mut guide = p;
-        guide.guides.normal[0][1] = f32::INFINITY;
-        assert!(PilotData::decode(&guide.encode(), 3, 2, 5).unwrap_err().contains("guide"));
-    }
-
-    #[test]
-    fn decisions_read_from_a_checkpoint_head_alone() {
-        let config = EmisConfig::new(EmisMethod::Vcm);
-        let mut state = EmisState::new(config, 4, 3);
-        state.update(&[[0.5; 3]; 12], 1);
-        let bytes = state.encode();
-        let d = EmisState::read_decisions(&mut &bytes[..]).unwrap();
-        assert_eq!(
-            (d.nu, Connections::Fixed(d.connections), d.reports.len()),
-            (state.strategy.nu, state.strategy.connections, 1)
-        );
-        assert_eq!(d.reports[0].iteration, 1);
-        // the head is enough: the buffers after it are not read
-        let meta_len = 8 + u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
-        assert!(EmisState::read_decisions(&mut &bytes[..meta_len]).is_ok());
-        assert!(EmisState::read_decisions(&mut &bytes[..meta_len - 1]).unwrap_err().contains("bytes"));
-        assert!(EmisState::read_decisions(&mut &b"TPD1...."[..]).unwrap_err().contains("unknown format"));
-    }
-
-    #[test]
-    fn emis_state_checkpoint_round_trips() {
-        let config = EmisConfig::new(EmisMethod::Vcm);
-        let mut state = EmisState::new(config.clone(), 3, 2);
-        state.absorb(&pilot(3, 2, state.candidates.len())).unwrap();
-        state.strategy = Strategy {
-            nu: 0.5,
-            connections: Connections::Fixed(2),
-            merge: Some(MergeMask::PerPixel(Arc::new(vec![0.0, 1.0, 0.5, 0.25, 1.0, 0.0]))),
-        };
-        state.relative_moment = Some(Image { width: 3, height: 2, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] });
-        state.updates_done = 2;
-        state.stop_collecting();
-        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
-        assert_eq!(back.strategy, state.strategy);
-        // per-pixel connections travel after the merge mask, and are checked
-        let mut per_pixel = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
-        per_pixel.strategy.connections = Connections::PerPixel(Arc::new(vec![0.0, 1.5, 8.0, 0.25, 4.0, 2.0]));
-        let back = EmisState::decode(config.clone(), 3, 2, &per_pixel.encode()).unwrap();
-        assert_eq!(back.strategy, per_pixel.strategy);
-        assert_eq!(back.relative_moment.as_ref().map(|i| &i.data), state.relative_moment.as_ref().map(|i| &i.data));
-        per_pixel.strategy.connections = Connections::PerPixel(Arc::new(vec![0.0, 1.5, f32::NAN, 0.25, 4.0, 2.0]));
-        let err = EmisState::decode(config.clone(), 3, 2, &per_pixel.encode()).map(|_| ()).unwrap_err();
-        assert!(err.contains("connection mask value NaN at pixel 2"), "{err}");
-        assert_eq!(back.moments, state.moments);
-        assert_eq!(back.statistics, state.statistics);
-        assert_eq!(back.guides, state.guides);
-        assert_eq!(back.updates_done, 2);
-        assert!(!back.collecting());
-        assert_eq!(back.relative_moment.as_ref().map(|i| &i.data), state.relative_moment.as_ref().map(|i| &i.data));
-        assert!(EmisState::decode(config, 2, 3, &state.encode()).is_err());
-    }
-
-    /// A path-tracing start keeps its reduced candidate set across a checkpoint, and after the
-    /// restart the full set and the first kept iteration.
-    #[test]
-    fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() {
-        let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
-        let mut state = EmisState::new(config.clone(), 3, 2);
-        assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
-        state.absorb(&pilot(3, 2, 9)).unwrap();
-        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
-        assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Reduced, 9, 0));
-        assert_eq!(back.moments, state.moments);
-        assert_eq!(back.strategy, state.strategy);
-        state.candidate_set = CandidateSet::Full;
-        state.candidates = config.candidates_of(CandidateSet::Full);
-        state.moments = MomentBuffer::new(3, 2, 51);
-        state.kept_from = 4;
-        let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
-        assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Full, 51, 4));
-        // a reduced set after a restart, or with the default pilot, is corrupt
-        state.candidate_set = CandidateSet::Reduced;
-        assert!(EmisState::decode(config, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
-        state.kept_from = 0;
-        let bidirectional = EmisConfig::new(EmisMethod::Vcm);
-        assert!(EmisState::decode(bidirectional, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
-    }
-}
+#[path = "wire_tests.rs"]
+mod tests;

@@ -20,7 +20,7 @@
 //! factor (`--correlation-aware`). Use them where light arrives along paths camera paths find
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
-use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver};
+use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver, timed_pixel};
 use super::path::connections::Connections;
 use super::path::light_cache::LightCache;
 use super::path::light_path::{MAX_BIDIR_EDGES, light_path_count};
@@ -38,6 +38,8 @@ use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::cell::Cell;
+use std::time::Instant;
 
 /// The bidirectional path tracer, with optional merging, reporting samples to `O`.
 #[derive(Clone, Debug)]
@@ -186,7 +188,14 @@ impl<O: SampleObserver> Bidir<O> {
         // until the primary hit is known, any radius will do: no merge can involve the camera ray
         let mut counts = self.counts(it, pixel, 1.0);
         let mut radius = 0.0;
-        let report = Report { observer: &self.observer, pixel };
+        // a sample of the paths is timed (for costs measured per job), the observer's own
+        // time left out
+        let timed = self.observer.wants_times() && timed_pixel(pixel);
+        let clock = Cell::new(0u64);
+        let path_start = timed.then(Instant::now);
+        let vertices_before = counters.camera_vertices;
+        let mut block_ns = 0u64;
+        let report = Report { observer: &self.observer, pixel, clock: timed.then_some(&clock) };
         let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
         let mut ray = cam.generate_ray(raster);
         let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
@@ -277,6 +286,8 @@ impl<O: SampleObserver> Bidir<O> {
                 }
             }
             // ---- connections to cached light vertices ----
+            let block = timed.then(|| (Instant::now(), clock.get()));
+            let mut tried = 0u64;
             for _ in 0..self.connections.draw(pixel, &mut sampler) {
                 let u = sampler.next_1d();
                 if cache.selectable.is_empty() || !material.has_smooth_lobe() {
@@ -289,9 +300,16 @@ impl<O: SampleObserver> Bidir<O> {
                 if depth + light.len() as u32 > max_edges {
                     continue;
                 }
+                tried += 1;
                 if let Some(w) = connect(scene, verts, light, connect_scale, &counts, &report) {
                     total += w.value;
                 }
+            }
+            if let Some(block) = block.filter(|_| tried > 0) {
+                let ns = net_ns(block, &clock);
+                block_ns += ns;
+                counters.times.connections += tried;
+                counters.times.connection_ns += ns;
             }
             // ---- merging (vcm), never at the primary vertex ----
             if let Some(m) = &self.merge {
@@ -304,10 +322,20 @@ impl<O: SampleObserver> Bidir<O> {
                     && u < chi
                     && material.has_smooth_lobe()
                 {
+                    let block = timed.then(|| (Instant::now(), clock.get()));
                     let (value, found) = merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
                     total += value;
                     counters.merge_queries += 1;
                     counters.photons_found += found as u64;
+                    if let Some(block) = block {
+                        let (ns, t) = (net_ns(block, &clock), &mut counters.times);
+                        block_ns += ns;
+                        t.queries += 1;
+                        t.photons += found as u64;
+                        t.photons_squared += found as f64 * found as f64;
+                        t.merge_ns += ns;
+                        t.merge_ns_photons += ns as f64 * found as f64;
+                    }
                 }
             }
             // ---- continue the camera path ----
@@ -344,8 +372,20 @@ impl<O: SampleObserver> Bidir<O> {
             }
             ray = hit.spawn_ray(frame.to_world(bs.wi));
         }
+        if let Some(start) = path_start {
+            let t = &mut counters.times;
+            let observer = clock.get();
+            t.camera_vertices += counters.camera_vertices - vertices_before;
+            t.camera_ns += (start.elapsed().as_nanos() as u64).saturating_sub(observer + block_ns);
+            t.observer_ns += observer;
+        }
         (total, raster)
     }
+}
+
+/// Nanoseconds since a block's start, less the observer's time in it (`clock` then and now).
+fn net_ns((start, clock_then): (Instant, u64), clock: &Cell<u64>) -> u64 {
+    (start.elapsed().as_nanos() as u64).saturating_sub(clock.get() - clock_then)
 }
 
 impl<O: SampleObserver> Integrator for Bidir<O> {
@@ -375,6 +415,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
+            let light_start = Instant::now();
             let cache = LightCache::trace(
                 scene,
                 tile.seed,
@@ -383,7 +424,9 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 self.max_edges().saturating_sub(1),
                 self.settings.rr_depth,
             );
+            let mut light_time = light_start.elapsed();
             let radius_max = merge_radius_max(scene);
+            let build_start = Instant::now();
             // no map without light paths or without a pixel that merges: queries against an
             // empty map would only cost time, and would count as merges that found nothing
             // (diluting φ, photons per query and light path)
@@ -392,6 +435,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 .as_ref()
                 .filter(|m| n > 0 && m.mask.may_merge())
                 .map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
+            let build_time = build_start.elapsed();
             let start = IterationStart {
                 iteration,
                 light_paths: n,
@@ -400,7 +444,9 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             };
             let it = Iteration { cache, photons, radius_max };
             self.observer.on_iteration_start(&start);
+            let splat_start = Instant::now();
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
+            light_time += splat_start.elapsed();
             let rows: Vec<(Vec<(Rgb, Vec2)>, PathCounters)> = (0..h)
                 .into_par_iter()
                 .map_init(Vec::new, |verts, y| {
@@ -424,6 +470,16 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                     accum.add_sample(x as u32, y as u32, *raster, *value);
                 }
                 counters += *row_counters;
+            }
+            if self.observer.wants_times() {
+                // the phases run on the whole pool (the build on one thread while the others
+                // wait): their cost is the pool's time
+                let pool = |t: std::time::Duration| t.as_nanos() as u64 * rayon::current_num_threads() as u64;
+                let t = &mut counters.times;
+                (t.iterations, t.light_vertices, t.light_ns) = (1, start.light_vertices, pool(light_time));
+                if it.photons.is_some() {
+                    (t.photons_built, t.build_ns) = (start.selectable_vertices, pool(build_time));
+                }
             }
             self.observer.on_iteration_end(&start, &counters);
             for chunk in &splats {

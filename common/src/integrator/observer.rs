@@ -1,9 +1,10 @@
 //! Sample hooks: every sample of the bidirectional integrators can be reported to an observer
 //! with its technique, pixel, MIS-weighted contribution, and the gathered path densities and
 //! sample counts a proxy-weight evaluation needs (docs/emis.md §3.2), plus per-iteration path
-//! statistics for the cost model (docs/emis.md §2). The integrators are generic over the
-//! observer; with [`NoObserver`] every call inlines to nothing, so unobserved rendering pays
-//! nothing.
+//! statistics for the cost model (docs/emis.md §2) and, when the observer asks for them, the
+//! time each kind of work took ([`WorkTimes`], for costs measured per job). The integrators are
+//! generic over the observer; with [`NoObserver`] every call inlines to nothing, so unobserved
+//! rendering pays nothing.
 
 use super::path::mis::{PathPdfs, SampleCounts, Technique};
 use crate::math::Rgb;
@@ -60,7 +61,7 @@ pub struct IterationStart {
 }
 
 /// Work counted over one iteration, for the cost model (docs/emis.md §2).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PathCounters {
     /// Surface vertices of all camera paths.
     pub camera_vertices: u64,
@@ -68,6 +69,9 @@ pub struct PathCounters {
     pub merge_queries: u64,
     /// Photons found within the radius by those queries.
     pub photons_found: u64,
+    /// The time the work took, where the observer asked for it
+    /// ([`SampleObserver::wants_times`]).
+    pub times: WorkTimes,
 }
 
 impl std::ops::AddAssign for PathCounters {
@@ -75,7 +79,81 @@ impl std::ops::AddAssign for PathCounters {
         self.camera_vertices += o.camera_vertices;
         self.merge_queries += o.merge_queries;
         self.photons_found += o.photons_found;
+        self.times += o.times;
     }
+}
+
+/// Measured time of the bidirectional engine's kinds of work, in nanoseconds of one thread,
+/// without the observer's own time: every light vertex (tracing and its light-tracing splat,
+/// over whole iterations), the photon map's build, and, in the camera paths of a sample of
+/// pixels ([`timed_pixel`]), camera vertices, connections and merge queries. Sums, so that
+/// iterations and workers add up; they vary from run to run, unlike everything else a render
+/// reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WorkTimes {
+    /// Iterations timed.
+    pub iterations: u64,
+    /// Light vertices stored in those iterations.
+    pub light_vertices: u64,
+    /// Tracing and splatting them (the pool's wall time × its threads).
+    pub light_ns: u64,
+    /// Photons the maps of those iterations held.
+    pub photons_built: u64,
+    /// Building the maps (wall time × threads).
+    pub build_ns: u64,
+    /// Camera vertices of the timed paths.
+    pub camera_vertices: u64,
+    /// Their time: intersection, emitter hit, next-event estimate, sampling the next
+    /// direction, without connections and merges.
+    pub camera_ns: u64,
+    /// Connections tried at the timed paths' vertices.
+    pub connections: u64,
+    /// Their time.
+    pub connection_ns: u64,
+    /// Merge queries at the timed paths' vertices.
+    pub queries: u64,
+    /// Photons those queries found.
+    pub photons: u64,
+    /// Σ photons² over the queries (for the fit of time against photons).
+    pub photons_squared: f64,
+    /// Their time.
+    pub merge_ns: u64,
+    /// Σ time × photons over the queries.
+    pub merge_ns_photons: f64,
+    /// The observer's own time within the timed work (left out of every figure above).
+    pub observer_ns: u64,
+}
+
+impl std::ops::AddAssign for WorkTimes {
+    fn add_assign(&mut self, o: Self) {
+        // saturating: sums a worker sends must not wrap (the coordinator bounds them as well)
+        let add = |a: &mut u64, b: u64| *a = a.saturating_add(b);
+        add(&mut self.iterations, o.iterations);
+        add(&mut self.light_vertices, o.light_vertices);
+        add(&mut self.light_ns, o.light_ns);
+        add(&mut self.photons_built, o.photons_built);
+        add(&mut self.build_ns, o.build_ns);
+        add(&mut self.camera_vertices, o.camera_vertices);
+        add(&mut self.camera_ns, o.camera_ns);
+        add(&mut self.connections, o.connections);
+        add(&mut self.connection_ns, o.connection_ns);
+        add(&mut self.queries, o.queries);
+        add(&mut self.photons, o.photons);
+        self.photons_squared += o.photons_squared;
+        add(&mut self.merge_ns, o.merge_ns);
+        self.merge_ns_photons += o.merge_ns_photons;
+        add(&mut self.observer_ns, o.observer_ns);
+    }
+}
+
+/// One pixel in [`TIMED_PIXEL_STRIDE`] has its camera paths timed: enough paths for stable
+/// means, few enough that the clock reads cost nothing measurable.
+pub const TIMED_PIXEL_STRIDE: u32 = 8;
+
+/// Whether `pixel`'s camera paths are timed.
+#[inline(always)]
+pub fn timed_pixel(pixel: u32) -> bool {
+    pixel.is_multiple_of(TIMED_PIXEL_STRIDE)
 }
 
 /// Receives every sample. Called concurrently from render threads: during an iteration's
@@ -84,6 +162,11 @@ impl std::ops::AddAssign for PathCounters {
 pub trait SampleObserver: Send + Sync {
     /// Called once per non-zero sample.
     fn on_sample(&self, record: &SampleRecord);
+    /// Whether the integrator should time its work ([`PathCounters::times`]).
+    #[inline(always)]
+    fn wants_times(&self) -> bool {
+        false
+    }
     /// Called before an iteration's light tracing, once its light subpaths are traced.
     #[inline(always)]
     fn on_iteration_start(&self, _start: &IterationStart) {}
@@ -103,6 +186,10 @@ impl<T: SampleObserver + ?Sized> SampleObserver for &T {
     #[inline(always)]
     fn on_sample(&self, record: &SampleRecord) {
         (**self).on_sample(record)
+    }
+    #[inline(always)]
+    fn wants_times(&self) -> bool {
+        (**self).wants_times()
     }
     #[inline(always)]
     fn on_iteration_start(&self, start: &IterationStart) {
@@ -128,6 +215,9 @@ impl<T: SampleObserver> SampleObserver for [T] {
     fn on_sample(&self, record: &SampleRecord) {
         self.iter().for_each(|o| o.on_sample(record))
     }
+    fn wants_times(&self) -> bool {
+        self.iter().any(|o| o.wants_times())
+    }
     fn on_iteration_start(&self, start: &IterationStart) {
         self.iter().for_each(|o| o.on_iteration_start(start))
     }
@@ -149,6 +239,10 @@ impl<A: SampleObserver, B: SampleObserver> SampleObserver for (A, B) {
     fn on_sample(&self, record: &SampleRecord) {
         self.0.on_sample(record);
         self.1.on_sample(record);
+    }
+    #[inline(always)]
+    fn wants_times(&self) -> bool {
+        self.0.wants_times() || self.1.wants_times()
     }
     #[inline(always)]
     fn on_iteration_start(&self, start: &IterationStart) {

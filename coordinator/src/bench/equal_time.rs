@@ -6,11 +6,16 @@
 
 use super::chart::{Group, write_bar_chart};
 use super::{SceneArgs, geometric_mean};
-use crate::options::{EmisConnectionsArg, EmisModelArgs, EmisPilotArg, IntegratorKind, make_renderer, scene_name};
+use crate::options::{
+    CostModelArg, EmisConnectionsArg, EmisModelArgs, EmisPilotArg, IntegratorKind, MomentOutliersArg, make_renderer,
+    scene_name,
+};
+use clap::ValueEnum;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::emis::PilotStart;
-use tessera_common::emis::optimize::ConnectionScope;
+use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::optimize::{ConnectionScope, OutlierStage};
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings};
@@ -41,6 +46,14 @@ pub struct EqualTimeArgs {
     /// named `emis-vcm/c-pixel`).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "image")]
     pub emis_connections: Vec<EmisConnectionsArg>,
+    /// Cost models besides `--cost-model` each `emis-*` column also runs with (a column each,
+    /// named `emis-vcm/k-measured`).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub compare_cost_models: Vec<CostModelArg>,
+    /// Outlier rules besides `--moment-outliers` each `emis-*` column also runs with (a column
+    /// each, named `emis-vcm/o-each`).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub compare_moment_outliers: Vec<MomentOutliersArg>,
     /// Also draw the speed-ups as an SVG bar chart, one file per duration (NAME-20s.svg ...).
     #[arg(long)]
     pub chart: Option<PathBuf>,
@@ -79,11 +92,20 @@ impl Cell {
 /// One scene's equal-time results, a cell per column.
 type Row = Vec<Cell>;
 
+/// The model settings a column changes.
+#[derive(Clone, Copy, Default)]
+struct Variant {
+    cost: Option<CostModel>,
+    outliers: Option<OutlierStage>,
+}
+
 /// One column: an integrator, for `emis-*` with a pilot and a connection scope.
 struct Column {
     kind: IntegratorKind,
     pilot: PilotStart,
     connections: ConnectionScope,
+    /// Another cost model or outlier rule than the model arguments'.
+    variant: Variant,
     name: String,
 }
 
@@ -95,7 +117,7 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
     for &kind in &args.integrators {
         if IntegratorName::from(kind).emis_method().is_none() {
             let (pilot, connections) = (PilotStart::default(), ConnectionScope::default());
-            out.push(Column { kind, pilot, connections, name: kind.name().to_string() });
+            out.push(Column { kind, pilot, connections, variant: Variant::default(), name: kind.name().to_string() });
             continue;
         }
         for pilot in args.emis_pilot.iter().map(|&p| PilotStart::from(p)) {
@@ -107,7 +129,28 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
                 if connections == ConnectionScope::PerPixel {
                     name.push_str("/c-pixel");
                 }
-                out.push(Column { kind, pilot, connections, name });
+                // the model arguments' column, each compared setting alone, and each pair
+                let models = std::iter::once(None).chain(args.compare_cost_models.iter().map(Some));
+                for model in models {
+                    let rules = std::iter::once(None).chain(args.compare_moment_outliers.iter().map(Some));
+                    for rule in rules {
+                        let mut name = name.clone();
+                        if let Some(m) = model {
+                            name.push_str(&format!(
+                                "/k-{}",
+                                m.to_possible_value().expect("no skipped values").get_name()
+                            ));
+                        }
+                        if let Some(r) = rule {
+                            name.push_str(&format!(
+                                "/o-{}",
+                                r.to_possible_value().expect("no skipped values").get_name()
+                            ));
+                        }
+                        let variant = Variant { cost: model.map(|&m| m.into()), outliers: rule.map(|&r| r.into()) };
+                        out.push(Column { kind, pilot, connections, variant, name });
+                    }
+                }
             }
         }
     }
@@ -118,7 +161,7 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
     let scene = Scene::load(path)?;
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let mut rows = Vec::new();
-    for Column { kind, pilot, connections, name } in columns(args) {
+    for Column { kind, pilot, connections, variant, name } in columns(args) {
         let mut settings = RenderSettings {
             integrator: kind.into(),
             emis_pilot: pilot,
@@ -126,6 +169,12 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
             ..RenderSettings::default()
         };
         args.model.apply(&mut settings);
+        if let Some(model) = variant.cost {
+            settings.cost_model = model;
+        }
+        if let Some(rule) = variant.outliers {
+            settings.moment_outliers = rule;
+        }
         let renderer = make_renderer(&settings, &scene)?;
         let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
         for &seed in &args.seeds {
@@ -190,6 +239,17 @@ fn print_speedups(table: &[(String, Row)]) {
         ("emis-bdpt/c-pixel", "bdpt", BDPT_TARGET),
         ("emis-vcm/c-pixel", "emis-vcm", 0.0),
         ("emis-bdpt/c-pixel", "emis-bdpt", 0.0),
+        ("emis-vcm/k-measured", "emis-vcm", 0.0),
+        ("emis-bdpt/k-measured", "emis-bdpt", 0.0),
+        ("emis-vcm/k-measured", "vcm", VCM_TARGET),
+        ("emis-vcm/o-each", "emis-vcm", 0.0),
+        ("emis-bdpt/o-each", "emis-bdpt", 0.0),
+        ("emis-vcm/o-each", "vcm", VCM_TARGET),
+        ("emis-bdpt/o-each", "bdpt", BDPT_TARGET),
+        ("emis-vcm/k-measured/o-each", "emis-vcm", 0.0),
+        ("emis-bdpt/k-measured/o-each", "emis-bdpt", 0.0),
+        ("emis-vcm/k-measured/o-each", "vcm", VCM_TARGET),
+        ("emis-bdpt/k-measured/o-each", "bdpt", BDPT_TARGET),
     ] {
         let r = ratio(a, b);
         if r.is_empty() {
@@ -212,7 +272,15 @@ fn print_speedups(table: &[(String, Row)]) {
 /// emis-vcm (each pilot's column) against the better of pt and vcm on every scene (the
 /// floor), for the mean over seeds and, with several seeds, for each seed alone.
 fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
-    for column in ["emis-vcm", "emis-vcm/pt-start", "emis-vcm/c-pixel"] {
+    let columns = [
+        "emis-vcm",
+        "emis-vcm/pt-start",
+        "emis-vcm/c-pixel",
+        "emis-vcm/k-measured",
+        "emis-vcm/o-each",
+        "emis-vcm/k-measured/o-each",
+    ];
+    for column in columns {
         let floor: Vec<(String, f64)> = table
             .iter()
             .filter_map(|(s, r)| Some((s.clone(), err(r, "pt")?.min(err(r, "vcm")?) / err(r, column)?)))

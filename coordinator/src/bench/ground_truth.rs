@@ -15,7 +15,7 @@
 //! moments the way the optimiser forms them (box radius 3, relative to the reference in the
 //! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed; with
 //! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says, the
-//! shared part being the minimum over the reduced set),
+//! shared part being the minimum over the reduced set; with `each`, each candidate's own),
 //! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
 //! and from the pilot.
 //!
@@ -32,7 +32,7 @@ use tessera_common::emis::cost::{CostModel, StatisticsSums, pixel_cost};
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
-use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_shared_outliers};
+use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_each_outliers, remove_shared_outliers};
 use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::compare::relmse;
 use tessera_common::film::{Film, Rect, TileAccum};
@@ -229,9 +229,11 @@ fn predict(
 ) -> Vec<f64> {
     let (w, h) = s.size();
     let mut planes: Vec<Image> = (0..costs.len()).map(|c| Image::from_data(w, h, moments_of(moments, c))).collect();
-    if outliers == OutlierStage::Shared {
-        let norm: Vec<f32> = s.ref_mean.iter().map(|&r| r * r + 1e-4).collect();
-        remove_shared_outliers(&mut planes, &norm, 0.999);
+    let norm: Vec<f32> = s.ref_mean.iter().map(|&r| r * r + 1e-4).collect();
+    match outliers {
+        OutlierStage::Shared => remove_shared_outliers(&mut planes, &norm, 0.999),
+        OutlierStage::Each => remove_each_outliers(&mut planes, &norm, 0.999),
+        OutlierStage::Filtered => {}
     }
     planes
         .into_iter()

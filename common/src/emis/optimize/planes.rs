@@ -112,6 +112,20 @@ pub(super) fn subtract_shared_outliers(planes: &mut [Image], shared: &[f32], nor
     });
 }
 
+/// Zeroes, in every candidate's per-pixel moments, the finite values whose relative moment is
+/// above that candidate's own `quantile`: before the box filter spreads a rare sample over its
+/// neighbours, where the error metric would drop the pixel.
+pub fn remove_each_outliers(planes: &mut [Image], norm: &[f32], quantile: f64) {
+    planes.par_iter_mut().for_each(|plane| {
+        let threshold = relative_quantile(&plane.data, norm, quantile);
+        for (v, &n) in plane.data.iter_mut().zip(norm) {
+            if v.is_finite() && *v / n > threshold {
+                *v = 0.0;
+            }
+        }
+    });
+}
+
 /// The `quantile` of the finite per-pixel relative moments `moments / norm`, exact (a
 /// selection, not a histogram: one rare sample can be 1e6 times the rest, and a histogram's
 /// bins over [min, max] would then put every other pixel in its first bin); +∞ if none is

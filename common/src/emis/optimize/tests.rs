@@ -441,5 +441,30 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
     }
 }
 
+/// `OutlierStage::Each`: each candidate loses its own worst 0.1 % of pixels (relative
+/// moments, before the filter), whatever the other candidates hold there; +∞ flags stay.
+#[test]
+fn each_candidate_loses_its_own_worst_pixels() {
+    let (w, h) = (100usize, 20usize);
+    let norm: Vec<f32> = (0..w * h).map(|p| if p % 2 == 0 { 1.0 } else { 4.0 }).collect();
+    // candidate 0: one huge pixel (7) and one +∞; candidate 1: two huge pixels (3 and 11)
+    let mut planes = vec![Image::filled(w, h, 1.0), Image::filled(w, h, 1.0)];
+    planes[0].data[7] = 1e6;
+    planes[0].data[8] = f32::INFINITY;
+    planes[1].data[3] = 1e5;
+    planes[1].data[11] = 1e7;
+    remove_each_outliers(&mut planes, &norm, 0.999);
+    // 2000 pixels: the 0.1 % above the 99.9 % quantile are the top two of each
+    assert_eq!((planes[0].data[7], planes[0].data[8]), (0.0, f32::INFINITY));
+    assert_eq!((planes[1].data[3], planes[1].data[11]), (0.0, 0.0));
+    // the rest is untouched, the pixels of the other candidate's outliers included
+    assert_eq!((planes[0].data[3], planes[0].data[11], planes[1].data[7]), (1.0, 1.0, 1.0));
+    assert_eq!(
+        planes.iter().flat_map(|p| &p.data).filter(|&&v| v == 1.0).count(),
+        2 * w * h - 4,
+        "three zeroed, one +∞"
+    );
+}
+
 #[path = "connection_tests.rs"]
 mod connection_tests;

@@ -148,7 +148,7 @@ pub fn merge<O: SampleObserver>(
         let correction = wi.z.abs() / z.n_geo.dot(y.wo).abs();
         let value = z.beta * f * y.beta * (correction * kernel * weight / (n_paths * chi));
         if value != Rgb::ZERO {
-            report.observer.on_sample(&SampleRecord {
+            report.observe(&SampleRecord {
                 technique: Technique::Merge(s),
                 pixel: report.pixel,
                 value,

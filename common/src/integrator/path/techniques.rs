@@ -19,17 +19,36 @@ use crate::math::{Rgb, SHADOW_EPSILON};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
+use std::cell::Cell;
+use std::time::Instant;
 
-/// Where a sample lands and who watches: the pixel and the observer.
+/// Where a sample lands and who watches: the pixel, the observer and, on a timed path, the
+/// clock of the observer's time.
 #[derive(Clone, Copy)]
 pub struct Report<'a, O: SampleObserver> {
     /// The observer.
     pub observer: &'a O,
     /// The camera path's pixel.
     pub pixel: u32,
+    /// Where a timed path adds the observer's time (nanoseconds), so that the work's own
+    /// time can leave it out.
+    pub clock: Option<&'a Cell<u64>>,
 }
 
 impl<O: SampleObserver> Report<'_, O> {
+    /// Hands `record` to the observer, timing the call on a timed path.
+    #[inline(always)]
+    pub fn observe(&self, record: &SampleRecord) {
+        match self.clock {
+            None => self.observer.on_sample(record),
+            Some(clock) => {
+                let start = Instant::now();
+                self.observer.on_sample(record);
+                clock.set(clock.get() + start.elapsed().as_nanos() as u64);
+            }
+        }
+    }
+
     #[inline(always)]
     fn emit(
         &self,
@@ -42,16 +61,7 @@ impl<O: SampleObserver> Report<'_, O> {
         sequence: u32,
     ) {
         if value != Rgb::ZERO {
-            self.observer.on_sample(&SampleRecord {
-                technique,
-                pixel,
-                value,
-                weight,
-                kernel: 1.0,
-                sequence,
-                pdfs,
-                counts,
-            });
+            self.observe(&SampleRecord { technique, pixel, value, weight, kernel: 1.0, sequence, pdfs, counts });
         }
     }
 }
@@ -346,7 +356,7 @@ pub fn light_trace<O: SampleObserver>(
     let weight = mis::weight(&pdfs, counts, Technique::LightTrace);
     let value = raw * (weight * scale);
     let pixel = raster.y as u32 * cam.width + raster.x as u32;
-    Report { observer, pixel }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts, sequence);
+    Report { observer, pixel, clock: None }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts, sequence);
     Some((Weighted { value, weight }, raster))
 }
 

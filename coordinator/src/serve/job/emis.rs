@@ -81,10 +81,14 @@ impl PilotShape {
         // counts no render can reach would overflow the job's sums and skew its costs
         let most = u64::from(iterations) * u64::from(self.width) * u64::from(self.height) * MAX_COUNT_PER_SAMPLE;
         let s = &pilot.statistics;
-        if let Some(c) =
-            [s.camera_vertices, s.light_paths, s.light_vertices, s.merge_queries].into_iter().find(|&c| c > most)
-        {
+        let t = &s.times;
+        let counts = [s.camera_vertices, s.light_paths, s.light_vertices, s.merge_queries];
+        let timed = [t.light_vertices, t.photons_built, t.camera_vertices, t.connections, t.queries, t.photons];
+        if let Some(c) = counts.into_iter().chain(timed).find(|&c| c > most) {
             return Err(format!("path statistics count {c} is over {MAX_COUNT_PER_SAMPLE} per pixel and iteration"));
+        }
+        if t.iterations > iterations as u64 {
+            return Err(format!("work times cover {} iterations, the tile {iterations}", t.iterations));
         }
         Ok(Some(pilot))
     }
