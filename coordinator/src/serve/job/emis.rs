@@ -94,6 +94,18 @@ impl PilotShape {
     }
 }
 
+/// The digest of `mask` (little-endian f32) as a blob, stored the first time (`digest` keeps it
+/// for the pass).
+fn stored(blobs: &BlobStore, digest: &mut Option<String>, mask: &[f32]) -> std::io::Result<String> {
+    if let Some(d) = digest {
+        return Ok(d.clone());
+    }
+    let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let d = blobs.put(&bytes)?;
+    *digest = Some(d.clone());
+    Ok(d)
+}
+
 /// An EMIS job's state on the coordinator.
 pub struct EmisJob {
     /// Merged pilot data, current strategy, reports.
@@ -129,33 +141,11 @@ impl EmisJob {
         let merge = match &s.merge {
             None => MergeSpec::None,
             Some(MergeMask::Constant(c)) => MergeSpec::Constant(*c),
-            Some(MergeMask::PerPixel(mask)) => {
-                let digest = match &self.mask_digest {
-                    Some(d) => d.clone(),
-                    None => {
-                        let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
-                        let d = blobs.put(&bytes)?;
-                        self.mask_digest = Some(d.clone());
-                        d
-                    }
-                };
-                MergeSpec::Mask(digest)
-            }
+            Some(MergeMask::PerPixel(mask)) => MergeSpec::Mask(stored(blobs, &mut self.mask_digest, mask)?),
         };
         let (connections, connection_mask) = match &s.connections {
             Connections::Fixed(c) => (*c, None),
-            Connections::PerPixel(mask) => {
-                let digest = match &self.connection_digest {
-                    Some(d) => d.clone(),
-                    None => {
-                        let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
-                        let d = blobs.put(&bytes)?;
-                        self.connection_digest = Some(d.clone());
-                        d
-                    }
-                };
-                (0, Some(digest))
-            }
+            Connections::PerPixel(mask) => (0, Some(stored(blobs, &mut self.connection_digest, mask)?)),
         };
         Ok(TileStrategy {
             nu: s.nu,
