@@ -48,31 +48,12 @@ const B3: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
 
 /// Denoises a `width × height` RGB image.
 pub fn denoise(width: usize, height: usize, color: &[[f32; 3]], guides: &Guides, s: &DenoiseSettings) -> Vec<[f32; 3]> {
-    let n = width * height;
-    assert!(
-        color.len() == n && guides.albedo.len() == n && guides.normal.len() == n && guides.depth.len() == n,
-        "invariant: image and guides have width × height pixels"
-    );
-    let modulation: Vec<[f32; 3]> = guides.albedo.iter().map(|a| a.map(|c| c.max(1e-3))).collect();
-    let mut current: [Vec<f32>; 3] =
-        std::array::from_fn(|c| color.iter().zip(&modulation).map(|(v, a)| v[c] / a[c]).collect());
-    let mut next: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0; n]);
-    let planes = Planes::new(width, height, guides);
-    for level in 0..s.levels {
-        let pass = Pass { planes: &planes, step: 1 << level, settings: s };
-        let [r, g, b] = &mut next;
-        r.par_chunks_mut(width).zip(g.par_chunks_mut(width)).zip(b.par_chunks_mut(width)).enumerate().for_each_init(
-            || Scratch::new(width),
-            |scratch, (y, ((r, g), b))| pass.filter_row(y, &current, [r, g, b], scratch),
-        );
-        std::mem::swap(&mut current, &mut next);
-    }
-    (0..n)
-        .map(|p| {
-            let a = modulation[p];
-            [current[0][p] * a[0], current[1][p] * a[1], current[2][p] * a[2]]
-        })
-        .collect()
+    filtered(width, height, color, guides, s, |planes, modulation| {
+        (0..width * height)
+            .into_par_iter()
+            .map(|p| std::array::from_fn(|c| planes[c][p] * modulation[c][p].max(1e-3)))
+            .collect()
+    })
 }
 
 /// The scalar Ī of the optimiser: the denoised image's channel mean, box-filtered.
@@ -83,43 +64,101 @@ pub fn denoised_intensity(
     guides: &Guides,
     s: &DenoiseSettings,
 ) -> Image {
-    let d = denoise(width, height, color, guides, s);
-    Image::from_data(width, height, d.iter().map(|c| (c[0] + c[1] + c[2]) / 3.0).collect()).box_blur(s.final_box)
+    let mean = filtered(width, height, color, guides, s, |planes, modulation| {
+        (0..width * height)
+            .into_par_iter()
+            .map(|p| {
+                let [r, g, b]: [f32; 3] = std::array::from_fn(|c| planes[c][p] * modulation[c][p].max(1e-3));
+                (r + g + b) / 3.0
+            })
+            .collect()
+    });
+    Image::from_data(width, height, mean).box_blur(s.final_box)
+}
+
+/// Planes of the guides and of the image at each level, one allocation for all.
+const ARENA_PLANES: usize = 3 + 3 + 1 + 1 + 3 + 3;
+
+/// Runs the filter's levels on the albedo-demodulated image and hands `finish` the result's
+/// planes and the albedo planes (to modulate with, clamped to 1e-3 as they were divided by).
+/// Every buffer is a part of one allocation, which the allocator always maps afresh and
+/// returns when dropped, whatever the process allocated before (decision 0026).
+fn filtered<R>(
+    width: usize,
+    height: usize,
+    color: &[[f32; 3]],
+    guides: &Guides,
+    s: &DenoiseSettings,
+    finish: impl FnOnce([&[f32]; 3], [&[f32]; 3]) -> R,
+) -> R {
+    let n = width * height;
+    assert!(
+        color.len() == n && guides.albedo.len() == n && guides.normal.len() == n && guides.depth.len() == n,
+        "invariant: image and guides have width × height pixels"
+    );
+    let mut arena = vec![0.0f32; ARENA_PLANES * n];
+    let mut parts = arena.chunks_mut(n.max(1));
+    let mut take = || parts.next().unwrap_or_default();
+    let guide_parts: [&mut [f32]; 8] = std::array::from_fn(|_| take());
+    let mut current: [&mut [f32]; 3] = std::array::from_fn(|_| take());
+    let mut next: [&mut [f32]; 3] = std::array::from_fn(|_| take());
+    let planes = Planes::new(width, height, guides, guide_parts);
+    for (c, plane) in current.iter_mut().enumerate() {
+        plane.par_iter_mut().zip(color).zip(guides.albedo).for_each(|((o, v), a)| *o = v[c] / a[c].max(1e-3));
+    }
+    for level in 0..s.levels {
+        let pass = Pass { planes: &planes, step: 1 << level, settings: s };
+        let img: [&[f32]; 3] = current.each_ref().map(|v| &**v);
+        let [r, g, b] = &mut next;
+        r.par_chunks_mut(width).zip(g.par_chunks_mut(width)).zip(b.par_chunks_mut(width)).enumerate().for_each_init(
+            || Scratch::new(width),
+            |scratch, (y, ((r, g), b))| pass.filter_row(y, &img, [r, g, b], scratch),
+        );
+        std::mem::swap(&mut current, &mut next);
+    }
+    finish(current.each_ref().map(|v| &**v), planes.albedo)
 }
 
 /// The guides as planes, one value per pixel each, so that a tap's loop over a row reads
 /// contiguous memory and compiles to vector code.
-struct Planes {
+struct Planes<'a> {
     width: usize,
     height: usize,
-    normal: [Vec<f32>; 3],
-    albedo: [Vec<f32>; 3],
-    depth: Vec<f32>,
+    normal: [&'a [f32]; 3],
+    albedo: [&'a [f32]; 3],
+    depth: &'a [f32],
     /// |∇z| by central differences.
-    gradient: Vec<f32>,
+    gradient: &'a [f32],
     /// 1 where the camera ray escaped (zero normal), else 0.
-    escaped: Vec<f32>,
+    escaped: &'a [f32],
 }
 
-impl Planes {
-    fn new(width: usize, height: usize, g: &Guides) -> Self {
+impl<'a> Planes<'a> {
+    /// The guides' planes, written into `parts` (normal, albedo, gradient, escaped).
+    fn new(width: usize, height: usize, g: &Guides<'a>, parts: [&'a mut [f32]; 8]) -> Self {
+        let [n0, n1, n2, a0, a1, a2, gradient, escaped] = parts;
         let at = |x: usize, y: usize| g.depth[y * width + x];
-        let gradient = (0..height)
-            .flat_map(|y| (0..width).map(move |x| (x, y)))
-            .map(|(x, y)| {
-                let dx = (at((x + 1).min(width - 1), y) - at(x.saturating_sub(1), y)).abs() * 0.5;
-                let dy = (at(x, (y + 1).min(height - 1)) - at(x, y.saturating_sub(1))).abs() * 0.5;
-                dx.max(dy)
-            })
-            .collect();
+        gradient.par_iter_mut().enumerate().for_each(|(p, out)| {
+            let (x, y) = (p % width, p / width);
+            let dx = (at((x + 1).min(width - 1), y) - at(x.saturating_sub(1), y)).abs() * 0.5;
+            let dy = (at(x, (y + 1).min(height - 1)) - at(x, y.saturating_sub(1))).abs() * 0.5;
+            *out = dx.max(dy);
+        });
+        let normal = [n0, n1, n2];
+        let albedo = [a0, a1, a2];
+        for c in 0..3 {
+            normal[c].par_iter_mut().zip(g.normal).for_each(|(o, v)| *o = v[c]);
+            albedo[c].par_iter_mut().zip(g.albedo).for_each(|(o, v)| *o = v[c]);
+        }
+        escaped.par_iter_mut().zip(g.normal).for_each(|(o, &v)| *o = (v == [0.0; 3]) as u8 as f32);
         Planes {
             width,
             height,
-            normal: std::array::from_fn(|c| g.normal.iter().map(|v| v[c]).collect()),
-            albedo: std::array::from_fn(|c| g.albedo.iter().map(|v| v[c]).collect()),
-            depth: g.depth.to_vec(),
+            normal: normal.map(|v| &*v),
+            albedo: albedo.map(|v| &*v),
+            depth: g.depth,
             gradient,
-            escaped: g.normal.iter().map(|&v| (v == [0.0; 3]) as u8 as f32).collect(),
+            escaped,
         }
     }
 }
@@ -147,7 +186,7 @@ impl Scratch {
 
 /// One à-trous level.
 struct Pass<'a> {
-    planes: &'a Planes,
+    planes: &'a Planes<'a>,
     step: usize,
     settings: &'a DenoiseSettings,
 }
@@ -156,7 +195,7 @@ impl<'a> Pass<'a> {
     /// Filters row `y` of `img` into `out`: per tap, the edge-stopping weights of the whole
     /// row, then their products with the kernel summed per pixel (in the same tap order for
     /// every pixel, so the result does not depend on how rows are split among threads).
-    fn filter_row(&self, y: usize, img: &[Vec<f32>; 3], out: [&mut [f32]; 3], scratch: &mut Scratch) {
+    fn filter_row(&self, y: usize, img: &[&[f32]; 3], out: [&mut [f32]; 3], scratch: &mut Scratch) {
         let (g, s, step) = (self.planes, self.settings, self.step);
         let width = g.width;
         let inv_albedo_sigma = 1.0 / s.albedo_sigma;
@@ -186,7 +225,7 @@ impl<'a> Pass<'a> {
                     // compiles to vector code
                     let at_p = |v: &'a [f32]| &v[p.start..][..len];
                     let at_q = |v: &'a [f32]| &v[q.start..][..len];
-                    let (zp, zq, grad) = (at_p(&g.depth), at_q(&g.depth), at_p(&g.gradient));
+                    let (zp, zq, grad) = (at_p(g.depth), at_q(g.depth), at_p(g.gradient));
                     let np = g.normal.each_ref().map(|v| at_p(v));
                     let nq = g.normal.each_ref().map(|v| at_q(v));
                     let ap = g.albedo.each_ref().map(|v| at_p(v));
@@ -203,8 +242,8 @@ impl<'a> Pass<'a> {
                 }
                 power(cosine, s.normal_power, weight);
                 let (ep, eq) = (&g.escaped[p.clone()][..len], &g.escaped[q.clone()][..len]);
-                for (w, e) in weight.iter_mut().zip(exponent.iter()) {
-                    *w *= e.exp();
+                for (w, &e) in weight.iter_mut().zip(exponent.iter()) {
+                    *w *= exp_nonpositive(e);
                 }
                 let kernel = kx * ky;
                 let c = img.each_ref().map(|v| &v[q.clone()][..len]);
@@ -240,6 +279,31 @@ impl<'a> Pass<'a> {
 fn blend(pick: bool, a: f32, b: f32) -> f32 {
     let mask = 0u32.wrapping_sub(pick as u32);
     f32::from_bits((a.to_bits() & mask) | (b.to_bits() & !mask))
+}
+
+/// e^x for x ≤ 0 (larger x count as 0; NaN stays NaN) in arithmetic alone, so that the loop
+/// over a row's taps compiles to vector code (`f32::exp` is a library call per value; decision
+/// 0026). Relative error below 2e-7·(1 + |x|), far inside the weights' purpose, and the same
+/// on every host, as it does not depend on the C library's `expf`.
+#[inline(always)]
+fn exp_nonpositive(x: f32) -> f32 {
+    // e^x = 2^n · e^(r·ln 2), n the nearest integer to x·log2(e), |r| ≤ ½; `max` sends NaN to
+    // −126 (restored below), so every lane stays finite
+    #[allow(clippy::manual_clamp)] // `clamp` keeps NaN, which the integer step must not see
+    let t = (x * std::f32::consts::LOG2_E).max(-126.0).min(0.0);
+    // adding 1.5·2^23 rounds t to an integer held in the low mantissa bits: exact and
+    // branch-free, where `as i32` would saturate lane by lane in scalar code
+    const ROUND: f32 = 12_582_912.0;
+    let k = t + ROUND;
+    let n = k - ROUND;
+    let f = (t - n) * std::f32::consts::LN_2;
+    // Taylor to degree 6: the remainder at |f| ≤ ln 2 / 2 is below 1.2e-7
+    let p = 1.0 + f * (1.0 + f * (0.5 + f * (1.0 / 6.0 + f * (1.0 / 24.0 + f * (1.0 / 120.0 + f * (1.0 / 720.0))))));
+    let exponent = k.to_bits().wrapping_sub(ROUND.to_bits()).wrapping_add(127);
+    let scale = f32::from_bits(exponent << 23);
+    // below 2^-126 the result would be subnormal: a weight of 0
+    let r = blend(t > -126.0, p * scale, 0.0);
+    blend(x.is_nan(), x, r)
 }
 
 /// |offset| of tap (i, j) in units of the step.
@@ -325,6 +389,28 @@ mod tests {
     /// pixel and per tap, on random guides with escaped pixels, normals facing away from each
     /// other and image borders closer than the largest step.
     #[test]
+    fn exp_nonpositive_is_exp_to_float_precision() {
+        let mut worst = 0.0f64;
+        for i in 0..=200_000 {
+            let x = -(i as f32) * 1e-3 * (1.0 + (i % 7) as f32 * 1e-4);
+            let exact = (x as f64).exp();
+            let got = exp_nonpositive(x) as f64;
+            if exact < f32::MIN_POSITIVE as f64 * 2.0 {
+                assert!(got <= f32::MIN_POSITIVE as f64 * 2.0, "e^{x} = {exact}, got {got}");
+                continue;
+            }
+            let error = (got - exact).abs() / exact / (1.0 + x.abs() as f64);
+            worst = worst.max(error);
+        }
+        assert!(worst < 2e-7, "relative error / (1 + |x|) up to {worst}");
+        assert_eq!(exp_nonpositive(0.0), 1.0);
+        assert_eq!(exp_nonpositive(-0.0), 1.0);
+        assert_eq!(exp_nonpositive(f32::NEG_INFINITY), 0.0);
+        assert_eq!(exp_nonpositive(-1e30), 0.0);
+        assert!(exp_nonpositive(f32::NAN).is_nan());
+    }
+
+    #[test]
     fn row_wise_filter_equals_the_per_pixel_definition() {
         let (w, h) = (37usize, 23usize);
         let mut s = Sampler::for_pixel(11, 0, 0);
@@ -346,7 +432,9 @@ mod tests {
         let settings = DenoiseSettings { levels: 4, ..DenoiseSettings::default() };
         let out = denoise(w, h, &color, &guides, &settings);
         // the definition, per pixel
-        let gradient = Planes::new(w, h, &guides).gradient;
+        let mut storage = vec![vec![0.0f32; w * h]; 8];
+        let parts: Vec<&mut [f32]> = storage.iter_mut().map(|v| &mut v[..]).collect();
+        let gradient = Planes::new(w, h, &guides, parts.try_into().expect("eight planes")).gradient;
         let modulation: Vec<[f32; 3]> = albedo.iter().map(|a| a.map(|c| c.max(1e-3))).collect();
         let mut img: Vec<[f32; 3]> =
             (0..w * h).map(|p| std::array::from_fn(|c| color[p][c] / modulation[p][c])).collect();

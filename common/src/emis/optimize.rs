@@ -46,6 +46,7 @@ mod planes;
 
 pub use image_level::ImageLevelScore;
 use image_level::{class_of, connection_classes, image_level_groups, image_level_scores};
+use planes::Planes;
 pub use planes::{remove_each_outliers, remove_shared_outliers};
 
 /// Filter radii (docs/emis.md, decision 6).
@@ -248,10 +249,10 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let shared = input.filters.outliers == OutlierStage::Shared;
     let (mut filtered, minimum) = planes::moment_planes(m, shared);
     if let Some(minimum) = minimum {
-        planes::subtract_shared_outliers(&mut filtered, &minimum, &norm, quantile);
+        planes::subtract_shared_outliers(&mut filtered.slices_mut(), &minimum, &norm, quantile);
     }
     if input.filters.outliers == OutlierStage::Each {
-        planes::remove_each_outliers(&mut filtered, &norm, quantile);
+        planes::remove_each_outliers_in(&mut filtered.slices_mut(), &norm, quantile);
     }
     let thresholds = planes::filter_planes(&mut filtered, &norm, order, input.filters.moment_box, quantile);
     let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);
@@ -304,7 +305,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
                 let i = input.image.data[p] as f64;
                 chosen
                     .and_then(|g| groups[g].variant(merge, class))
-                    .map_or(0.0, |c| (filtered[c].data[p] as f64 / (i * i + 1e-4)) as f32)
+                    .map_or(0.0, |c| (filtered[c][p] as f64 / (i * i + 1e-4)) as f32)
             })
             .collect(),
     );
@@ -316,7 +317,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
 /// blurred into an expected count.
 fn pixel_level(
     input: &OptimizerInput,
-    filtered: &[Image],
+    filtered: &Planes,
     terms: &[CostTerms],
     connections: bool,
 ) -> (Image, Option<Image>) {
@@ -335,7 +336,7 @@ fn pixel_level(
 
 /// Per pixel, the first candidate with the lowest filtered moment × cost, where that value is
 /// above 0 (a pixel whose best is 0 gets nothing: no merging, no connections).
-fn pixel_winners(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]) -> Vec<Option<usize>> {
+fn pixel_winners(input: &OptimizerInput, filtered: &Planes, terms: &[CostTerms]) -> Vec<Option<usize>> {
     let (w, h) = (input.moments.width as usize, input.moments.height as usize);
     let costs: Vec<f64> =
         input.candidates.iter().zip(terms).map(|(c, t)| t.at(if c.merge { 1.0 } else { 0.0 })).collect();
@@ -348,7 +349,7 @@ fn pixel_winners(input: &OptimizerInput, filtered: &[Image], terms: &[CostTerms]
         let (mut best, mut which) = ([f64::INFINITY; BLOCK], [NONE; BLOCK]);
         let (best, which) = (&mut best[..out.len()], &mut which[..out.len()]);
         for (c, &cost) in costs.iter().enumerate() {
-            for ((v, i), &m) in best.iter_mut().zip(which.iter_mut()).zip(&filtered[c].data[start..]) {
+            for ((v, i), &m) in best.iter_mut().zip(which.iter_mut()).zip(&filtered[c][start..]) {
                 let value = m as f64 * cost;
                 let lower = value < *v;
                 *v = if lower { value } else { *v };

@@ -26,6 +26,9 @@ pub struct OverheadsArgs {
     /// fastest kept).
     #[arg(long, default_value_t = 2)]
     pub repeats: u32,
+    /// Only the optimiser and denoiser runs, no pilot renders (for profiling the update).
+    #[arg(long)]
+    pub update_only: bool,
 }
 
 /// What [`accumulation_overhead`] measured for one pilot.
@@ -125,8 +128,33 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
 
 /// Runs `tessera bench overheads`.
 pub fn run(args: &OverheadsArgs) -> anyhow::Result<()> {
-    let scenes = args.scenes.scenes()?;
     let pool = args.scenes.pool()?;
+    if !args.update_only {
+        accumulation_table(args, &pool)?;
+    }
+    println!("\noptimiser (51 candidates, synthetic moments) and denoiser, best of {} runs:", args.repeats.max(1));
+    for (w, h) in [(256u32, 256u32), (1920, 1080)] {
+        let runs: Vec<(f64, f64, usize)> =
+            (0..args.repeats.max(1)).map(|_| pool.install(|| optimizer_time(w, h))).collect();
+        let best_opt = runs.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        let best_den = runs.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+        let best_update = runs.iter().map(|r| r.0 + r.1).fold(f64::INFINITY, f64::min);
+        let guides = (w * h) as usize * (3 + 3 + 1) * 4;
+        println!(
+            "{w}x{h}: update {:.1} ms (optimiser {:.1} ms, denoiser {:.1} ms); moment buffer {:.1} MB (+{:.1} MB guides; the optimiser holds a filtered copy of the same size)",
+            best_update * 1e3,
+            best_opt * 1e3,
+            best_den * 1e3,
+            runs[0].2 as f64 / 1e6,
+            guides as f64 / 1e6
+        );
+    }
+    Ok(())
+}
+
+/// The moment accumulation table: one row per scene.
+fn accumulation_table(args: &OverheadsArgs, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
+    let scenes = args.scenes.scenes()?;
     println!(
         "moment accumulation (51 VCM / 26 BDPT candidates), {} rounds of 2 iterations: time per pilot iteration (fastest round) without moments, with moments and the denoiser's guides (the first {GUIDE_ITERATIONS} iterations), with moments alone (the later ones); overheads are medians over rounds of ratios within a round, of wall time and of process CPU time:",
         args.repeats.max(1)
@@ -153,21 +181,6 @@ pub fn run(args: &OverheadsArgs) -> anyhow::Result<()> {
             ));
         }
         println!("| {} | {} |", scene_name(path), cells.join(" | "));
-    }
-    println!("\noptimiser (51 candidates, synthetic moments) and denoiser, best of {} runs:", args.repeats.max(1));
-    for (w, h) in [(256u32, 256u32), (1920, 1080)] {
-        let runs: Vec<(f64, f64, usize)> =
-            (0..args.repeats.max(1)).map(|_| pool.install(|| optimizer_time(w, h))).collect();
-        let best_opt = runs.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
-        let best_den = runs.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
-        let guides = (w * h) as usize * (3 + 3 + 1) * 4;
-        println!(
-            "{w}x{h}: optimiser {:.1} ms, denoiser {:.1} ms; moment buffer {:.1} MB (+{:.1} MB guides; the optimiser holds a filtered copy of the same size)",
-            best_opt * 1e3,
-            best_den * 1e3,
-            runs[0].2 as f64 / 1e6,
-            guides as f64 / 1e6
-        );
     }
     Ok(())
 }

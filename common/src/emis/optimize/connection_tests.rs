@@ -122,11 +122,11 @@ fn per_pixel_classes_sum_as_their_definition_bit_for_bit() {
                 _ => 0.0,
             };
             cost += (costs[c].at(candidates[c].merge as u8 as f64) + shared_build) / (w * h) as f64;
-            let mut moment = filtered[c].data[p];
+            let mut moment = filtered[c][p];
             if moment / n > thresholds[c] && moment.is_finite() {
                 moment = 0.0;
             }
-            rel += moment as f64 / (i * i + 1e-4) / (w * h) as f64;
+            rel += moment as f64 * (1.0 / ((i * i + 1e-4) * (w * h) as f64));
         }
         assert_eq!(
             (score.relative_moment.to_bits(), score.cost.to_bits()),

@@ -22,19 +22,77 @@ const CHUNK: usize = 16 * 1024;
 /// while every candidate's 16 values are written out.
 const TILE: usize = 16;
 
+/// Every candidate's image of moments, in one allocation, plane after plane: a block this
+/// large is always mapped afresh and returned when dropped, whatever the process allocated
+/// before, where one block per plane was not (decision 0026).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Planes {
+    width: usize,
+    height: usize,
+    data: Vec<f32>,
+}
+
+impl Planes {
+    /// `count` planes of `width × height` zeros.
+    fn zeros(width: usize, height: usize, count: usize) -> Self {
+        Planes { width, height, data: vec![0.0; width * height * count] }
+    }
+
+    /// The images as planes (for tests of the later steps on planes of their own).
+    #[cfg(test)]
+    pub(super) fn from_images(images: &[Image]) -> Self {
+        let (width, height) = images.first().map_or((0, 0), |i| (i.width, i.height));
+        Planes { width, height, data: images.iter().flat_map(|i| i.data.iter().copied()).collect() }
+    }
+
+    /// The planes as images.
+    #[cfg(test)]
+    pub(super) fn to_images(&self) -> Vec<Image> {
+        self.slices().into_iter().map(|p| Image::from_data(self.width, self.height, p.to_vec())).collect()
+    }
+
+    fn pixels(&self) -> usize {
+        self.width * self.height
+    }
+
+    #[cfg(test)]
+    fn slices(&self) -> Vec<&[f32]> {
+        match self.pixels() {
+            0 => Vec::new(),
+            n => self.data.chunks_exact(n).collect(),
+        }
+    }
+
+    pub(super) fn slices_mut(&mut self) -> Vec<&mut [f32]> {
+        match self.pixels() {
+            0 => Vec::new(),
+            n => self.data.chunks_exact_mut(n).collect(),
+        }
+    }
+}
+
+impl std::ops::Index<usize> for Planes {
+    type Output = [f32];
+
+    fn index(&self, c: usize) -> &[f32] {
+        let n = self.pixels();
+        &self.data[c * n..(c + 1) * n]
+    }
+}
+
 /// Every candidate's per-iteration moments as one image each (+∞ flags stay infinite; 0
 /// iterations give 0 for finite sums) and, with `shared`, per pixel the minimum over the
 /// candidates of the finite ones (+∞ where there is none).
-pub(super) fn moment_planes(m: &MomentBuffer, shared: bool) -> (Vec<Image>, Option<Vec<f32>>) {
+pub(super) fn moment_planes(m: &MomentBuffer, shared: bool) -> (Planes, Option<Vec<f32>>) {
     let (w, h, k) = (m.width as usize, m.height as usize, m.candidates);
     let n = w * h;
     let scale = if m.iterations == 0 { 0.0 } else { 1.0 / m.iterations as f32 };
-    let mut planes: Vec<Vec<f32>> = (0..k).map(|_| vec![0.0f32; n]).collect();
+    let mut planes = Planes::zeros(w, h, k);
     let mut minimum = shared.then(|| vec![f32::INFINITY; n]);
     if k > 0 && n > 0 {
         // per task, its range of pixels in every plane
         let mut parts: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(CHUNK)).map(|_| Vec::with_capacity(k)).collect();
-        for plane in &mut planes {
+        for plane in planes.slices_mut() {
             for (part, chunk) in parts.iter_mut().zip(plane.chunks_mut(CHUNK)) {
                 part.push(chunk);
             }
@@ -68,7 +126,6 @@ pub(super) fn moment_planes(m: &MomentBuffer, shared: bool) -> (Vec<Image>, Opti
             }
         });
     }
-    let planes = planes.into_iter().map(|data| Image::from_data(w, h, data)).collect();
     (planes, minimum)
 }
 
@@ -78,23 +135,24 @@ pub(super) fn moment_planes(m: &MomentBuffer, shared: bool) -> (Vec<Image>, Opti
 /// Outliers are pixels whose shared relative moment is above its `quantile`, taken before the
 /// box filter spreads one rare sample over its neighbours.
 pub fn remove_shared_outliers(planes: &mut [Image], norm: &[f32], quantile: f64) {
+    let mut planes: Vec<&mut [f32]> = planes.iter_mut().map(|p| &mut p.data[..]).collect();
     // the minimum over the finite values, plane by plane over blocks of pixels (contiguous)
     const BLOCK: usize = 4096;
     let mut shared = vec![f32::INFINITY; norm.len()];
     shared.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
         for plane in planes.iter() {
-            for (s, &v) in out.iter_mut().zip(&plane.data[b * BLOCK..]) {
+            for (s, &v) in out.iter_mut().zip(&plane[b * BLOCK..]) {
                 if v.is_finite() && v < *s {
                     *s = v;
                 }
             }
         }
     });
-    subtract_shared_outliers(planes, &shared, norm, quantile);
+    subtract_shared_outliers(&mut planes, &shared, norm, quantile);
 }
 
 /// [`remove_shared_outliers`] with the per-pixel minimum `shared` already found.
-pub(super) fn subtract_shared_outliers(planes: &mut [Image], shared: &[f32], norm: &[f32], quantile: f64) {
+pub(super) fn subtract_shared_outliers(planes: &mut [&mut [f32]], shared: &[f32], norm: &[f32], quantile: f64) {
     let threshold = relative_quantile(shared, norm, quantile);
     let outliers: Vec<usize> = (0..shared.len())
         .filter(|&p| {
@@ -104,7 +162,7 @@ pub(super) fn subtract_shared_outliers(planes: &mut [Image], shared: &[f32], nor
         .collect();
     planes.par_iter_mut().for_each(|plane| {
         for &p in &outliers {
-            let v = &mut plane.data[p];
+            let v = &mut plane[p];
             if v.is_finite() {
                 *v = (*v - shared[p]).max(0.0);
             }
@@ -116,9 +174,15 @@ pub(super) fn subtract_shared_outliers(planes: &mut [Image], shared: &[f32], nor
 /// above that candidate's own `quantile`: before the box filter spreads a rare sample over its
 /// neighbours, where the error metric would drop the pixel.
 pub fn remove_each_outliers(planes: &mut [Image], norm: &[f32], quantile: f64) {
+    let mut planes: Vec<&mut [f32]> = planes.iter_mut().map(|p| &mut p.data[..]).collect();
+    remove_each_outliers_in(&mut planes, norm, quantile);
+}
+
+/// [`remove_each_outliers`] on planes as slices.
+pub(super) fn remove_each_outliers_in(planes: &mut [&mut [f32]], norm: &[f32], quantile: f64) {
     planes.par_iter_mut().for_each(|plane| {
-        let threshold = relative_quantile(&plane.data, norm, quantile);
-        for (v, &n) in plane.data.iter_mut().zip(norm) {
+        let threshold = relative_quantile(plane, norm, quantile);
+        for (v, &n) in plane.iter_mut().zip(norm) {
             if v.is_finite() && *v / n > threshold {
                 *v = 0.0;
             }
@@ -150,32 +214,36 @@ fn relative_quantile(moments: &[f32], norm: &[f32], quantile: f64) -> f32 {
 /// Filters every plane in place ([`MomentFilter::filter`] with `radius`) and returns each
 /// one's outlier threshold: the histogram `quantile` of its [`MomentFilter::outlier_basis`].
 pub(super) fn filter_planes(
-    planes: &mut [Image],
+    planes: &mut Planes,
     norm: &[f32],
     order: MomentFilter,
     radius: usize,
     quantile: f64,
 ) -> Vec<f32> {
+    let size = (planes.width, planes.height);
     planes
-        .par_iter_mut()
-        .map_init(PassScratch::default, |scratch, plane| filter_plane(plane, norm, order, radius, quantile, scratch))
+        .slices_mut()
+        .into_par_iter()
+        .map_init(PassScratch::default, |scratch, plane| {
+            filter_plane(plane, size, norm, order, radius, quantile, scratch)
+        })
         .collect()
 }
 
 fn filter_plane(
-    plane: &mut Image,
+    plane: &mut [f32],
+    (w, h): (usize, usize),
     norm: &[f32],
     order: MomentFilter,
     radius: usize,
     quantile: f64,
     scratch: &mut PassScratch,
 ) -> f32 {
-    let (w, h) = (plane.width, plane.height);
     let mut stream = QuantileStream::new(histogram_keep(quantile, w * h));
     let mut basis = [0.0f32; STRIP];
     match order {
         MomentFilter::Relative => scratch.box_blur_in_place(
-            &mut plane.data,
+            plane,
             (w, h),
             radius,
             |y, row| row.iter_mut().zip(&norm[y * w..]).for_each(|(v, &n)| *v /= n),
@@ -189,11 +257,11 @@ fn filter_plane(
             },
         ),
         MomentFilter::Absolute => {
-            scratch.box_blur_in_place(&mut plane.data, (w, h), radius, |_, _| (), |_, _, seg| stream.push_slice(seg))
+            scratch.box_blur_in_place(plane, (w, h), radius, |_, _| (), |_, _, seg| stream.push_slice(seg))
         }
     }
     stream.histogram_quantile(quantile).unwrap_or_else(|| {
-        let basis: Vec<f32> = plane.data.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+        let basis: Vec<f32> = plane.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
         histogram_quantile_by_counts(&basis, quantile)
     })
 }
@@ -201,11 +269,12 @@ fn filter_plane(
 /// The outlier thresholds of already filtered planes, by the definition (for tests of the
 /// image-level sums on planes of their own).
 #[cfg(test)]
-pub(super) fn thresholds(filtered: &[Image], norm: &[f32], order: MomentFilter, quantile: f64) -> Vec<f32> {
+pub(super) fn thresholds(filtered: &Planes, norm: &[f32], order: MomentFilter, quantile: f64) -> Vec<f32> {
     filtered
-        .iter()
+        .slices()
+        .into_iter()
         .map(|img| {
-            let basis: Vec<f32> = img.data.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+            let basis: Vec<f32> = img.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
             histogram_quantile_by_counts(&basis, quantile)
         })
         .collect()

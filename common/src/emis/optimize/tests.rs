@@ -349,11 +349,11 @@ fn moment_planes_equal_the_definitions_bit_for_bit() {
             let expected: Vec<Image> = expected.iter().map(|e| order.filter(e, &norm, 3)).collect();
             let (mut got, minimum) = planes::moment_planes(&moments, outliers == OutlierStage::Shared);
             if let Some(minimum) = minimum {
-                planes::subtract_shared_outliers(&mut got, &minimum, &norm, 0.999);
+                planes::subtract_shared_outliers(&mut got.slices_mut(), &minimum, &norm, 0.999);
             }
             let thresholds = planes::filter_planes(&mut got, &norm, order, 3, 0.999);
-            assert_eq!(got, expected, "{order:?} {outliers:?}");
-            let by_counts = planes::thresholds(&expected, &norm, order, 0.999);
+            assert_eq!(got.to_images(), expected, "{order:?} {outliers:?}");
+            let by_counts = planes::thresholds(&planes::Planes::from_images(&expected), &norm, order, 0.999);
             assert_eq!(thresholds.map_bits(), by_counts.map_bits(), "{order:?} {outliers:?}");
         }
     }
@@ -416,11 +416,11 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
                 let Some(c) = g.variant(chi > 0.1, 0) else { continue };
                 let merges = candidates[c].merge;
                 cost += (costs[c].at(merges as u8 as f64) + if merges { 0.0 } else { shared_build }) / (w * h) as f64;
-                let mut moment = filtered[c].data[p];
+                let mut moment = filtered[c][p];
                 if moment / n > thresholds[c] && moment.is_finite() {
                     moment = 0.0;
                 }
-                rel += moment as f64 / (i * i + 1e-4) / (w * h) as f64;
+                rel += moment as f64 * (1.0 / ((i * i + 1e-4) * (w * h) as f64));
             }
             assert_eq!((score.relative_moment.to_bits(), score.cost.to_bits()), (rel.to_bits(), cost.to_bits()));
         }
@@ -430,7 +430,7 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
         for (p, bit) in bits.iter().enumerate() {
             let mut best = (f64::INFINITY, None);
             for c in 0..k {
-                let v = filtered[c].data[p] as f64 * costs[c].at(candidates[c].merge as u8 as f64);
+                let v = filtered[c][p] as f64 * costs[c].at(candidates[c].merge as u8 as f64);
                 if v < best.0 {
                     best = (v, Some(c));
                 }
