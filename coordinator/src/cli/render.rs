@@ -92,10 +92,33 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Peak resident set size of this process so far (Linux reports `ru_maxrss` in KiB).
+/// Peak resident set size of this process so far: `VmHWM` of `/proc/self/status`, which starts
+/// afresh at `exec`. `ru_maxrss` does not on Linux, so under `cargo run` it reported cargo's
+/// own peak; it stays the fallback where `/proc` is missing (in KiB on Linux).
 pub fn peak_rss_bytes() -> u64 {
+    let hwm = std::fs::read_to_string("/proc/self/status").ok().and_then(|status| {
+        let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+        line.trim().strip_suffix("kB")?.trim().parse::<u64>().ok()
+    });
+    if let Some(kib) = hwm {
+        return kib * 1024;
+    }
     // SAFETY: getrusage only writes into the struct we pass
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };
     usage.ru_maxrss.max(0) as u64 * 1024
+}
+
+#[cfg(test)]
+mod tests {
+    /// The peak follows this process's own memory: touching 256 MB raises it by as much.
+    #[test]
+    fn peak_memory_rises_with_touched_memory() {
+        let before = super::peak_rss_bytes();
+        assert!(before > 0);
+        let block = vec![1u8; 256 << 20];
+        std::hint::black_box(&block);
+        let after = super::peak_rss_bytes();
+        assert!(after >= before + (250 << 20), "{before} -> {after}");
+    }
 }
