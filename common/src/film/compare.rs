@@ -38,9 +38,13 @@ impl Comparison {
     }
 }
 
+/// The fraction of per-pixel errors the equal-time benchmark drops: a firefly or two must not
+/// decide a comparison of whole images.
+pub const DROPPED_FRACTION: f64 = 0.001;
+
 /// relMSE with the top `drop` fraction of per-pixel errors removed (numpy's linear quantile).
 pub fn relmse(a: &[[f32; 3]], reference: &[[f32; 3]], drop: f64) -> f64 {
-    let mut err: Vec<f64> = a
+    let err: Vec<f64> = a
         .iter()
         .zip(reference)
         .map(|(x, r)| {
@@ -53,6 +57,12 @@ pub fn relmse(a: &[[f32; 3]], reference: &[[f32; 3]], drop: f64) -> f64 {
                 / 3.0
         })
         .collect();
+    mean_without_top(err, drop)
+}
+
+/// The mean of per-pixel errors above the `1 − drop` quantile removed (numpy's linear
+/// quantile), as [`relmse`] drops them; nothing is dropped from 1000 values or fewer.
+pub fn mean_without_top(mut err: Vec<f64>, drop: f64) -> f64 {
     if drop > 0.0 && err.len() > 1000 {
         let mut sorted = err.clone();
         sorted.sort_by(|a, b| a.total_cmp(b));

@@ -10,9 +10,11 @@
 //!    into the merge mask every bidirectional candidate below renders with (the image-level
 //!    choice is judged with the mask held fixed; the tests check the mask on its own);
 //! 2. every image-level candidate of `emis-vcm` (25 (ν, c) and path tracing) renders
-//!    `iterations` iterations, one call each, and its per-pixel per-iteration variance
-//!    relative to the reference is averaged as relMSE averages: the relMSE × iterations it
-//!    converges to, free of the reference's own noise and of bias;
+//!    `iterations` iterations, one call each, for each of `--seeds` seeds, and its per-pixel
+//!    per-iteration variance relative to the reference, pooled over the seeds, is averaged
+//!    as relMSE averages (once over every pixel, once without the top 0.1 % as the equal-time
+//!    benchmark drops them): the relMSE × iterations it converges to, free of the reference's
+//!    own noise and of bias;
 //! 3. each candidate is timed (CPU seconds per iteration) the way a final pass renders it,
 //!    in [`FINAL_ITERATIONS_PER_CALL`] calls, path tracing by `pt`, on `--timing-threads`
 //!    threads (one by default: CPU time then counts no thread waiting at a barrier for a
@@ -27,7 +29,7 @@ use crate::options::scene_name;
 use anyhow::{Context, bail};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth};
+use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth, SeedVariance};
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
@@ -35,7 +37,7 @@ use tessera_common::emis::{
     CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, render_iterations,
 };
 use tessera_common::film::Film;
-use tessera_common::film::compare::relmse;
+use tessera_common::film::compare::{DROPPED_FRACTION, mean_without_top, relmse};
 use tessera_common::integrator::PathSettings;
 use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
@@ -50,9 +52,12 @@ pub struct DecisionTruthArgs {
     /// Side of the square image the scenes are rendered at.
     #[arg(long, default_value_t = 128)]
     pub size: u32,
-    /// Iterations each candidate renders for its variance.
+    /// Iterations each candidate renders for its variance, per seed.
     #[arg(long, default_value_t = 256)]
     pub iterations: u32,
+    /// Seeds each candidate renders its iterations with; every seed's iterations are pooled.
+    #[arg(long, default_value_t = 3)]
+    pub seeds: u32,
     /// Iterations of the pilot that chooses the merge mask.
     #[arg(long, default_value_t = 64)]
     pub pilot: u32,
@@ -69,6 +74,9 @@ pub struct DecisionTruthArgs {
     #[arg(long, short = 'o', default_value = "common/tests/data/emis-decision-truth.json")]
     pub output: PathBuf,
 }
+
+/// The first seed of the candidates' variance renders (the next `--seeds` − 1 follow it).
+const TRUTH_SEED: u64 = 1000;
 
 /// One scene at the benchmark's size with its reference.
 struct Subject {
@@ -149,47 +157,72 @@ fn strategy(nu: f32, connections: u32, mask: &Arc<Vec<f32>>) -> Strategy {
     Strategy { nu, connections: Connections::Fixed(connections), merge: Some(MergeMask::PerPixel(mask.clone())) }
 }
 
+/// A candidate's relative variance: every seed's and the pooled figures.
+struct Variance {
+    pooled: SeedVariance,
+    seeds: Vec<SeedVariance>,
+    relmse_k: f64,
+}
+
 /// Per-iteration variance relative to the reference from `iterations` single-iteration
-/// renders: the whole run's, each half's, and relMSE × iterations of the mean image.
+/// renders for each of `seeds` seeds: each seed's, all of them pooled (every iteration has the
+/// same expectation), and relMSE × iterations of the mean image.
 fn relative_variance(
     s: &Subject,
     strategy: &Strategy,
     iterations: u32,
+    seeds: u32,
     pool: &rayon::ThreadPool,
-) -> (f64, [f64; 2], f64) {
+) -> Variance {
     let n = s.reference.len();
-    // per half: Σx and Σx² per pixel and channel
-    let mut sums = [vec![[0.0f64; 6]; n], vec![[0.0f64; 6]; n]];
-    for it in 0..iterations {
-        let (accum, _) =
-            pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 1000, it..it + 1, None));
-        let mut film = Film::new(&s.scene.film);
-        film.merge_tile(&accum);
-        let half = &mut sums[(2 * it / iterations) as usize];
-        for (acc, p) in half.iter_mut().zip(film.average()) {
-            for c in 0..3 {
-                acc[c] += p[c] as f64;
-                acc[3 + c] += (p[c] as f64).powi(2);
+    // per seed: Σx and Σx² per pixel and channel
+    let mut sums = vec![vec![[0.0f64; 6]; n]; seeds as usize];
+    for (seed, sums) in sums.iter_mut().enumerate() {
+        for it in 0..iterations {
+            let seed = TRUTH_SEED + seed as u64;
+            let (accum, _) =
+                pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, seed, it..it + 1, None));
+            let mut film = Film::new(&s.scene.film);
+            film.merge_tile(&accum);
+            for (acc, p) in sums.iter_mut().zip(film.average()) {
+                for c in 0..3 {
+                    acc[c] += p[c] as f64;
+                    acc[3 + c] += (p[c] as f64).powi(2);
+                }
             }
         }
     }
-    let variance = |parts: &[&Vec<[f64; 6]>], k: f64| -> f64 {
-        let mut total = 0.0;
-        for (j, r) in s.reference.iter().enumerate() {
-            for c in 0..3 {
-                let (sx, sxx) = parts.iter().fold((0.0, 0.0), |(a, b), part| (a + part[j][c], b + part[j][3 + c]));
-                let var = ((sxx - sx * sx / k) / (k - 1.0)).max(0.0);
-                total += var / ((r[c] as f64).powi(2) + 1e-4);
-            }
+    let variance = |parts: &[Vec<[f64; 6]>]| -> SeedVariance {
+        let k = (iterations as usize * parts.len()) as f64;
+        let per_pixel: Vec<f64> = s
+            .reference
+            .iter()
+            .enumerate()
+            .map(|(j, r)| {
+                (0..3)
+                    .map(|c| {
+                        let (sx, sxx) =
+                            parts.iter().fold((0.0, 0.0), |(a, b), part| (a + part[j][c], b + part[j][3 + c]));
+                        let var = ((sxx - sx * sx / k) / (k - 1.0)).max(0.0);
+                        var / ((r[c] as f64).powi(2) + 1e-4)
+                    })
+                    .sum::<f64>()
+                    / 3.0
+            })
+            .collect();
+        SeedVariance {
+            relative_variance: per_pixel.iter().sum::<f64>() / n as f64,
+            trimmed_variance: mean_without_top(per_pixel, DROPPED_FRACTION),
         }
-        total / (3 * n) as f64
     };
-    let half = (iterations / 2) as f64;
-    let whole = variance(&[&sums[0], &sums[1]], iterations as f64);
-    let halves = [variance(&[&sums[0]], half), variance(&[&sums[1]], iterations as f64 - half)];
+    let k = (iterations * seeds) as f64;
     let mean: Vec<[f32; 3]> =
-        (0..n).map(|j| std::array::from_fn(|c| ((sums[0][j][c] + sums[1][j][c]) / iterations as f64) as f32)).collect();
-    (whole, halves, relmse(&mean, &s.reference, 0.0) * iterations as f64)
+        (0..n).map(|j| std::array::from_fn(|c| (sums.iter().map(|part| part[j][c]).sum::<f64>() / k) as f32)).collect();
+    Variance {
+        pooled: variance(&sums),
+        seeds: sums.chunks(1).map(variance).collect(),
+        relmse_k: relmse(&mean, &s.reference, 0.0) * k,
+    }
 }
 
 /// CPU seconds per iteration of `strategy`, rendered as a final pass renders it.
@@ -219,23 +252,27 @@ fn measure_scene(s: &Subject, args: &DecisionTruthArgs, pool: &rayon::ThreadPool
         .iter()
         .zip(&seconds)
         .map(|(&(nu, connections, model_cost), &seconds)| {
-            let (relative_variance, relative_variance_halves, relmse_k) =
-                relative_variance(s, &strategy(nu, connections, &mask), args.iterations, pool);
+            let v = relative_variance(s, &strategy(nu, connections, &mask), args.iterations, args.seeds, pool);
             let c = CandidateTruth {
                 nu,
                 connections,
-                relative_variance,
-                relative_variance_halves,
-                relmse_k,
+                relative_variance: v.pooled.relative_variance,
+                trimmed_variance: v.pooled.trimmed_variance,
+                seeds: v.seeds,
+                relmse_k: v.relmse_k,
                 seconds,
                 model_cost,
             };
+            let per_seed = |f: fn(&SeedVariance) -> f64| {
+                c.seeds.iter().map(|v| format!("{:.3e}", f(v))).collect::<Vec<_>>().join(" ")
+            };
             println!(
-                "| {} | {nu} | {connections} | {:.4e} | {:.4e} {:.4e} | {:.4e} | {:.3} | {:.2} | {:.4e} |",
+                "| {} | {nu} | {connections} | {:.4e} | {} | {:.4e} | {} | {:.4e} | {:.3} | {:.2} | {:.4e} |",
                 s.name,
+                c.trimmed_variance,
+                per_seed(|v| v.trimmed_variance),
                 c.relative_variance,
-                c.relative_variance_halves[0],
-                c.relative_variance_halves[1],
+                per_seed(|v| v.relative_variance),
                 c.relmse_k,
                 c.seconds * 1e3,
                 c.model_cost,
@@ -250,20 +287,23 @@ fn measure_scene(s: &Subject, args: &DecisionTruthArgs, pool: &rayon::ThreadPool
 /// Runs `tessera bench decision-truth`.
 pub fn run(args: &DecisionTruthArgs) -> anyhow::Result<()> {
     let pool = args.scenes.pool()?;
-    if args.iterations < 4 {
-        bail!("--iterations must be at least 4, for two halves with a variance each");
+    if args.iterations < 2 || args.seeds == 0 {
+        bail!("--iterations must be at least 2 and --seeds at least 1, for a variance per seed");
     }
     let mut truth = DecisionTruth {
         width: args.size,
         height: args.size,
         iterations: args.iterations,
+        seeds: args.seeds,
         timed_iterations: args.timed,
         pilot_iterations: args.pilot,
         command: std::env::args().skip(1).collect::<Vec<_>>().join(" "),
         scenes: Vec::new(),
     };
-    println!("| scene | ν | c | relative variance | halves | relMSE × K | ms/iteration | model cost | relMSE × time |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!(
+        "| scene | ν | c | trimmed variance | per seed | relative variance | per seed | relMSE × K | ms/iteration | model cost | relMSE × time |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for path in args.scenes.scenes()? {
         let subject = Subject::load(&path, args.size)?;
         let scene = measure_scene(&subject, args, &pool)?;

@@ -185,7 +185,11 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
                 tile_size: 32,
             };
             let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
-            cell.relmse.push(tessera_common::film::compare::relmse(&out.film.average(), &reference.pixels, 0.001));
+            cell.relmse.push(tessera_common::film::compare::relmse(
+                &out.film.average(),
+                &reference.pixels,
+                tessera_common::film::compare::DROPPED_FRACTION,
+            ));
             cell.samples_per_s += out.film.total_samples() as f64 / out.elapsed.as_secs_f64() / args.seeds.len() as f64;
         }
         rows.push(cell);
