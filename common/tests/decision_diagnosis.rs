@@ -45,8 +45,9 @@ fn intensity(scene: &std::path::Path) -> Image {
     Image::from_data(SIZE, SIZE, out).box_blur(DenoiseSettings::default().final_box)
 }
 
-/// The pilot's data and Ī as an update computes it: the pilot's image, denoised.
-fn pilot(scene: &Scene, config: &EmisConfig, seed: u64, iterations: std::ops::Range<u32>) -> (PilotData, Image) {
+/// The pilot's data, Ī as an update computes it (the pilot's image, denoised) and the pilot's
+/// image without the denoiser (channel mean, the same box).
+fn pilot(scene: &Scene, config: &EmisConfig, seed: u64, iterations: std::ops::Range<u32>) -> (PilotData, Image, Image) {
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(EmisMethod::Vcm);
     let (accum, data) =
@@ -56,22 +57,26 @@ fn pilot(scene: &Scene, config: &EmisConfig, seed: u64, iterations: std::ops::Ra
     film.merge_tile(&accum);
     let (albedo, normal, depth) = data.guides.means();
     let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
-    let image = denoised_intensity(SIZE, SIZE, &film.average(), &guides, &config.denoise);
-    (data, image)
+    let average = film.average();
+    let image = denoised_intensity(SIZE, SIZE, &average, &guides, &config.denoise);
+    let raw = Image::from_data(SIZE, SIZE, average.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect())
+        .box_blur(config.denoise.final_box);
+    (data, image, raw)
 }
 
 /// How many pixels `pilot` puts below half of `reference` (both + 0.01), and the lowest
-/// ratio with its pixel.
-fn underestimates(pilot: &Image, reference: &Image) -> String {
+/// ratio with its pixel and the value there without the denoiser.
+fn underestimates(pilot: &Image, raw: &Image, reference: &Image) -> String {
     let ratio = |p: usize| (pilot.data[p] + 0.01) / (reference.data[p] + 0.01);
     let low = (0..SIZE * SIZE).filter(|&p| ratio(p) < 0.5).count();
     let worst = (0..SIZE * SIZE).min_by(|&a, &b| ratio(a).total_cmp(&ratio(b))).unwrap_or(0);
     format!(
-        "{low} | {:.3} at ({}, {}): {:.3} against {:.3}",
+        "{low} | {:.3} at ({}, {}): {:.3} (not denoised {:.3}) against {:.3}",
         ratio(worst),
         worst % SIZE,
         worst / SIZE,
         pilot.data[worst],
+        raw.data[worst],
         reference.data[worst]
     )
 }
@@ -142,9 +147,9 @@ fn decisions_by_outlier_rule_and_normaliser() {
         let cell = |(nu, c): (f32, u32)| format!("ν {nu} c {c} | {:.2}", t.regret(nu, c).unwrap_or(f64::NAN));
         for seed in 1..=3 {
             for n in [4u32, 16] {
-                let (whole, denoised) = pilot(&scene, &config, seed, 0..n);
-                let (a, _) = pilot(&scene, &config, seed, 0..n / 2);
-                let (b, _) = pilot(&scene, &config, seed, n / 2..n);
+                let (whole, denoised, raw) = pilot(&scene, &config, seed, 0..n);
+                let (a, ..) = pilot(&scene, &config, seed, 0..n / 2);
+                let (b, ..) = pilot(&scene, &config, seed, n / 2..n);
                 let halves = drop_consistent_outliers(&whole.moments, [&a.moments, &b.moments], &image);
                 println!(
                     "| {name} | {seed} | {n} | {} | {} | {} | {} | {} |",
@@ -152,7 +157,7 @@ fn decisions_by_outlier_rule_and_normaliser() {
                     cell(choose(&config, &whole.moments, &whole, &image, OutlierStage::Each)),
                     cell(choose(&config, &halves, &whole, &image, OutlierStage::Shared)),
                     cell(choose(&config, &whole.moments, &whole, &denoised, OutlierStage::Shared)),
-                    underestimates(&denoised, &image),
+                    underestimates(&denoised, &raw, &image),
                 );
             }
         }
