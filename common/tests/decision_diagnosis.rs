@@ -6,7 +6,7 @@
 //! (box-blurred as the denoiser's output is) unless said otherwise: the default outlier rule;
 //! `each` (every candidate's own top 0.1 % before the filter); `halves`, the default after
 //! zeroing, per candidate, the 0.1 % of pixels whose smaller half-moment is largest (would it
-//! tell concentrated excess, which the metric drops, from one-sample spikes?); and the default
+//! tell concentrated excess, which the metric drops, from one-sample spikes?); the default
 //! with Ī the pilot's own denoised image, as an update computes it; and the default with Ī the
 //! pilot's image without the denoiser (channel mean, the same box). Each choice's regret
 //! against the cached truth is printed, with how many pixels the pilot's Ī puts below half the
