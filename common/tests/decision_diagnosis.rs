@@ -26,6 +26,7 @@ use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, OutlierStage, optimize};
 use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
 use tessera_common::film::Film;
+use tessera_common::film::compare::DROPPED_FRACTION;
 use tessera_common::integrator::PathSettings;
 use tessera_common::scene::Scene;
 
@@ -86,7 +87,7 @@ fn underestimates(pilot: &Image, raw: &Image, reference: &Image) -> String {
 /// top 0.1 % zeroed (flagged pixels stay flagged).
 fn drop_consistent_outliers(whole: &MomentBuffer, halves: [&MomentBuffer; 2], image: &Image) -> MomentBuffer {
     let n = SIZE * SIZE;
-    let drop = (n as f64 * 0.001).ceil() as usize;
+    let drop = (n as f64 * DROPPED_FRACTION).ceil() as usize;
     let mut out = whole.clone();
     for c in 0..whole.candidates {
         let mut keys: Vec<(f64, usize)> = (0..n)

@@ -177,9 +177,9 @@ fn relative_variance(
     let n = s.reference.len();
     // per seed: Σx and Σx² per pixel and channel
     let mut sums = vec![vec![[0.0f64; 6]; n]; seeds as usize];
-    for (seed, sums) in sums.iter_mut().enumerate() {
+    for (i, sums) in sums.iter_mut().enumerate() {
+        let seed = TRUTH_SEED + i as u64;
         for it in 0..iterations {
-            let seed = TRUTH_SEED + seed as u64;
             let (accum, _) =
                 pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, seed, it..it + 1, None));
             let mut film = Film::new(&s.scene.film);

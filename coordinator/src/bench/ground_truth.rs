@@ -34,7 +34,7 @@ use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_each_outliers, remove_shared_outliers};
 use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
-use tessera_common::film::compare::relmse;
+use tessera_common::film::compare::{DROPPED_FRACTION, relmse};
 use tessera_common::film::{Film, Rect, TileAccum};
 use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
@@ -211,7 +211,7 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
         film.merge_tile(&accum);
         let image = film.average();
         m.error.push(relmse(&image, &s.reference, 0.0) * k as f64);
-        m.error_dropped.push(relmse(&image, &s.reference, 0.001) * k as f64);
+        m.error_dropped.push(relmse(&image, &s.reference, DROPPED_FRACTION) * k as f64);
         let own_moments = moments_of(&own.snapshot().0, 0);
         m.own_moment.push(relative_mean(w, h, own_moments, &s.ref_mean, MomentFilter::default()));
     }
