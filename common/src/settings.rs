@@ -15,6 +15,7 @@
 //! ```
 
 use crate::emis::cost::CostModel;
+use crate::emis::denoise::ImageEstimate;
 use crate::emis::estimator::{MergeKernel, MergeRatio, MomentSettings};
 use crate::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use crate::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
@@ -134,6 +135,8 @@ pub struct RenderSettings {
     pub moment_filter: MomentFilter,
     /// EMIS: the outlier rejection of the image-level sums.
     pub moment_outliers: OutlierStage,
+    /// EMIS: the image estimate Ī that moments are made relative to.
+    pub emis_image: ImageEstimate,
     /// EMIS: the method's own pilot, or path tracing first.
     pub emis_pilot: PilotStart,
     /// EMIS: one connection count for the image, or one per pixel.
@@ -159,6 +162,7 @@ impl Default for RenderSettings {
             cost_model: CostModel::default(),
             moment_filter: MomentFilter::default(),
             moment_outliers: OutlierStage::default(),
+            emis_image: ImageEstimate::default(),
             emis_pilot: PilotStart::default(),
             emis_connections: ConnectionScope::default(),
         }
@@ -309,6 +313,7 @@ impl RenderSettings {
         config.measured_costs = self.cost_model == CostModel::Measured;
         config.filters.order = self.moment_filter;
         config.filters.outliers = self.moment_outliers;
+        config.denoise = self.emis_image.settings();
         config.pilot = self.emis_pilot;
         config.connection_scope = self.emis_connections;
         config

@@ -1,16 +1,12 @@
-//! Diagnostic, ignored by default: where do the decision tests' failures on caustic-glass and
-//! veach-mis come from, the moments or Ī? (docs/decisions/0027-decision-truth-over-seeds.md)
+//! Diagnostic, ignored by default: how does the normaliser Ī change the image-level choice?
+//! (docs/decisions/0027-decision-truth-over-seeds.md, 0028-pilot-image-not-denoised.md)
 //!
-//! Per scene, seed and pilot length n, a `vcm` pilot's moments over iterations 0..n and over
-//! each half. The image-level choice is made five ways, with Ī the converged reference
-//! (box-blurred as the denoiser's output is) unless said otherwise: the default outlier rule;
-//! `each` (every candidate's own top 0.1 % before the filter); `halves`, the default after
-//! zeroing, per candidate, the 0.1 % of pixels whose smaller half-moment is largest (would it
-//! tell concentrated excess, which the metric drops, from one-sample spikes?); the default
-//! with Ī the pilot's own denoised image, as an update computes it; and the default with Ī the
-//! pilot's image without the denoiser (channel mean, the same box). Each choice's regret
-//! against the cached truth is printed, with how many pixels the pilot's Ī puts below half the
-//! reference's and the worst of them; nothing is asserted.
+//! Per scene, seed and pilot length n, a `vcm` pilot's moments over iterations 0..n. The
+//! image-level choice is made with the default outlier rule and six normalisers: the converged
+//! reference (box-blurred as Ī is), and the pilot's own image through the guided à-trous
+//! filter with 5, 3, 2, 1 or no levels (no levels: the channel mean and the box alone, the
+//! default). Each choice's regret against the cached truth is printed, with how many pixels
+//! the 5-level Ī puts below half the reference's and the worst of them; nothing is asserted.
 //!
 //! ```text
 //! cargo test -p tessera-common --test decision_diagnosis -- --ignored --nocapture
@@ -26,9 +22,11 @@ use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, OutlierStage, optimize};
 use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy, render_iterations};
 use tessera_common::film::Film;
-use tessera_common::film::compare::DROPPED_FRACTION;
 use tessera_common::integrator::PathSettings;
 use tessera_common::scene::Scene;
+
+/// The denoiser's à-trous levels tried; 0 leaves the channel mean and the box alone.
+const LEVELS: [u32; 5] = [5, 3, 2, 1, 0];
 
 /// Side of the square images, as in the cached truth.
 const SIZE: usize = 128;
@@ -47,9 +45,14 @@ fn intensity(scene: &std::path::Path) -> Image {
     Image::from_data(SIZE, SIZE, out).box_blur(DenoiseSettings::default().final_box)
 }
 
-/// The pilot's data, Ī as an update computes it (the pilot's image, denoised) and the pilot's
-/// image without the denoiser (channel mean, the same box).
-fn pilot(scene: &Scene, config: &EmisConfig, seed: u64, iterations: std::ops::Range<u32>) -> (PilotData, Image, Image) {
+/// The pilot's data, Ī through the guided filter with each of [`LEVELS`], and the pilot's
+/// image without the filter (channel mean, the same box).
+fn pilot(
+    scene: &Scene,
+    config: &EmisConfig,
+    seed: u64,
+    iterations: std::ops::Range<u32>,
+) -> (PilotData, [Image; 5], Image) {
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(EmisMethod::Vcm);
     let (accum, data) =
@@ -60,7 +63,8 @@ fn pilot(scene: &Scene, config: &EmisConfig, seed: u64, iterations: std::ops::Ra
     let (albedo, normal, depth) = data.guides.means();
     let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
     let average = film.average();
-    let image = denoised_intensity(SIZE, SIZE, &average, &guides, &config.denoise);
+    let image = LEVELS
+        .map(|levels| denoised_intensity(SIZE, SIZE, &average, &guides, &DenoiseSettings { levels, ..config.denoise }));
     let raw = Image::from_data(SIZE, SIZE, average.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect())
         .box_blur(config.denoise.final_box);
     (data, image, raw)
@@ -81,31 +85,6 @@ fn underestimates(pilot: &Image, raw: &Image, reference: &Image) -> String {
         raw.data[worst],
         reference.data[worst]
     )
-}
-
-/// `whole` with, per candidate, the pixels whose smaller relative half-moment is among the
-/// top 0.1 % zeroed (flagged pixels stay flagged).
-fn drop_consistent_outliers(whole: &MomentBuffer, halves: [&MomentBuffer; 2], image: &Image) -> MomentBuffer {
-    let n = SIZE * SIZE;
-    let drop = (n as f64 * DROPPED_FRACTION).ceil() as usize;
-    let mut out = whole.clone();
-    for c in 0..whole.candidates {
-        let mut keys: Vec<(f64, usize)> = (0..n)
-            .map(|p| {
-                let norm = (image.data[p] as f64).powi(2) + 1e-4;
-                let m = halves.map(|h| h.moment(p as u32, c) / norm);
-                (if m[0].is_finite() && m[1].is_finite() { m[0].min(m[1]) } else { 0.0 }, p)
-            })
-            .collect();
-        keys.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for &(key, p) in keys.iter().take(drop) {
-            let i = p * whole.candidates + c;
-            if key > 0.0 && out.sums[i].is_finite() {
-                out.sums[i] = 0.0;
-            }
-        }
-    }
-    out
 }
 
 fn choose(
@@ -137,9 +116,9 @@ fn decisions_by_outlier_rule_and_normaliser() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/emis-decision-truth.json");
     let truth: DecisionTruth = serde_json::from_str(&std::fs::read_to_string(path).expect("truth")).expect("parses");
     println!(
-        "| scene | seed | pilot | default | regret | each | regret | halves | regret | default, Ī of the pilot | regret | default, Ī of the pilot not denoised | regret | pixels Ī < ½ | lowest ratio |"
+        "| scene | seed | pilot | reference | regret | levels 5 | regret | 3 | regret | 2 | regret | 1 | regret | 0 | regret | pixels Ī < ½ | lowest ratio |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for name in ["caustic-glass", "cornell-box", "veach-mis"] {
         let file = scene_path(name);
         let scene = Scene::load(&file).expect("loads").with_resolution(SIZE as u32, SIZE as u32).expect("square");
@@ -148,19 +127,19 @@ fn decisions_by_outlier_rule_and_normaliser() {
         let t = truth.scene(name).expect("in the truth");
         let cell = |(nu, c): (f32, u32)| format!("ν {nu} c {c} | {:.2}", t.regret(nu, c).unwrap_or(f64::NAN));
         for seed in 1..=3 {
-            for n in [4u32, 16] {
+            for n in [1u32, 4, 16] {
                 let (whole, denoised, raw) = pilot(&scene, &config, seed, 0..n);
-                let (a, ..) = pilot(&scene, &config, seed, 0..n / 2);
-                let (b, ..) = pilot(&scene, &config, seed, n / 2..n);
-                let halves = drop_consistent_outliers(&whole.moments, [&a.moments, &b.moments], &image);
+                let pick = |i: &Image| cell(choose(&config, &whole.moments, &whole, i, OutlierStage::Shared));
+                let [l5, l3, l2, l1, l0] = &denoised;
                 println!(
-                    "| {name} | {seed} | {n} | {} | {} | {} | {} | {} | {} |",
-                    cell(choose(&config, &whole.moments, &whole, &image, OutlierStage::Shared)),
-                    cell(choose(&config, &whole.moments, &whole, &image, OutlierStage::Each)),
-                    cell(choose(&config, &halves, &whole, &image, OutlierStage::Shared)),
-                    cell(choose(&config, &whole.moments, &whole, &denoised, OutlierStage::Shared)),
-                    cell(choose(&config, &whole.moments, &whole, &raw, OutlierStage::Shared)),
-                    underestimates(&denoised, &raw, &image),
+                    "| {name} | {seed} | {n} | {} | {} | {} | {} | {} | {} | {} |",
+                    pick(&image),
+                    pick(l5),
+                    pick(l3),
+                    pick(l2),
+                    pick(l1),
+                    pick(l0),
+                    underestimates(l5, &raw, &image),
                 );
             }
         }

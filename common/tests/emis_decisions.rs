@@ -9,8 +9,8 @@
 //!
 //! Plus one invariant per extreme: where light paths are essential (caustic-glass) every
 //! update keeps ν > 0; where path tracing wins (veach-mis) the merge mask stays almost empty.
-//! The regret bound fails today on caustic-glass and veach-mis: those two tests are ignored
-//! (run them with `--ignored`) until the optimiser is fixed; decisions 0018 and 0027 have the
+//! The regret bound fails today on caustic-glass after 4 iterations: that test is ignored (run
+//! it with `--ignored`) until the optimiser is fixed; decisions 0018, 0027 and 0028 have the
 //! figures.
 //! `EMIS_DIAG=1` prints every candidate's prediction beside its truth at each judged update;
 //! `EMIS_OUTLIERS=each` (or `filtered`) decides with that outlier rule instead of the default.
@@ -137,12 +137,12 @@ fn caustic_glass_decisions_keep_light_paths() {
     }
 }
 
-/// Fails: the update after 4 iterations chooses c = 0 (ν 0.5 or 0.75, regret 2.3–2.8). With
-/// the converged reference as Ī the same moments choose within 1.12–1.45: the pilot's
-/// denoised Ī is many times too dark on small bright features (decision 0027,
+/// Fails: the update after 4 iterations chooses ν 0.25 or 0.5 (regret 1.37–1.71); after 16
+/// it is within 1.24. With the converged reference as Ī the same moments choose within
+/// 1.12–1.45 after 4, so what is left is mostly the moments (decision 0028,
 /// `tests/decision_diagnosis.rs`). Run with `--ignored`.
 #[test]
-#[ignore = "known failure, issue 21: regret 2.3-2.8 after 4 iterations, Ī too dark (decision 0027)"]
+#[ignore = "known failure, issue 21: regret 1.37-1.71 after 4 iterations (decision 0028)"]
 fn caustic_glass_decisions_are_near_the_best() {
     assert_regrets("caustic-glass", &judge("caustic-glass"));
 }
@@ -165,12 +165,9 @@ fn veach_mis_merges_almost_nowhere() {
     }
 }
 
-/// Fails: light paths win (regret 1.70–2.74). With the converged reference as Ī the same
-/// moments choose path tracing at every seed: the pilot's denoised Ī is 60–200 times too
-/// dark around the small lights, which inflates path tracing's relative moments there
-/// (decision 0027, `tests/decision_diagnosis.rs`). Run with `--ignored`.
+/// Passes since Ī is the pilot image not denoised (decision 0028): the guided filter darkened
+/// the two-pixel lights 60–200 times, and light paths won with regret 1.70–2.74.
 #[test]
-#[ignore = "known failure, issue 21: regret 1.70-2.74, Ī too dark around the lights (decision 0027)"]
 fn veach_mis_decisions_are_near_the_best() {
     assert_regrets("veach-mis", &judge("veach-mis"));
 }

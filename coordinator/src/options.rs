@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::denoise::ImageEstimate;
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::scene::Scene;
@@ -123,6 +124,10 @@ pub struct EmisModelArgs {
     /// it over the neighbours; or apply the reference's rule alone.
     #[arg(long, value_enum, default_value = "shared")]
     pub moment_outliers: MomentOutliersArg,
+    /// emis-*: the image estimate Ī the moments are made relative to: the pilot image (its
+    /// channel mean and radius-3 box), or the pilot image denoised by the guided filter first.
+    #[arg(long, value_enum, default_value = "pilot")]
+    pub emis_image: EmisImageArg,
 }
 
 impl EmisModelArgs {
@@ -131,6 +136,25 @@ impl EmisModelArgs {
         settings.cost_model = self.cost_model.into();
         settings.moment_filter = self.moment_filter.into();
         settings.moment_outliers = self.moment_outliers.into();
+        settings.emis_image = self.emis_image.into();
+    }
+}
+
+/// Where the EMIS image estimate Ī comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EmisImageArg {
+    /// The pilot image, not denoised: its channel mean and radius-3 box.
+    Pilot,
+    /// The pilot image denoised by the à-trous filter guided by albedo, normal and depth.
+    Guided,
+}
+
+impl From<EmisImageArg> for ImageEstimate {
+    fn from(arg: EmisImageArg) -> ImageEstimate {
+        match arg {
+            EmisImageArg::Pilot => ImageEstimate::Pilot,
+            EmisImageArg::Guided => ImageEstimate::Guided,
+        }
     }
 }
 

@@ -5,6 +5,7 @@
 use crate::v1 as pb;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::denoise::ImageEstimate;
 use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::film::Rect;
@@ -71,6 +72,10 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
             Some(v) => parse_json_name::<ConnectionScope>("emis_connections", v)?,
             None => d.emis_connections,
         },
+        emis_image: match &s.emis_image {
+            Some(v) => parse_json_name::<ImageEstimate>("emis_image", v)?,
+            None => d.emis_image,
+        },
     })
 }
 
@@ -95,6 +100,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         moment_outliers: Some(json_name(&s.moment_outliers)),
         emis_pilot: Some(json_name(&s.emis_pilot)),
         emis_connections: Some(json_name(&s.emis_connections)),
+        emis_image: Some(json_name(&s.emis_image)),
     }
 }
 
@@ -127,6 +133,7 @@ mod tests {
             cost_model: CostModel::Reference,
             emis_pilot: PilotStart::PathTracing,
             emis_connections: ConnectionScope::PerPixel,
+            emis_image: ImageEstimate::Guided,
             ..RenderSettings::default()
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);

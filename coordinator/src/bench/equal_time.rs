@@ -7,14 +7,15 @@
 use super::chart::{Group, write_bar_chart};
 use super::{SceneArgs, geometric_mean};
 use crate::options::{
-    CostModelArg, EmisConnectionsArg, EmisModelArgs, EmisPilotArg, IntegratorKind, MomentOutliersArg, make_renderer,
-    scene_name,
+    CostModelArg, EmisConnectionsArg, EmisImageArg, EmisModelArgs, EmisPilotArg, IntegratorKind, MomentOutliersArg,
+    make_renderer, scene_name,
 };
 use clap::ValueEnum;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::denoise::ImageEstimate;
 use tessera_common::emis::optimize::{ConnectionScope, OutlierStage};
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
@@ -54,6 +55,10 @@ pub struct EqualTimeArgs {
     /// each, named `emis-vcm/o-each`).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub compare_moment_outliers: Vec<MomentOutliersArg>,
+    /// Image estimates besides `--emis-image` each `emis-*` column also runs with (a column
+    /// each, named `emis-vcm/i-guided`).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub compare_emis_image: Vec<EmisImageArg>,
     /// Also draw the speed-ups as an SVG bar chart, one file per duration (NAME-20s.svg ...).
     #[arg(long)]
     pub chart: Option<PathBuf>,
@@ -97,6 +102,7 @@ type Row = Vec<Cell>;
 struct Variant {
     cost: Option<CostModel>,
     outliers: Option<OutlierStage>,
+    image: Option<ImageEstimate>,
 }
 
 /// One column: an integrator, for `emis-*` with a pilot and a connection scope.
@@ -147,9 +153,17 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
                                 r.to_possible_value().expect("no skipped values").get_name()
                             ));
                         }
-                        let variant = Variant { cost: model.map(|&m| m.into()), outliers: rule.map(|&r| r.into()) };
+                        let variant =
+                            Variant { cost: model.map(|&m| m.into()), outliers: rule.map(|&r| r.into()), image: None };
                         out.push(Column { kind, pilot, connections, variant, name });
                     }
+                }
+                // each other image estimate alone, with the model arguments
+                for image in &args.compare_emis_image {
+                    let suffix = image.to_possible_value().expect("no skipped values");
+                    let name = format!("{name}/i-{}", suffix.get_name());
+                    let variant = Variant { image: Some((*image).into()), ..Variant::default() };
+                    out.push(Column { kind, pilot, connections, variant, name });
                 }
             }
         }
@@ -174,6 +188,9 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
         }
         if let Some(rule) = variant.outliers {
             settings.moment_outliers = rule;
+        }
+        if let Some(image) = variant.image {
+            settings.emis_image = image;
         }
         let renderer = make_renderer(&settings, &scene)?;
         let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
@@ -254,6 +271,12 @@ fn print_speedups(table: &[(String, Row)]) {
         ("emis-bdpt/k-measured/o-each", "emis-bdpt", 0.0),
         ("emis-vcm/k-measured/o-each", "vcm", VCM_TARGET),
         ("emis-bdpt/k-measured/o-each", "bdpt", BDPT_TARGET),
+        ("emis-vcm/i-guided", "emis-vcm", 0.0),
+        ("emis-bdpt/i-guided", "emis-bdpt", 0.0),
+        ("emis-vcm/i-guided", "vcm", VCM_TARGET),
+        ("emis-bdpt/i-guided", "bdpt", BDPT_TARGET),
+        ("emis-vcm/i-pilot", "emis-vcm", 0.0),
+        ("emis-bdpt/i-pilot", "emis-bdpt", 0.0),
     ] {
         let r = ratio(a, b);
         if r.is_empty() {
@@ -283,6 +306,8 @@ fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
         "emis-vcm/k-measured",
         "emis-vcm/o-each",
         "emis-vcm/k-measured/o-each",
+        "emis-vcm/i-guided",
+        "emis-vcm/i-pilot",
     ];
     for column in columns {
         let floor: Vec<(String, f64)> = table
