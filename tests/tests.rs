@@ -200,8 +200,8 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
 /// keep path tracing (pt passes: iterations 1 and 3 return no moments), the one after 4 picks a
 /// bidirectional strategy: the coordinator discards its film and renders the budget's 6
 /// iterations, 4..10, into a new one. The image, its sample counts and the decisions equal a
-/// local render's, bit for bit. With the guided Ī: with the default one, a path-tracing start
-/// keeps path tracing there at every seed (decision 0028).
+/// local render's, bit for bit. The start's updates use the guided Ī: with the pilot image
+/// alone path tracing stays there at every seed (decisions 0028 and 0029).
 #[test]
 fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() {
     use tessera_common::film::exr::{read_attribute, read_sample_counts};
@@ -211,7 +211,7 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
     let gem = std::fs::read(scene("caustic-glass").with_file_name("gem.obj")).unwrap();
     let settings = json!({
         "integrator": "emis-vcm", "spp": 6, "seed": 4,
-        "emis_pilot": "path-tracing", "emis_updates": [1, 2, 4], "emis_image": "guided",
+        "emis_pilot": "path-tracing", "emis_updates": [1, 2, 4],
     });
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![("gem.obj".into(), gem)], settings);
     assert_eq!(status, 201, "{job}");
@@ -225,7 +225,7 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
     assert_eq!(summary, [(1, true, false), (2, true, false), (4, true, true)], "{updates:?}");
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
-    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4", "--emis-image", "guided"];
+    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4"];
     let local = local_render_with(dir.path(), &scene("caustic-glass"), "emis-vcm", 6, 4, &more);
     assert_same_image(&out, &local);
     assert!(read_sample_counts(&out).unwrap().iter().all(|&n| n == 6), "the kept iterations only");
@@ -440,10 +440,10 @@ fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
 /// comes inside the pass collecting moments for the update at 32 (tiles 4..12, 12..20,
 /// 20..28, 28..32 of eight iterations each at most, after tiles 0..1, 1..2 and 2..4), so the
 /// restarted film, the full-set moments and the first kept iteration come back from the
-/// checkpoint. With the guided Ī, as the test above.
+/// checkpoint.
 #[test]
 fn coordinator_killed_mid_emis_job_after_a_restart_resumes_with_the_new_film() {
-    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4,32", "--emis-image", "guided"];
+    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4,32"];
     coordinator_killed_mid_job(("caustic-glass", "emis-vcm", 40, &more), 1, 4, 7);
 }
 

@@ -126,6 +126,7 @@ pub struct EmisModelArgs {
     pub moment_outliers: MomentOutliersArg,
     /// emis-*: the image estimate Ī the moments are made relative to: the pilot image (its
     /// channel mean and radius-3 box), or the pilot image denoised by the guided filter first.
+    /// A path-tracing start's updates use the guided filter either way.
     #[arg(long, value_enum, default_value = "pilot")]
     pub emis_image: EmisImageArg,
 }

@@ -21,7 +21,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum ImageEstimate {
-    /// The pilot image's channel mean and box, not denoised.
+    /// The pilot image's channel mean and box, not denoised. A path-tracing start's updates
+    /// still use the guided filter ([`super::render::EmisConfig::start_denoise`]).
     #[default]
     Pilot,
     /// The pilot image through the guided à-trous filter first (decision 7).

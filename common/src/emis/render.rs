@@ -160,6 +160,9 @@ pub struct EmisConfig {
     pub filters: FilterSettings,
     /// The denoiser (docs/emis.md, decision 7).
     pub denoise: DenoiseSettings,
+    /// The denoiser while a path-tracing start is still path tracing: its image is black on
+    /// caustics, which only the guided filter's spreading lets speak (decision 0029).
+    pub start_denoise: DenoiseSettings,
     /// The pilot: the method's own, or path tracing first.
     pub pilot: PilotStart,
     /// One c for the image or one per pixel (the reduced set's decisions are image-level).
@@ -185,6 +188,7 @@ impl EmisConfig {
             measured_costs: false,
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
+            start_denoise: DenoiseSettings::GUIDED,
             pilot: PilotStart::default(),
             connection_scope: ConnectionScope::default(),
         }

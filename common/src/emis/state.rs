@@ -186,13 +186,14 @@ impl EmisState {
     pub fn update(&mut self, image: &[[f32; 3]], iteration: u32) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
+        let reduced = self.candidate_set == CandidateSet::Reduced;
         let (albedo, normal, depth) = self.guides.means();
         let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
-        let intensity = denoised_intensity(w, h, image, &guides, &self.config.denoise);
+        let denoise = if reduced { &self.config.start_denoise } else { &self.config.denoise };
+        let intensity = denoised_intensity(w, h, image, &guides, denoise);
         let denoise_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let statistics = self.statistics.statistics((w * h) as u32);
-        let reduced = self.candidate_set == CandidateSet::Reduced;
         let measured = if self.config.measured_costs {
             measured_constants(&self.statistics.times, &self.config.constants)
         } else {
