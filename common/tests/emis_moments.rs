@@ -122,11 +122,13 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
 /// stop after `GUIDE_ITERATIONS`; another iteration's image is `pt`'s own.
 #[test]
 fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
+    use tessera_common::emis::denoise::DenoiseSettings;
     use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
     use tessera_common::integrator::PathTracer;
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    // the guided Ī, whose updates read guides
+    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Vcm) };
     let pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: None };
     for skipped in [1, 3, 4, 5, 8] {
         let (_, none) =
@@ -173,7 +175,8 @@ fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
     use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let config = EmisConfig::new(EmisMethod::Bdpt);
+    use tessera_common::emis::denoise::DenoiseSettings;
+    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Bdpt) };
     let pilot = Strategy::pilot(EmisMethod::Bdpt);
     let guides = |iterations| {
         let (_, data) = render_iterations(&scene, settings, &config, &pilot, 7, iterations, Some(CandidateSet::Full));
@@ -198,6 +201,31 @@ fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
     let mut merged = one.clone();
     merged.merge(&guides(1..2)).unwrap();
     assert_eq!(merged, guides(0..2), "guides of two calls add up to one call's, bit for bit");
+}
+
+/// Guides are recorded only for updates that read them: the guided Ī's, and a path-tracing
+/// start's (decision 0029). A pilot for the default Ī leaves them out: zero sums, no samples,
+/// so its uploads carry none.
+#[test]
+fn guides_are_recorded_only_where_an_update_reads_them() {
+    use tessera_common::emis::denoise::DenoiseSettings;
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotStart, Strategy, render_iterations};
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let settings = PathSettings::from_scene(&scene, None);
+    let default = EmisConfig::new(EmisMethod::Vcm);
+    let guided = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Vcm) };
+    let start = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let record = |config: &EmisConfig, strategy: &Strategy, set| {
+        let (_, data) = render_iterations(&scene, settings, config, strategy, 5, 0..1, Some(set));
+        data.expect("iteration 0 records").guides
+    };
+    let pilot = Strategy::pilot(EmisMethod::Vcm);
+    let none = record(&default, &pilot, CandidateSet::Full);
+    assert!(none.samples == 0 && none.is_zero(), "the default Ī reads no guides");
+    assert_eq!(record(&guided, &pilot, CandidateSet::Full).samples, 1);
+    let pt_start = Strategy::path_tracing_start(EmisMethod::Vcm);
+    let reduced = record(&start, &pt_start, CandidateSet::Reduced);
+    assert!(reduced.samples == 1 && !reduced.is_zero(), "a path-tracing start's updates read guides");
 }
 
 /// Issue 21, fault 1: once path tracing wins with a merge mask (ν = 0, χ > 0 somewhere), a

@@ -194,6 +194,21 @@ impl EmisConfig {
         }
     }
 
+    /// Whether the updates of `set` read the denoiser's guides: only the guided filter does,
+    /// so pilots that feed the default Ī leave them out of their data and uploads.
+    pub fn records_guides(&self, set: CandidateSet) -> bool {
+        self.denoise_of(set).levels > 0
+    }
+
+    /// The denoiser of the updates of `set`: [`EmisConfig::start_denoise`] for the
+    /// path-tracing start's reduced set, [`EmisConfig::denoise`] otherwise.
+    pub fn denoise_of(&self, set: CandidateSet) -> &DenoiseSettings {
+        match set {
+            CandidateSet::Reduced => &self.start_denoise,
+            CandidateSet::Full => &self.denoise,
+        }
+    }
+
     /// The candidates of `set`, in moment-buffer order.
     pub fn candidates_of(&self, set: CandidateSet) -> Vec<Candidate> {
         match set {
@@ -284,7 +299,8 @@ pub struct PilotData {
 }
 
 /// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments of
-/// that set's candidates, the statistics and the guides of those iterations, if
+/// that set's candidates, the statistics and (where [`EmisConfig::records_guides`]) the guides
+/// of those iterations, if
 /// [`collects_moments`] says so (the pilot data is `Some` exactly then). Deterministic for
 /// any thread count.
 pub fn render_iterations(
@@ -344,7 +360,11 @@ pub fn render_iterations_until(
     };
     let candidates = config.candidates_of(set);
     let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
-    let guided = iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS);
+    let guided = if config.records_guides(set) {
+        iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS)
+    } else {
+        0..0
+    };
     let guides = GuideCollector::new(w, h, guided);
     integrator.with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
     let (mut moments, statistics) = estimator.into_snapshot();

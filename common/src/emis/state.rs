@@ -187,9 +187,10 @@ impl EmisState {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
         let reduced = self.candidate_set == CandidateSet::Reduced;
-        let (albedo, normal, depth) = self.guides.means();
+        let denoise = self.config.denoise_of(self.candidate_set);
+        // without à-trous levels the guides are not read (and not recorded)
+        let (albedo, normal, depth) = if denoise.levels > 0 { self.guides.means() } else { Default::default() };
         let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
-        let denoise = if reduced { &self.config.start_denoise } else { &self.config.denoise };
         let intensity = denoised_intensity(w, h, image, &guides, denoise);
         let denoise_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();

@@ -7,7 +7,7 @@ use super::{SceneArgs, cpu_seconds};
 use crate::options::scene_name;
 use std::time::Instant;
 use tessera_common::emis::cost::PathStatistics;
-use tessera_common::emis::denoise::{Guides, denoised_intensity};
+use tessera_common::emis::denoise::{DenoiseSettings, Guides, denoised_intensity};
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
@@ -44,13 +44,15 @@ struct Overhead {
 }
 
 /// Pilot iteration time without moment accumulation, with it in the first
-/// [`GUIDE_ITERATIONS`] (which also sum the denoiser's guides), and with it after them: the
+/// [`GUIDE_ITERATIONS`] (which also sum the denoiser's guides where the guided Ī needs them),
+/// and with it after them: the
 /// calls a render makes ([`render_iterations`] without and with collection), so the
 /// estimator's buffer and its hand-over are counted. Each overhead is the median over
 /// `repeats` rounds of a ratio of runs made back to back within one round (robust to the
 /// host's load changing between rounds, which separate fastest times are not).
 fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> Overhead {
-    let config = EmisConfig::new(method);
+    // the guided Ī, so that the first iterations record the guides (the default Ī does not)
+    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(method) };
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
     let mut best = [f64::INFINITY; 3];
