@@ -300,9 +300,8 @@ pub struct PilotData {
 
 /// Renders the full-frame `iterations` with `strategy`; with `collect`, also the moments of
 /// that set's candidates, the statistics and (where [`EmisConfig::records_guides`]) the guides
-/// of those iterations, if
-/// [`collects_moments`] says so (the pilot data is `Some` exactly then). Deterministic for
-/// any thread count.
+/// of those iterations, if [`collects_moments`] says so (the pilot data is `Some` exactly
+/// then). Deterministic for any thread count.
 pub fn render_iterations(
     scene: &Scene,
     settings: PathSettings,

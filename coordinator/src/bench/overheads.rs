@@ -45,9 +45,8 @@ struct Overhead {
 
 /// Pilot iteration time without moment accumulation, with it in the first
 /// [`GUIDE_ITERATIONS`] (which also sum the denoiser's guides where the guided Ī needs them),
-/// and with it after them: the
-/// calls a render makes ([`render_iterations`] without and with collection), so the
-/// estimator's buffer and its hand-over are counted. Each overhead is the median over
+/// and with it after them: the calls a render makes ([`render_iterations`] without and with
+/// collection), so the estimator's buffer and its hand-over are counted. Each overhead is the median over
 /// `repeats` rounds of a ratio of runs made back to back within one round (robust to the
 /// host's load changing between rounds, which separate fastest times are not).
 fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> Overhead {
