@@ -63,6 +63,7 @@ fn bench_mask(scene: &Scene, reference: &[[f64; 3]]) -> MergeMask {
             .box_blur(DenoiseSettings::default().final_box);
     let candidates = config.candidates_of(CandidateSet::Full);
     let decision = optimize(&OptimizerInput {
+        restart_share: 0.0,
         candidates: &candidates,
         moments: &data.moments,
         image: &intensity,

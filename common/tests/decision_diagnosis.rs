@@ -98,6 +98,7 @@ fn choose(
     let mut filters = config.filters;
     filters.outliers = rule;
     let decision = optimize(&OptimizerInput {
+        restart_share: 0.0,
         candidates: &candidates,
         moments,
         image,

@@ -37,6 +37,7 @@ fn check(name: &str, estimate: ImageEstimate) {
             .box_blur(config.denoise.final_box);
     let decide = |image: &Image| -> Decision {
         optimize(&OptimizerInput {
+            restart_share: 0.0,
             candidates: &candidates,
             moments: &moments,
             image,

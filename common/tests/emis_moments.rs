@@ -229,13 +229,16 @@ fn guides_are_recorded_only_where_an_update_reads_them() {
 }
 
 /// Issue 21, fault 1: once path tracing wins with a merge mask (ν = 0, χ > 0 somewhere), a
-/// collecting iteration traces no light paths, so it must neither build a photon map nor
-/// count merge queries: queries against an empty map would be counted with no photons found
-/// and dilute φ (photons per query and light path), making merging look cheaper at the next
-/// update than it is.
+/// collecting iteration traces no light paths for the image, so it must not count merge
+/// queries against an empty map: they would be counted with no photons found and dilute φ
+/// (photons per query and light path), making merging look cheaper at the next update than
+/// it is. The queries it counts are the light probe's, against the probe's own light paths
+/// (`tests/light_probe.rs` checks their φ).
 #[test]
-fn path_tracing_with_a_merge_mask_counts_no_merge_queries() {
+fn path_tracing_with_a_merge_mask_counts_only_the_probes_queries() {
     use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    use tessera_common::integrator::LightProbe;
+    use tessera_common::integrator::path::light_path::light_path_count;
     use tessera_common::integrator::path::merge::MergeMask;
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
@@ -243,7 +246,9 @@ fn path_tracing_with_a_merge_mask_counts_no_merge_queries() {
     let merging_pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: Some(MergeMask::Constant(1.0)) };
     let (image, data) = render_iterations(&scene, settings, &config, &merging_pt, 3, 2..3, Some(CandidateSet::Full));
     let statistics = data.expect("iteration 2 records").statistics;
-    assert_eq!((statistics.light_paths, statistics.merge_queries), (0, 0), "{statistics:?}");
+    let probe = light_path_count(LightProbe::LIGHT_PATHS_PER_PIXEL, scene.camera.width * scene.camera.height);
+    assert_eq!(statistics.light_paths, probe as u64, "{statistics:?}");
+    assert!(statistics.merge_queries > 0 && statistics.photons_per_path > 0.0, "{statistics:?}");
     assert!(statistics.camera_vertices > 0);
     // the samples drawn for merging are drawn all the same: the image is that of χ = 0
     let plain = Strategy { merge: Some(MergeMask::Constant(0.0)), ..merging_pt };

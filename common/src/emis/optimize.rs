@@ -217,6 +217,10 @@ pub struct OptimizerInput<'a> {
     pub merge_scope: MergeScope,
     /// Image-level or per-pixel connection counts (per pixel only with per-pixel merging).
     pub connection_scope: ConnectionScope,
+    /// The share of the render's iterations a bidirectional winner would discard (a
+    /// path-tracing start restarts): such a winner must beat path tracing by more than the
+    /// work it throws away, its image-level score being divided by 1 − share. 0 otherwise.
+    pub restart_share: f64,
 }
 
 /// The optimiser's decision.
@@ -280,8 +284,10 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         classes.as_deref(),
         &thresholds,
     );
+    let kept = 1.0 - input.restart_share.clamp(0.0, 1.0);
     let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
-        let score = |g: usize| scores[g].relative_moment * scores[g].cost;
+        let discount = |g: usize| if groups[g].nu > 0.0 { kept } else { 1.0 };
+        let score = |g: usize| scores[g].relative_moment * scores[g].cost / discount(g);
         score(a).total_cmp(&score(b))
     });
     // nothing finite: path tracing (as every candidate, it cannot sample some pixel's paths)

@@ -17,7 +17,11 @@
 //! (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt wins. The first
 //! update a bidirectional candidate wins discards the image so far, restarts the moments for
 //! the full set and renders a sample budget's iterations in full after it; the updates that
-//! follow keep the schedule (their iteration counts include the discarded ones).
+//! follow keep the schedule (their iteration counts include the discarded ones). A candidate
+//! wins that update only by more than the share of the render it discards. Its recording
+//! iterations carry a light probe (`integrator::LightProbe`): without it the cost model would
+//! know neither the light paths' length nor the photons a merge finds, and price merging as
+//! free (docs/decisions/0032-light-probe-and-restart-share.md).
 //!
 //! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
@@ -365,7 +369,8 @@ pub fn render_iterations_until(
         0..0
     };
     let guides = GuideCollector::new(w, h, guided);
-    integrator.with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
+    // under path tracing a light probe measures what the cost model needs of light paths
+    integrator.with_probe().with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
     let (mut moments, statistics) = estimator.into_snapshot();
     moments.round_for_wire();
     (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
@@ -446,7 +451,10 @@ pub fn render_emis(
         let total = expected_total(done, state.kept_from);
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
-        if state.update_due(done) && done < total && pool.install(|| state.update(&film.average(), done)).restarted {
+        if state.update_due(done)
+            && done < total
+            && pool.install(|| state.update(&film.average(), done, total)).restarted
+        {
             film = Film::new(&scene.film);
         }
     }

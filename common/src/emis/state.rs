@@ -3,7 +3,8 @@
 //! Pure and synchronous (the farm calls it between passes); reports every update.
 //!
 //! A path-tracing start ([`PilotStart::PathTracing`]) decides from the reduced candidate set
-//! with global merging until a bidirectional candidate wins. That update restarts: the
+//! with global merging until a bidirectional candidate wins, by more than the share of the
+//! render's iterations a restart would discard. That update restarts: the
 //! caller discards its image (the report says `restarted`), the moments and statistics
 //! start again for the full set, and [`EmisState::kept_from`] records the first iteration
 //! the image keeps.
@@ -182,8 +183,11 @@ impl EmisState {
     /// Runs an update on the image so far (per-pixel means, row-major): denoise, optimise,
     /// switch the strategy. After the last configured update, moments are no longer collected.
     /// When the report says `restarted`, the caller must discard its image: the iterations
-    /// before `iteration` are no longer part of the render.
-    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32) -> &UpdateReport {
+    /// before `iteration` are no longer part of the render. `expected_total` is the render's
+    /// iterations as the budget now expects them (`u32::MAX` when unknown): a path-tracing
+    /// start switches only to a candidate that beats path tracing by more than the share of
+    /// them the restart discards.
+    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, expected_total: u32) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
         let reduced = self.candidate_set == CandidateSet::Reduced;
@@ -209,6 +213,7 @@ impl EmisState {
             filters: self.config.filters,
             merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
             connection_scope: self.config.connection_scope,
+            restart_share: if reduced { iteration as f64 / expected_total.max(1) as f64 } else { 0.0 },
         });
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
@@ -307,7 +312,7 @@ mod tests {
         let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
         let pt_wins = pilot(&state, |c| if c.is_path_tracing() { 1.0 } else { 1e3 });
         state.absorb(&pt_wins).unwrap();
-        let report = state.update(&image, 1).clone();
+        let report = state.update(&image, 1, 64).clone();
         assert!(report.reduced && !report.restarted, "{report:?}");
         assert_eq!(report.candidates.len(), 9);
         assert_eq!((state.strategy.nu, state.candidate_set, state.kept_from), (0.0, CandidateSet::Reduced, 0));
@@ -315,7 +320,7 @@ mod tests {
         // merged with the first iteration's moments, the target's mean is 10× lower than pt's
         let target = Candidate { nu: 1.0, connections: 0, merge: true };
         state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
-        let report = state.update(&image, 4).clone();
+        let report = state.update(&image, 4, 64).clone();
         assert!(report.reduced && report.restarted, "{report:?}");
         assert_eq!(
             state.strategy,
@@ -328,10 +333,46 @@ mod tests {
         assert_eq!(state.statistics, StatisticsSums::default());
         assert!(state.collecting(), "the update after 16 follows, on the full set");
         state.absorb(&pilot(&state, |c| if c.nu == 0.5 && c.connections == 2 { 1e-3 } else { 1.0 })).unwrap();
-        let report = state.update(&image, 16).clone();
+        let report = state.update(&image, 16, 64).clone();
         assert!(!report.reduced && !report.restarted, "{report:?}");
         assert_eq!((state.strategy.nu, &state.strategy.connections, state.kept_from), (0.5, &Connections::Fixed(2), 4));
         assert!(matches!(state.strategy.merge, Some(MergeMask::PerPixel(_))));
+    }
+
+    /// A path-tracing start switches only to a candidate that beats path tracing by more than
+    /// the share of the render a restart discards: 1.5× better is worth discarding 1 of 64
+    /// iterations, not 16 of 20.
+    #[test]
+    fn a_restart_must_win_back_the_iterations_it_discards() {
+        let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+        let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+        let target = Candidate { nu: 1.0, connections: 0, merge: false };
+        for (iteration, total, restarts) in [(1, 64, true), (16, 64, true), (16, 20, false), (16, 16, false)] {
+            let mut state = EmisState::new(config.clone(), SIDE, SIDE);
+            // the target's moment × cost is 1.5× lower than path tracing's
+            let (pt_cost, target_cost) = {
+                // the statistics of `pilot`: three camera vertices per pixel
+                let sums =
+                    StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
+                let s = sums.statistics(SIDE * SIDE);
+                let terms = super::super::cost::CostTerms::of_candidates(
+                    &config.constants,
+                    &s,
+                    &[Candidate::PATH_TRACING, target],
+                    SIDE * SIDE,
+                );
+                (terms[0].at(0.0), terms[1].at(0.0))
+            };
+            let moment = |c: &Candidate| match c {
+                c if c.is_path_tracing() => 1.0,
+                c if *c == target => (pt_cost / target_cost / 1.5) as f32,
+                _ => 1e3,
+            };
+            state.absorb(&pilot(&state, moment)).unwrap();
+            let report = state.update(&image, iteration, total).clone();
+            assert_eq!(report.restarted, restarts, "update after {iteration} of {total}: {report:?}");
+            assert_eq!(state.strategy.nu > 0.0, restarts);
+        }
     }
 
     /// The bidirectional pilot (the default) never restarts, even when its first update
@@ -341,7 +382,7 @@ mod tests {
         let mut state = EmisState::new(EmisConfig::new(EmisMethod::Bdpt), SIDE, SIDE);
         assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Full, 26));
         state.absorb(&pilot(&state, |c| if c.nu == 2.0 && c.connections == 1 { 1e-3 } else { 1.0 })).unwrap();
-        let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1).clone();
+        let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1, 64).clone();
         assert!(!report.reduced && !report.restarted);
         assert_eq!((state.strategy.nu, state.kept_from, state.moments.iterations), (2.0, 0, 1));
     }

@@ -52,8 +52,25 @@ pub struct Bidir<O: SampleObserver = NoObserver> {
     pub connections: Connections,
     /// Merging (`vcm`), or none (`bdpt`).
     pub merge: Option<MergeConfig>,
+    /// Measure what the strategy neither traces nor merges (see [`LightProbe`]).
+    pub probe: bool,
     /// Receives every sample.
     pub observer: O,
+}
+
+/// What an iteration observed for EMIS measures that its strategy would not: without light
+/// paths (ν = 0) it traces a few, so that the cost model learns their length (L̄l); without a
+/// pixel that merges, a share of the camera vertices count the photons within the merge
+/// radius (φ). Otherwise the model takes both from fallbacks that make merging look free
+/// (docs/emis.md §9.8). The probe adds nothing to the image; its light paths are reported as
+/// the iteration's, and its queries as merge queries.
+pub struct LightProbe;
+
+impl LightProbe {
+    /// Light paths per pixel the probe traces.
+    pub const LIGHT_PATHS_PER_PIXEL: f32 = 1.0 / 32.0;
+    /// Share of the camera vertices where a merge could happen that count photons.
+    pub const QUERY_SHARE: f32 = 1.0 / 8.0;
 }
 
 /// What one iteration shares between its camera paths and splats.
@@ -62,6 +79,9 @@ pub struct Iteration {
     pub cache: LightCache,
     /// The photon map over the cache (`vcm`).
     pub photons: Option<PhotonMap>,
+    /// The map a [`LightProbe`] counts photons in (its own light paths', or the iteration's
+    /// when no pixel merges).
+    pub probe: Option<PhotonMap>,
     /// Largest merge radius.
     pub radius_max: f32,
 }
@@ -74,6 +94,7 @@ impl Bidir<NoObserver> {
             light_paths_per_pixel,
             connections: Connections::Fixed(connections),
             merge: None,
+            probe: false,
             observer: NoObserver,
         }
     }
@@ -85,6 +106,7 @@ impl Bidir<NoObserver> {
             light_paths_per_pixel,
             connections: Connections::Fixed(connections),
             merge: Some(merge),
+            probe: false,
             observer: NoObserver,
         }
     }
@@ -94,6 +116,12 @@ impl Bidir<NoObserver> {
         Bidir { connections, ..self }
     }
 
+    /// The same integrator measuring with a [`LightProbe`] what its iterations neither trace
+    /// nor merge.
+    pub fn with_probe(self) -> Self {
+        Bidir { probe: true, ..self }
+    }
+
     /// The same integrator reporting its samples to `observer`.
     pub fn with_observer<O: SampleObserver>(self, observer: O) -> Bidir<O> {
         Bidir {
@@ -101,6 +129,7 @@ impl Bidir<NoObserver> {
             light_paths_per_pixel: self.light_paths_per_pixel,
             connections: self.connections,
             merge: self.merge,
+            probe: self.probe,
             observer,
         }
     }
@@ -316,7 +345,17 @@ impl<O: SampleObserver> Bidir<O> {
                 // drawn whether or not there is a map, so the samples that follow stay the same
                 let u = sampler.next_1d();
                 let chi = m.mask.at(pixel);
-                if let Some(photons) = &it.photons
+                if let Some(probe) = &it.probe
+                    && depth >= 2
+                    && u < LightProbe::QUERY_SHARE
+                    && material.has_smooth_lobe()
+                {
+                    // count only, as `merge` counts what it finds
+                    let mut found = 0u64;
+                    probe.query(hit.p, radius, |_, _| found += 1);
+                    counters.merge_queries += 1;
+                    counters.photons_found += found;
+                } else if let Some(photons) = &it.photons
                     && depth >= 2
                     && chi > 0.0
                     && u < chi
@@ -415,17 +454,16 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
+            let trace = |paths: u32| {
+                let max_edges = self.max_edges().saturating_sub(1);
+                LightCache::trace(scene, tile.seed, iteration, paths, max_edges, self.settings.rr_depth)
+            };
             let light_start = Instant::now();
-            let cache = LightCache::trace(
-                scene,
-                tile.seed,
-                iteration,
-                n,
-                self.max_edges().saturating_sub(1),
-                self.settings.rr_depth,
-            );
+            let cache = trace(n);
             let mut light_time = light_start.elapsed();
             let radius_max = merge_radius_max(scene);
+            let probe =
+                (self.probe && n == 0).then(|| trace(light_path_count(LightProbe::LIGHT_PATHS_PER_PIXEL, w * h)));
             let build_start = Instant::now();
             // no map without light paths or without a pixel that merges: queries against an
             // empty map would only cost time, and would count as merges that found nothing
@@ -436,13 +474,24 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 .filter(|m| n > 0 && m.mask.may_merge())
                 .map(|_| PhotonMap::build(&cache.vertices, &cache.selectable, radius_max));
             let build_time = build_start.elapsed();
+            // the probe's light paths stand in for the iteration's in the statistics and the
+            // proxy's connection density
+            let measured = probe.as_ref().unwrap_or(&cache);
             let start = IterationStart {
                 iteration,
-                light_paths: n,
-                light_vertices: cache.vertices.len() as u64,
-                selectable_vertices: cache.selectable.len() as u64,
+                light_paths: measured.paths,
+                light_vertices: measured.vertices.len() as u64,
+                selectable_vertices: measured.selectable.len() as u64,
             };
-            let it = Iteration { cache, photons, radius_max };
+            // photons are counted over the probe's light paths, or over the iteration's when no
+            // pixel merges
+            let probe = match (&photons, &self.merge) {
+                (None, Some(_)) if self.probe && measured.paths > 0 => {
+                    Some(PhotonMap::build(&measured.vertices, &measured.selectable, radius_max))
+                }
+                _ => None,
+            };
+            let it = Iteration { cache, photons, probe, radius_max };
             self.observer.on_iteration_start(&start);
             let splat_start = Instant::now();
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
@@ -476,7 +525,8 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 // wait): their cost is the pool's time
                 let pool = |t: std::time::Duration| t.as_nanos() as u64 * rayon::current_num_threads() as u64;
                 let t = &mut counters.times;
-                (t.iterations, t.light_vertices, t.light_ns) = (1, start.light_vertices, pool(light_time));
+                // a probe's light vertices are neither splatted nor timed
+                (t.iterations, t.light_vertices, t.light_ns) = (1, it.cache.vertices.len() as u64, pool(light_time));
                 if it.photons.is_some() {
                     (t.photons_built, t.build_ns) = (start.selectable_vertices, pool(build_time));
                 }

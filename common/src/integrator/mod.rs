@@ -14,7 +14,7 @@ use crate::film::{Rect, TileAccum};
 use crate::scene::Scene;
 use std::ops::Range;
 
-pub use bidir::Bidir;
+pub use bidir::{Bidir, LightProbe};
 pub use lt::LightTracer;
 pub use pt::PathTracer;
 

@@ -136,6 +136,7 @@ fn reference_decision(s: &Subject, iterations: u32, pool: &rayon::ThreadPool) ->
     let candidates = s.config.candidates_of(CandidateSet::Full);
     let decision = pool.install(|| {
         optimize(&OptimizerInput {
+            restart_share: 0.0,
             candidates: &candidates,
             moments: &data.moments,
             image: &intensity,

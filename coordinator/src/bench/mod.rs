@@ -11,6 +11,7 @@ pub mod farm;
 pub mod ground_truth;
 pub mod overheads;
 pub mod photon_map;
+pub mod pt_recording;
 pub mod speed;
 
 use anyhow::Context;

@@ -1,7 +1,8 @@
 //! `tessera bench overheads`: what EMIS costs beyond its integrator. Moment accumulation as a
 //! fraction of a pilot iteration's time (pilot iterations with and without the estimator,
 //! interleaved), one optimiser and one denoiser run at 256² and 1920×1080 on synthetic inputs,
-//! and the memory of the moment buffers.
+//! and the memory of the moment buffers. With `--path-tracing`: what recording moments costs
+//! while path tracing is the strategy, against `pt` itself.
 
 use super::{SceneArgs, cpu_seconds};
 use crate::options::scene_name;
@@ -29,6 +30,11 @@ pub struct OverheadsArgs {
     /// Only the optimiser and denoiser runs, no pilot renders (for profiling the update).
     #[arg(long)]
     pub update_only: bool,
+    /// Instead of the pilot's accumulation: an iteration recording moments under path
+    /// tracing (the VCM engine with χ = 0, with the reduced and the full candidate set)
+    /// against `pt`'s iteration and the engine's without moments.
+    #[arg(long, conflicts_with = "update_only")]
+    pub path_tracing: bool,
 }
 
 /// What [`accumulation_overhead`] measured for one pilot.
@@ -114,6 +120,7 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
     let denoise = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let decision = optimize(&OptimizerInput {
+        restart_share: 0.0,
         candidates: &candidates,
         moments: &moments,
         image: &Image::from_data(w as usize, h as usize, image.data),
@@ -130,6 +137,9 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
 /// Runs `tessera bench overheads`.
 pub fn run(args: &OverheadsArgs) -> anyhow::Result<()> {
     let pool = args.scenes.pool()?;
+    if args.path_tracing {
+        return super::pt_recording::table(&args.scenes, args.repeats.max(1), &pool);
+    }
     if !args.update_only {
         accumulation_table(args, &pool)?;
     }

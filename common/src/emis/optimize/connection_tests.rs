@@ -11,6 +11,7 @@ fn input<'a>(
     connection_scope: ConnectionScope,
 ) -> OptimizerInput<'a> {
     OptimizerInput {
+        restart_share: 0.0,
         candidates,
         moments,
         image,
@@ -99,7 +100,11 @@ fn per_pixel_classes_sum_as_their_definition_bit_for_bit() {
     let mask = Image::from_data(w, h, (0..w * h).map(|p| if p % 40 < 15 { 0.0 } else { 0.2 * s.next_1d() }).collect());
     let class_counts = connection_classes(&candidates);
     let classes: Vec<u8> = (0..w * h).map(|p| ((p / 7 + p % 5) % class_counts.len()) as u8).collect();
-    let input = OptimizerInput { statistics: stats, ..input(&candidates, &moments, &image, ConnectionScope::PerPixel) };
+    let input = OptimizerInput {
+        restart_share: 0.0,
+        statistics: stats,
+        ..input(&candidates, &moments, &image, ConnectionScope::PerPixel)
+    };
     let groups = image_level_groups(&candidates, MergeScope::PerPixel, Some(&class_counts));
     let got = image_level_scores(&input, &groups, &filtered, &norm, &costs, Some(&mask), Some(&classes), &thresholds);
     for (g, score) in groups.iter().zip(&got) {

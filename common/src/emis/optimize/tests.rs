@@ -29,6 +29,7 @@ fn run(candidates: &[Candidate], moments: &MomentBuffer, image: &Image) -> Decis
 
 fn run_with(candidates: &[Candidate], moments: &MomentBuffer, image: &Image, filters: FilterSettings) -> Decision {
     optimize(&OptimizerInput {
+        restart_share: 0.0,
         candidates,
         moments,
         image,
@@ -145,6 +146,7 @@ fn global_merge_scope_scores_every_candidate_and_gives_a_constant_mask() {
             if corner && c.merge { 10.0 * v / cost(c) } else { v / cost(c) }
         });
         let d = optimize(&OptimizerInput {
+            restart_share: 0.0,
             candidates: &candidates,
             moments: &b,
             image: &img,
@@ -224,6 +226,7 @@ fn bdpt_candidates_pay_nothing_for_a_photon_map() {
         if *c == target { 0.85 / cost } else { 1.0 / cost }
     };
     let d = optimize(&OptimizerInput {
+        restart_share: 0.0,
         candidates: &candidates,
         moments: &buffer(32, 32, &candidates, m),
         image: &Image::filled(32, 32, 0.7),
@@ -253,6 +256,7 @@ fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
     // the left half of the image is black
     let image = Image::from_data(w, h, (0..w * h).map(|p| if p % w < w / 2 { 0.0 } else { 0.5 }).collect());
     let input = OptimizerInput {
+        restart_share: 0.0,
         candidates: &candidates,
         moments: &moments,
         image: &image,
@@ -386,6 +390,7 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
     let mask = Image::from_data(w, h, (0..w * h).map(|p| if p % 40 < 15 { 0.0 } else { 0.2 * s.next_1d() }).collect());
     for scope in [MergeScope::PerPixel, MergeScope::Global] {
         let input = OptimizerInput {
+            restart_share: 0.0,
             candidates: &candidates,
             moments: &moments,
             image: &image,

@@ -192,13 +192,14 @@ impl EmisJob {
     /// committed (both name the same merged count), and a restart in between comes back to
     /// the barrier with the state the update already produced. That state's last report is
     /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
-    pub fn update(&mut self, film: &Film, iterations: u32) -> bool {
+    /// `expected_total`: the job's iterations as its budget now expects them.
+    pub fn update(&mut self, film: &Film, iterations: u32, expected_total: u32) -> bool {
         self.mask_digest = None;
         self.connection_digest = None;
         if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
             return done.restarted;
         }
-        self.state.update(&film.average(), iterations).restarted
+        self.state.update(&film.average(), iterations, expected_total).restarted
     }
 
     /// The decisions so far, for status views (`None` before the first update).
@@ -244,14 +245,14 @@ mod tests {
         let mut job = EmisJob::new(&spec()).unwrap();
         job.absorb(&pilot(&job, 1)).unwrap();
         let film = Film::for_filter(4, 2, &tessera_common::film::filter::Filter::BOX);
-        let restarted = job.update(&film, 1);
+        let restarted = job.update(&film, 1, 64);
         let (strategy, reports) = (job.state.strategy.clone(), job.state.reports.len());
-        assert_eq!(job.update(&film, 1), restarted);
+        assert_eq!(job.update(&film, 1, 64), restarted);
         assert_eq!(
             (job.state.strategy.clone(), job.state.reports.len(), job.state.updates_done),
             (strategy, reports, 1)
         );
-        job.update(&film, 4);
+        job.update(&film, 4, 64);
         assert_eq!(job.state.reports.len(), 2, "the next barrier's update runs");
     }
 

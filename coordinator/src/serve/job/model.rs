@@ -428,6 +428,13 @@ impl JobsModel {
         j.merged..end
     }
 
+    /// The iterations `job`'s budget expects at `now_ms` (`u32::MAX` while unknown).
+    pub fn expected_total(&self, job: &str, now_ms: u64) -> u32 {
+        let Some(j) = self.jobs.get(job) else { return u32::MAX };
+        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s)
+    }
+
     /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
     pub fn merge_finishes(&self, job: &str, upto: usize, now_ms: u64) -> bool {
         let Some(j) = self.jobs.get(job) else { return false };

@@ -57,7 +57,7 @@ pub fn initial_nu(spec: &JobSpec) -> f32 {
 /// `elapsed_s` seconds (a time budget's is unknown before the first iteration). A sample
 /// budget counts the iterations the film keeps, from `kept_from` on (EMIS: a path-tracing
 /// start's iterations are discarded when a bidirectional strategy wins).
-fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
+pub fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
     match (spec.settings.spp, spec.settings.time_s) {
         (Some(n), _) => kept_from + n,
         (None, Some(budget)) if spp_done > 0 && elapsed_s > 0.0 => {
