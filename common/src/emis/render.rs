@@ -451,9 +451,11 @@ pub fn render_emis(
         let total = expected_total(done, state.kept_from);
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
+        // a restart now would render a sample budget's N iterations after the ones so far
+        let restart_total = if let Budget::Samples(n) = opts.budget { done.saturating_add(n) } else { total };
         if state.update_due(done)
             && done < total
-            && pool.install(|| state.update(&film.average(), done, total)).restarted
+            && pool.install(|| state.update(&film.average(), done, restart_total)).restarted
         {
             film = Film::new(&scene.film);
         }

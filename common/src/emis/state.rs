@@ -183,11 +183,12 @@ impl EmisState {
     /// Runs an update on the image so far (per-pixel means, row-major): denoise, optimise,
     /// switch the strategy. After the last configured update, moments are no longer collected.
     /// When the report says `restarted`, the caller must discard its image: the iterations
-    /// before `iteration` are no longer part of the render. `expected_total` is the render's
-    /// iterations as the budget now expects them (`u32::MAX` when unknown): a path-tracing
-    /// start switches only to a candidate that beats path tracing by more than the share of
-    /// them the restart discards.
-    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, expected_total: u32) -> &UpdateReport {
+    /// before `iteration` are no longer part of the render. `restart_total` is how many
+    /// iterations the render would run in all if this update restarted it (a time budget's
+    /// expected total, a sample budget's `iteration + N`; `u32::MAX` when unknown): a
+    /// path-tracing start switches only to a candidate that beats path tracing by more than
+    /// the share of them the restart discards.
+    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: u32) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
         let reduced = self.candidate_set == CandidateSet::Reduced;
@@ -213,7 +214,7 @@ impl EmisState {
             filters: self.config.filters,
             merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
             connection_scope: self.config.connection_scope,
-            restart_share: if reduced { iteration as f64 / expected_total.max(1) as f64 } else { 0.0 },
+            restart_share: if reduced { iteration as f64 / restart_total.max(1) as f64 } else { 0.0 },
         });
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;

@@ -192,14 +192,14 @@ impl EmisJob {
     /// committed (both name the same merged count), and a restart in between comes back to
     /// the barrier with the state the update already produced. That state's last report is
     /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
-    /// `expected_total`: the job's iterations as its budget now expects them.
-    pub fn update(&mut self, film: &Film, iterations: u32, expected_total: u32) -> bool {
+    /// `restart_total`: the iterations the job would run in all if this update restarted it.
+    pub fn update(&mut self, film: &Film, iterations: u32, restart_total: u32) -> bool {
         self.mask_digest = None;
         self.connection_digest = None;
         if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
             return done.restarted;
         }
-        self.state.update(&film.average(), iterations, expected_total).restarted
+        self.state.update(&film.average(), iterations, restart_total).restarted
     }
 
     /// The decisions so far, for status views (`None` before the first update).

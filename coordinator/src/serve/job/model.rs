@@ -428,9 +428,14 @@ impl JobsModel {
         j.merged..end
     }
 
-    /// The iterations `job`'s budget expects at `now_ms` (`u32::MAX` while unknown).
-    pub fn expected_total(&self, job: &str, now_ms: u64) -> u32 {
+    /// The iterations `job` would run in all if its EMIS update at `now_ms` restarted it (as
+    /// `render_emis`): a sample budget's N after those merged, else what the budget expects
+    /// (`u32::MAX` while unknown).
+    pub fn restart_total(&self, job: &str, now_ms: u64) -> u32 {
         let Some(j) = self.jobs.get(job) else { return u32::MAX };
+        if let Some(n) = j.spec.settings.spp {
+            return j.spp_merged().saturating_add(n);
+        }
         let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s)
     }

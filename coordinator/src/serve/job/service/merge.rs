@@ -65,7 +65,7 @@ impl JobService {
     /// resumes after the update (or, if it stopped before, runs it again identically).
     pub(super) fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
         let iterations = inner.model.jobs[job].spp_merged();
-        let expected_total = inner.model.expected_total(job, now_ms);
+        let restart_total = inner.model.restart_total(job, now_ms);
         let filter = Filter::new(inner.model.jobs[job].spec.filter);
         inner.emis(job);
         let runtime = inner.job(job);
@@ -74,7 +74,7 @@ impl JobService {
             return self.persist(inner, &changes, &[]);
         };
         let span = tracing::info_span!("emis_update", job_id = %job, iterations);
-        let restarted = span.in_scope(|| emis.update(film, iterations, expected_total));
+        let restarted = span.in_scope(|| emis.update(film, iterations, restart_total));
         if let Some(report) = emis.state.reports.last() {
             super::events::emis_update(job, report);
         }
