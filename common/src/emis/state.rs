@@ -356,7 +356,7 @@ mod tests {
                 let sums =
                     StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
                 let s = sums.statistics(SIDE * SIDE);
-                let terms = super::super::cost::CostTerms::of_candidates(
+                let terms = crate::emis::cost::CostTerms::of_candidates(
                     &config.constants,
                     &s,
                     &[Candidate::PATH_TRACING, target],

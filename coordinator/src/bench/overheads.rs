@@ -32,7 +32,8 @@ pub struct OverheadsArgs {
     pub update_only: bool,
     /// Instead of the pilot's accumulation: an iteration recording moments under path
     /// tracing (the VCM engine with χ = 0, with the reduced and the full candidate set)
-    /// against `pt`'s iteration and the engine's without moments.
+    /// against `pt`'s iteration and the engine's without moments; and `pt`'s iterations in
+    /// EMIS's calls against one `pt` pass.
     #[arg(long, conflicts_with = "update_only")]
     pub path_tracing: bool,
 }
