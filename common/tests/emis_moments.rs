@@ -117,20 +117,24 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
     }
 }
 
-/// While path tracing is the strategy, a collecting call records moments in iteration 0 and
-/// those ≡ 2 mod 4 only (`collects_moments`), its pilot data counts exactly those, and guides
-/// stop after `GUIDE_ITERATIONS`; another iteration's image is `pt`'s own.
+/// While path tracing is the strategy, a collecting call records moments in iteration 0, those
+/// ≡ 2 mod 4 before `SPARSE_FROM` and those ≡ 6 mod 8 after it only (`collects_moments`), its
+/// pilot data counts exactly those, and guides stop after `GUIDE_ITERATIONS`; another
+/// iteration's image is `pt`'s own.
 #[test]
-fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
+fn pt_strategy_records_moments_in_a_quarter_then_an_eighth_of_the_iterations() {
     use tessera_common::emis::denoise::DenoiseSettings;
-    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, Strategy, render_iterations};
+    use tessera_common::emis::{
+        CandidateSet, EmisConfig, EmisMethod, GUIDE_ITERATIONS, SPARSE_FROM, Strategy, render_iterations,
+    };
     use tessera_common::integrator::PathTracer;
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     // the guided Ī, whose updates read guides
     let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Vcm) };
     let pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: None };
-    for skipped in [1, 3, 4, 5, 8] {
+    let sparse = [SPARSE_FROM + 2, SPARSE_FROM + 10];
+    for skipped in [1, 3, 4, 5, 8].into_iter().chain(sparse) {
         let (_, none) =
             render_iterations(&scene, settings, &config, &pt, 3, skipped..skipped + 1, Some(CandidateSet::Full));
         assert!(none.is_none(), "iteration {skipped} of a pt strategy records nothing");
@@ -141,18 +145,19 @@ fn pt_strategy_records_moments_in_a_quarter_of_the_iterations() {
     let request = TileRequest::new(Rect::full(w, h), 3..4, 3);
     PathTracer { settings }.render_tile(&scene, &request, &mut direct);
     assert_eq!(odd.sum, direct.sum, "a non-recording iteration is rendered by pt");
-    for recorded in [0, 2, 6] {
+    for recorded in [0, 2, 6, SPARSE_FROM + 6, SPARSE_FROM + 14] {
         let (_, data) =
             render_iterations(&scene, settings, &config, &pt, 3, recorded..recorded + 1, Some(CandidateSet::Full));
         let data = data.unwrap_or_else(|| panic!("iteration {recorded} records"));
-        assert_eq!((data.moments.iterations, data.statistics.iterations, data.guides.samples), (1, 1, 1));
+        let guides = u32::from(recorded < GUIDE_ITERATIONS);
+        assert_eq!((data.moments.iterations, data.statistics.iterations, data.guides.samples), (1, 1, guides));
     }
     // a call that contains a recording iteration records all of its iterations
     let (_, two) = render_iterations(&scene, settings, &config, &pt, 3, 5..7, Some(CandidateSet::Full));
     assert_eq!(two.expect("5..7 contains 6").moments.iterations, 2);
-    let late = (GUIDE_ITERATIONS..).find(|i| i % 4 == 2).expect("some iteration is ≡ 2 mod 4");
+    let late = (GUIDE_ITERATIONS..).find(|i| i % 8 == 6).expect("some iteration is ≡ 6 mod 8");
     let (_, late) = render_iterations(&scene, settings, &config, &pt, 3, late..late + 1, Some(CandidateSet::Full));
-    let late = late.expect("iterations ≡ 2 mod 4 record");
+    let late = late.expect("iterations ≡ 6 mod 8 record");
     assert_eq!((late.moments.iterations, late.guides.samples), (1, 0), "no guides after GUIDE_ITERATIONS");
     // a bidirectional strategy records every iteration
     let (_, bidir) = render_iterations(

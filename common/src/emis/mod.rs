@@ -36,7 +36,8 @@ mod wire;
 
 pub use render::{
     CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, GUIDE_ITERATIONS, PilotData,
-    PilotStart, Strategy, collecting_call, collects_moments, render_emis, render_iterations, render_iterations_until,
+    PilotStart, SPARSE_FROM, Strategy, collecting_call, collects_moments, render_emis, render_iterations,
+    render_iterations_until,
 };
 pub use state::{EmisState, UpdateReport};
 pub use wire::Decisions;

@@ -7,7 +7,8 @@
 //! 1, 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from
 //! the merged moments, the denoised image and the path statistics; rendering continues with
 //! that strategy (moments still collected, each sample with the counts it was drawn with;
-//! while that strategy is pt, in a quarter of the iterations, see [`collects_moments`]) until
+//! while that strategy is pt, in a quarter and later an eighth of the iterations, see
+//! [`collects_moments`]) until
 //! the last update the budget can reach, then without moments. Every iteration, pilot included,
 //! stays in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
@@ -55,20 +56,25 @@ use std::time::Instant;
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
 
 /// Whether a collecting call over `iterations` records moments when the current strategy
-/// has `nu` light paths per pixel. While path tracing is the strategy, only a quarter of the
-/// iterations do (those ≡ 2 mod 4, and iteration 0, the pilot of a path-tracing start):
-/// recording a pt iteration's moments needs the bidirectional integrator's densities of every
-/// technique plus the 51-candidate estimator, which costs more than the pt iteration itself
-/// and on a scene where pt stays best is pure overhead
-/// (docs/decisions/0005-recording-under-path-tracing.md). The updates at 4, 16 and 64 still
-/// get 1, 4 and 16 iterations of moments on top of the pilot's. With a bidirectional strategy
-/// the estimator adds a smaller share and every iteration records.
+/// has `nu` light paths per pixel. While path tracing is the strategy, only iteration 0 (the
+/// pilot of a path-tracing start), a quarter of the iterations before [`SPARSE_FROM`] (those
+/// ≡ 2 mod 4) and an eighth after it (≡ 6 mod 8) do: recording a pt iteration's moments needs
+/// the bidirectional integrator's densities of every technique plus the estimator, which
+/// costs more than the pt iteration itself and on a scene where pt stays best is pure
+/// overhead (docs/decisions/0005-recording-under-path-tracing.md,
+/// 0033-sparser-recording-under-path-tracing.md). The updates at 4, 16 and 64 get 1, 4 and
+/// 10 iterations of moments on top of the pilot's. With a bidirectional strategy the
+/// estimator adds a smaller share and every iteration records.
 pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
     nu > 0.0 || iterations.clone().any(records_under_path_tracing)
 }
 
+/// The iteration from which path tracing records an eighth of its iterations, not a quarter:
+/// the update there has seen five recordings, and the decision they give rarely moves.
+pub const SPARSE_FROM: u32 = 16;
+
 fn records_under_path_tracing(iteration: u32) -> bool {
-    iteration == 0 || iteration % 4 == 2
+    iteration == 0 || if iteration < SPARSE_FROM { iteration % 4 == 2 } else { iteration % 8 == 6 }
 }
 
 /// The first call (farm tile) of a collecting pass over the non-empty `iterations` when the

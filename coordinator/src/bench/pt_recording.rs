@@ -1,14 +1,15 @@
 //! `tessera bench overheads --path-tracing`: what an iteration that records moments costs
-//! while path tracing is the strategy (the path-tracing start's pilot and every fourth
-//! iteration after, `emis::collects_moments`), against the `pt` iteration it replaces; and
-//! what `pt`'s iterations cost as EMIS renders them, in calls of
-//! [`FINAL_ITERATIONS_PER_CALL`], against one pass of `tessera render --integrator pt`.
+//! while path tracing is the strategy (the path-tracing start's pilot, then every fourth
+//! iteration and from `emis::SPARSE_FROM` every eighth, `emis::collects_moments`), against
+//! the `pt` iteration it replaces; and what `pt`'s iterations cost as EMIS renders them, in
+//! calls of [`FINAL_ITERATIONS_PER_CALL`], against one pass of `tessera render --integrator
+//! pt`.
 
 use super::{SceneArgs, cpu_seconds};
 use crate::options::scene_name;
 use std::time::Instant;
 use tessera_common::emis::{
-    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, render_iterations,
+    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, collects_moments, render_iterations,
 };
 use tessera_common::film::{Film, Rect, TileAccum};
 use tessera_common::integrator::{Integrator, PathSettings, PathTracer, TileRequest};
@@ -51,6 +52,11 @@ fn round(scene: &Scene, config: &EmisConfig, iteration: u32) -> [(f64, f64); 4] 
     out
 }
 
+/// The `r`-th iteration after the pilot that records moments under path tracing.
+fn recording(r: u32) -> u32 {
+    (1..).filter(|&i| collects_moments(0.0, &(i..i + 1))).nth(r as usize).expect("invariant: recordings never end")
+}
+
 /// Iterations of one round of [`final_round`].
 const FINAL_ROUND: u32 = 4 * FINAL_ITERATIONS_PER_CALL;
 
@@ -80,7 +86,7 @@ fn final_round(scene: &Scene, config: &EmisConfig, first: u32, threads: usize) -
 /// ratios within a round, each other run against it (wall / CPU).
 pub fn table(args: &SceneArgs, repeats: u32, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
     println!(
-        "recording moments under path tracing (emis-vcm), {repeats} rounds of one iteration each (2, 6, 10, ...): `pt`'s fastest iteration, then medians over rounds of each run's time over `pt`'s in the same round (wall / CPU): the VCM engine with χ = 0 alone, recording the reduced set (the path-tracing start; the first {} iterations also sum the guides), recording the full set (a bidirectional pilot after pt won):",
+        "recording moments under path tracing (emis-vcm), {repeats} rounds of one recording iteration each (2, 6, 10, 14, 22, ...): `pt`'s fastest iteration, then medians over rounds of each run's time over `pt`'s in the same round (wall / CPU): the VCM engine with χ = 0 alone, recording the reduced set (the path-tracing start; the first {} iterations also sum the guides), recording the full set (a bidirectional pilot after pt won):",
         tessera_common::emis::GUIDE_ITERATIONS
     );
     println!("| scene | pt ms/it | {} | {} | {} |", RUNS[1], RUNS[2], RUNS[3]);
@@ -89,7 +95,7 @@ pub fn table(args: &SceneArgs, repeats: u32, pool: &rayon::ThreadPool) -> anyhow
     for path in &args.scenes()? {
         let scene = Scene::load(path)?;
         let rounds: Vec<[(f64, f64); 4]> =
-            (0..repeats).map(|r| pool.install(|| round(&scene, &config, 4 * r + 2))).collect();
+            (0..repeats).map(|r| pool.install(|| round(&scene, &config, recording(r)))).collect();
         let best = rounds.iter().map(|r| r[0].0).fold(f64::INFINITY, f64::min);
         let median = |run: usize, cpu: bool| {
             let mut v: Vec<f64> =

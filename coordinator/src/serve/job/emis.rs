@@ -275,13 +275,16 @@ mod tests {
         assert!(job.decode_pilot(&tile, true, &absurd.encode()).unwrap_err().contains("path statistics count"));
         absurd.statistics.camera_vertices = 8 << 16;
         assert!(job.decode_pilot(&tile, true, &absurd.encode()).is_ok(), "the bound itself is allowed");
-        // with path tracing as the strategy only iteration 0 and those ≡ 2 mod 4 record moments
+        // with path tracing as the strategy only iteration 0, those ≡ 2 mod 4 before 16 and
+        // those ≡ 6 mod 8 after it record moments
         let mut pt = EmisJob::new(&spec()).unwrap();
         pt.state.strategy.nu = 0.0;
         assert!(pt.decode_pilot(&tile, true, &[]).unwrap().is_none());
         assert!(pt.decode_pilot(&tile, true, &good).unwrap_err().contains("does not collect"));
         let skipped = TileSpec { samples: 4..5, ..tile.clone() };
         assert!(pt.decode_pilot(&skipped, true, &[]).unwrap().is_none());
+        let sparse = TileSpec { samples: 18..19, ..tile.clone() };
+        assert!(pt.decode_pilot(&sparse, true, &good).unwrap_err().contains("does not collect"));
         let recorded = TileSpec { samples: 2..3, ..tile };
         assert!(pt.decode_pilot(&recorded, true, &good).unwrap().is_some());
         assert!(pt.decode_pilot(&recorded, true, &[]).unwrap_err().contains("no pilot data"));

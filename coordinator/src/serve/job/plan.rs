@@ -233,11 +233,17 @@ mod tests {
         let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12]);
         // a collecting pass: a call per iteration that records under path tracing (0 and
-        // ≡ 2 mod 4), one per run between them
+        // ≡ 2 mod 4 before 16), one per run between them
         let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0, 0.0);
         let ranges: Vec<_> = collecting.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..16]);
         assert!(collecting.collect);
+        // from SPARSE_FROM (16) on, every eighth iteration records (≡ 6 mod 8)
+        let sparse = pass_after_update(&spec(IntegratorName::EmisVcm, Some(100), None), 16, 0, 1.0, 0.0);
+        let ranges: Vec<_> = sparse.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!(ranges[..5], [16..22, 22..23, 23..30, 30..31, 31..38]);
+        assert_eq!(ranges[ranges.len() - 2..], [62..63, 63..64]);
+        assert!(sparse.collect);
         let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0, 0.0);
         let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
