@@ -148,7 +148,8 @@ fn rest_submit_vcm_equals_local_render_and_reports_progress() {
 /// the merged moments, final passes with the chosen strategy (its merge mask fetched by the
 /// workers as a blob) — and the same image, bit for bit, the same decisions, strategy PNG and
 /// report as locally. After a coordinator restart the job shows the same decisions (read back
-/// from its stored report) and serves the same files.
+/// from its stored report) and serves the same files. The bidirectional pilot, whose update
+/// chooses a per-pixel merge mask.
 #[test]
 fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     use tessera_common::film::exr::{read_attribute, read_layer};
@@ -156,7 +157,7 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     let (mut c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("cornell-box")).unwrap();
     // updates after 1 and 4; the 10 final iterations are two calls (8 + 2) on both sides
-    let settings = json!({"integrator": "emis-vcm", "spp": 14, "seed": 4});
+    let settings = json!({"integrator": "emis-vcm", "spp": 14, "seed": 4, "emis_pilot": "bidirectional"});
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
     assert_eq!(status, 201, "{job}");
     assert_eq!((job["state"].as_str(), job["tiles_total"].as_u64()), (Some("queued"), Some(1)), "the pilot: {job}");
@@ -167,7 +168,8 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
     assert_eq!(updates.iter().map(|u| u["iteration"].as_u64().unwrap()).collect::<Vec<_>>(), [1, 4]);
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
-    let local = local_render(dir.path(), &scene("cornell-box"), "emis-vcm", 14, 4);
+    let own = ["--emis-pilot", "bidirectional"];
+    let local = local_render_with(dir.path(), &scene("cornell-box"), "emis-vcm", 14, 4, &own);
     assert_same_image(&out, &local);
     let (farm_mask, local_mask) = (read_layer(&out, "merge_mask").unwrap(), read_layer(&local, "merge_mask").unwrap());
     assert!(farm_mask.iter().zip(&local_mask).all(|(a, b)| a.to_bits() == b.to_bits()), "same merge mask");
@@ -238,14 +240,18 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
 /// Per-pixel connection counts on the farm: after the update at iteration 1 a bidirectional
 /// strategy renders with an expected count per pixel, which the workers fetch as a blob and
 /// round at each camera vertex as a local render does: the same image bit for bit, the same
-/// connection layer and report.
+/// connection layer and report. The bidirectional pilot, whose first update already chooses
+/// from the full set.
 #[test]
 fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
     use tessera_common::film::exr::{read_attribute, read_layer};
     let dir = tempfile::tempdir().unwrap();
     let (c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("indirect-room")).unwrap();
-    let settings = json!({"integrator": "emis-bdpt", "spp": 12, "seed": 3, "emis_updates": [1, 4], "emis_connections": "per-pixel"});
+    let settings = json!({
+        "integrator": "emis-bdpt", "spp": 12, "seed": 3, "emis_updates": [1, 4],
+        "emis_connections": "per-pixel", "emis_pilot": "bidirectional",
+    });
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
     assert_eq!(status, 201, "{job}");
     let id = job["id"].as_str().unwrap();
@@ -260,7 +266,7 @@ fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
         assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&bytes));
         std::fs::write(out.with_extension(name), &bytes).unwrap();
     }
-    let more = ["--emis-updates", "1,4", "--emis-connections", "per-pixel"];
+    let more = ["--emis-updates", "1,4", "--emis-connections", "per-pixel", "--emis-pilot", "bidirectional"];
     let local = local_render_with(dir.path(), &scene("indirect-room"), "emis-bdpt", 12, 3, &more);
     assert_same_image(&out, &local);
     let (farm_c, local_c) = (read_layer(&out, "connections").unwrap(), read_layer(&local, "connections").unwrap());
@@ -430,9 +436,10 @@ fn coordinator_killed_mid_job_resumes_from_its_data_dir() {
 
 /// The EMIS state (merged moments, statistics, guides, strategy) survives the crash too: killed
 /// after the updates at 1 and 4, inside the pass that collects moments for the update at 16.
+/// The bidirectional pilot: its iterations all record, and are slow enough to crash within.
 #[test]
 fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
-    coordinator_killed_mid_job(("cornell-box", "emis-vcm", 20, &[]), 0, 6, 16);
+    coordinator_killed_mid_job(("cornell-box", "emis-vcm", 20, &["--emis-pilot", "bidirectional"]), 0, 6, 16);
 }
 
 /// A path-tracing start survives the crash with its restart: on caustic-glass (seed 8) the

@@ -28,13 +28,15 @@ pub enum IntegratorKind {
     /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but
     /// the first (fixed radius, so slightly biased).
     Vcm,
-    /// Efficiency-aware MIS on bdpt: a bdpt pilot (ν = 1, c = 1) estimates every candidate's
-    /// second moment; after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are
-    /// chosen and used from then on.
+    /// Efficiency-aware MIS on bdpt: path tracing first (or, with `--emis-pilot
+    /// bidirectional`, a bdpt pilot with ν = 1, c = 1) estimates candidates' second moments;
+    /// after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are chosen and used
+    /// from then on.
     EmisBdpt,
-    /// Efficiency-aware MIS on vcm: a vcm pilot (ν = 1, c = 1, merging everywhere) picks ν, c and
-    /// a per-pixel merge mask; writes the mask, the relative moment, a strategy PNG and a JSON
-    /// report of every update beside the image.
+    /// Efficiency-aware MIS on vcm: path tracing first (or, with `--emis-pilot bidirectional`,
+    /// a vcm pilot with ν = 1, c = 1, merging everywhere) picks ν, c and a per-pixel merge
+    /// mask; writes the mask, the relative moment, a strategy PNG and a JSON report of every
+    /// update beside the image.
     EmisVcm,
 }
 
@@ -96,10 +98,10 @@ pub struct IntegratorArgs {
     /// The EMIS optimiser's model: cost constants, moment filter order, outlier rule.
     #[command(flatten)]
     pub model: EmisModelArgs,
-    /// emis-*: the pilot, the method's own (N = P, c = 1) or path tracing first, which
-    /// switches to the full candidate set, discarding the iterations so far, once a
-    /// bidirectional strategy wins.
-    #[arg(long, value_enum, default_value = "bidirectional")]
+    /// emis-*: the pilot, path tracing first, which switches to the full candidate set,
+    /// discarding the iterations so far, once a bidirectional strategy wins; or the method's
+    /// own (N = P, c = 1).
+    #[arg(long, value_enum, default_value = "path-tracing")]
     pub emis_pilot: EmisPilotArg,
     /// emis-*: choose one connection count for the image, or one per pixel (filtered like the
     /// merge mask, with ν the only image-level choice).

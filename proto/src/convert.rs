@@ -131,7 +131,7 @@ mod tests {
             emis_updates: vec![2, 5],
             merge_ratio: MergeRatio::Reference,
             cost_model: CostModel::Reference,
-            emis_pilot: PilotStart::PathTracing,
+            emis_pilot: PilotStart::Bidirectional,
             emis_connections: ConnectionScope::PerPixel,
             emis_image: ImageEstimate::Guided,
             ..RenderSettings::default()

@@ -1,28 +1,28 @@
 //! The integrators `emis-bdpt` and `emis-vcm`: efficiency-aware MIS (Grittmann et al. 2022;
 //! docs/emis.md) on the bidirectional engine.
 //!
-//! A pilot renders with a fixed strategy (docs/emis.md, decision 5: `emis-vcm` VCM with
-//! N = P, c = 1, χ = 1 and correlation-aware weights; `emis-bdpt` BDPT with N = P, c = 1) while
-//! a [`MomentEstimator`] records every candidate's second moment per pixel. After iterations
-//! 1, 4, 16 and 64 (configurable) the optimiser picks ν, c and the per-pixel merge mask χ from
-//! the merged moments, the denoised image and the path statistics; rendering continues with
-//! that strategy (moments still collected, each sample with the counts it was drawn with;
-//! while that strategy is pt, in a quarter and later an eighth of the iterations, see
-//! [`collects_moments`]) until
-//! the last update the budget can reach, then without moments. Every iteration, pilot included,
-//! stays in the image with equal weight. When path tracing wins, the remaining iterations are
+//! [`PilotStart::Bidirectional`], the paper's pilot, renders with a fixed strategy
+//! (docs/emis.md, decision 5: `emis-vcm` VCM with N = P, c = 1, χ = 1 and correlation-aware
+//! weights; `emis-bdpt` BDPT with N = P, c = 1) while a [`MomentEstimator`] records every
+//! candidate's second moment per pixel. After iterations 1, 4, 16 and 64 (configurable) the
+//! optimiser picks ν, c and the per-pixel merge mask χ from the merged moments, the denoised
+//! image and the path statistics; rendering continues with that strategy (moments still
+//! collected, each sample with the counts it was drawn with; while that strategy is pt, in a
+//! quarter and later an eighth of the iterations, see [`collects_moments`]) until the last
+//! update the budget can reach, then without moments. Every iteration, pilot included, stays
+//! in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
 //!
-//! [`PilotStart::PathTracing`] starts with path tracing instead (the reference's `OnDemandVcm`;
-//! docs/emis.md, decision 5 and checklist 13): its updates choose from a reduced set
-//! (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt wins. The first
-//! update a bidirectional candidate wins discards the image so far, restarts the moments for
-//! the full set and renders a sample budget's iterations in full after it; the updates that
-//! follow keep the schedule (their iteration counts include the discarded ones). A candidate
-//! wins that update only by more than the share of the render it discards. Its recording
-//! iterations carry a light probe (`integrator::LightProbe`): without it the cost model would
-//! know neither the light paths' length nor the photons a merge finds, and price merging as
-//! free (docs/decisions/0032-light-probe-and-restart-share.md).
+//! [`PilotStart::PathTracing`], the default, starts with path tracing instead (the
+//! reference's `OnDemandVcm`; docs/emis.md, decision 5 and checklist 13): its updates choose
+//! from a reduced set (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt
+//! wins. The first update a bidirectional candidate wins discards the image so far, restarts
+//! the moments for the full set and renders a sample budget's iterations in full after it;
+//! the updates that follow keep the schedule (their iteration counts include the discarded
+//! ones). A candidate wins that update only by more than the share of the render it
+//! discards. Its recording iterations carry a light probe (`integrator::LightProbe`): without
+//! it the cost model would know neither the light paths' length nor the photons a merge
+//! finds, and price merging as free (docs/decisions/0032-light-probe-and-restart-share.md).
 //!
 //! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
@@ -123,18 +123,21 @@ pub enum EmisMethod {
     Vcm,
 }
 
-/// How an `emis-*` render starts (docs/emis.md, decision 5).
+/// How an `emis-*` render starts (docs/emis.md, decision 5). The default, which
+/// `RenderSettings` and so `tessera render` and farm jobs carry, is path tracing first: on the
+/// nine bench scenes it beat the method's own pilot on every one
+/// (docs/decisions/0033-sparser-recording-and-the-path-tracing-start.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum PilotStart {
     /// The method's own pilot: VCM (or BDPT) with N = P, c = 1 (and χ = 1), kept in the image.
-    #[default]
     Bidirectional,
     /// Path tracing first (the reference's `OnDemandVcm`, docs/emis.md §1.2 and §4): updates
     /// choose from the reduced set ([`CandidateSet::Reduced`]) while path tracing wins. The
     /// first update a bidirectional candidate wins discards the iterations rendered so far
     /// (the image restarts with the new strategy, and a sample budget counts the kept
     /// iterations only) and switches to the full set for the updates that follow.
+    #[default]
     PathTracing,
 }
 
@@ -183,7 +186,9 @@ impl EmisConfig {
     /// The update schedule of docs/emis.md, decision 5.
     pub const DEFAULT_UPDATES: [u32; 4] = [1, 4, 16, 64];
 
-    /// The defaults of `method`.
+    /// The paper's configuration of `method`, with the method's own pilot
+    /// ([`PilotStart::Bidirectional`], what the decision tests and benches study); a render's
+    /// settings choose the pilot (`RenderSettings::emis_pilot`, [`PilotStart::default`]).
     pub fn new(method: EmisMethod) -> Self {
         EmisConfig {
             method,
@@ -199,7 +204,7 @@ impl EmisConfig {
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
             start_denoise: DenoiseSettings::GUIDED,
-            pilot: PilotStart::default(),
+            pilot: PilotStart::Bidirectional,
             connection_scope: ConnectionScope::default(),
         }
     }

@@ -41,7 +41,7 @@ pub struct EqualTimeArgs {
     #[command(flatten)]
     pub model: EmisModelArgs,
     /// The pilots each `emis-*` integrator runs with (each a column).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "bidirectional")]
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "path-tracing")]
     pub emis_pilot: Vec<EmisPilotArg>,
     /// The connection scopes each `emis-*` integrator runs with (each a column; per pixel is
     /// named `emis-vcm/c-pixel`).
@@ -116,8 +116,9 @@ struct Column {
 }
 
 /// The columns: each integrator of `--integrators`, the `emis-*` ones once per pilot of
-/// `--emis-pilot` and connection scope of `--emis-connections` (a path-tracing start is named
-/// `emis-vcm/pt-start`, per-pixel connections `emis-vcm/c-pixel`).
+/// `--emis-pilot` and connection scope of `--emis-connections` (the default pilot, a
+/// path-tracing start, is plain `emis-vcm`, which the targets read; the method's own pilot is
+/// named `emis-vcm/own-pilot`, per-pixel connections `emis-vcm/c-pixel`).
 fn columns(args: &EqualTimeArgs) -> Vec<Column> {
     let mut out = Vec::new();
     for &kind in &args.integrators {
@@ -129,8 +130,8 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
         for pilot in args.emis_pilot.iter().map(|&p| PilotStart::from(p)) {
             for connections in args.emis_connections.iter().map(|&c| ConnectionScope::from(c)) {
                 let mut name = kind.name().to_string();
-                if pilot == PilotStart::PathTracing {
-                    name.push_str("/pt-start");
+                if pilot == PilotStart::Bidirectional {
+                    name.push_str("/own-pilot");
                 }
                 if connections == ConnectionScope::PerPixel {
                     name.push_str("/c-pixel");
@@ -254,8 +255,10 @@ fn print_speedups(table: &[(String, Row)]) {
         ("emis-vcm", "vcm", VCM_TARGET),
         ("emis-bdpt", "bdpt", BDPT_TARGET),
         ("emis-vcm", "pt", 0.0),
-        ("emis-vcm/pt-start", "emis-vcm", 0.0),
-        ("emis-bdpt/pt-start", "emis-bdpt", 0.0),
+        ("emis-vcm", "emis-vcm/own-pilot", 0.0),
+        ("emis-bdpt", "emis-bdpt/own-pilot", 0.0),
+        ("emis-vcm/own-pilot", "vcm", VCM_TARGET),
+        ("emis-bdpt/own-pilot", "bdpt", BDPT_TARGET),
         ("emis-vcm/c-pixel", "vcm", VCM_TARGET),
         ("emis-bdpt/c-pixel", "bdpt", BDPT_TARGET),
         ("emis-vcm/c-pixel", "emis-vcm", 0.0),
@@ -301,7 +304,7 @@ fn print_speedups(table: &[(String, Row)]) {
 fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
     let columns = [
         "emis-vcm",
-        "emis-vcm/pt-start",
+        "emis-vcm/own-pilot",
         "emis-vcm/c-pixel",
         "emis-vcm/k-measured",
         "emis-vcm/o-each",

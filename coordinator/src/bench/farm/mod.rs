@@ -131,6 +131,8 @@ pub fn generated_job(
         spp: Some(spp),
         seed: Some(1),
         defines: [("width".to_string(), width.to_string()), ("height".to_string(), height.to_string())].into(),
+        // an emis-* job measures the heaviest uploads: the bidirectional pilot's full set
+        emis_pilot: tessera_common::emis::PilotStart::Bidirectional,
         ..RenderSettings::default()
     };
     let bundle = tessera_common::bundle::Bundle {

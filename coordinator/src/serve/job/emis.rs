@@ -227,8 +227,11 @@ mod tests {
     use tessera_common::film::Rect;
     use tessera_common::settings::{IntegratorName, RenderSettings};
 
+    /// An emis-vcm job with the bidirectional pilot, whose every iteration records.
     fn spec() -> JobSpec {
-        JobSpec::bare("j", IntegratorName::EmisVcm, Some(8), 4, 2)
+        let mut spec = JobSpec::bare("j", IntegratorName::EmisVcm, Some(8), 4, 2);
+        spec.settings.emis_pilot = tessera_common::emis::PilotStart::Bidirectional;
+        spec
     }
 
     fn pilot(job: &EmisJob, iterations: u32) -> PilotData {

@@ -91,8 +91,11 @@ fn checkpoints(data: &Path, job: &str) -> Vec<PathBuf> {
     dir.map(|e| e.unwrap().path()).filter(|p| p.file_name().unwrap().to_string_lossy().starts_with(job)).collect()
 }
 
+/// Settings for `integrator`; emis-* with the bidirectional pilot, which merges from its
+/// first update on.
 fn settings(integrator: IntegratorName, spp: u32) -> RenderSettings {
-    RenderSettings { integrator, spp: Some(spp), seed: Some(3), ..Default::default() }
+    let emis_pilot = tessera_common::emis::PilotStart::Bidirectional;
+    RenderSettings { integrator, spp: Some(spp), seed: Some(3), emis_pilot, ..Default::default() }
 }
 
 #[test]
