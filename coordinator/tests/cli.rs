@@ -88,7 +88,8 @@ fn time_budget_renders_at_least_one_pass() {
     assert!(counts[0] >= 1 && counts.iter().all(|&c| c == counts[0]), "every pixel has the same sample count");
 }
 
-/// `emis-vcm` writes the image, the EMIS layers and attributes, the strategy map and a report
+/// `emis-vcm` (the default path-tracing start) writes the image, the EMIS layers and
+/// attributes, the strategy map and a report
 /// whose updates happened at the configured iterations. (A sample budget, not a time budget:
 /// how many iterations fit in a time depends on the machine's load.)
 #[test]
@@ -116,7 +117,14 @@ fn emis_vcm_writes_its_layers_strategy_map_and_report() {
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("glass.emis.json")).unwrap()).unwrap();
     let updates = report["updates"].as_array().unwrap();
     assert_eq!(updates.iter().map(|u| u["iteration"].as_u64().unwrap()).collect::<Vec<_>>(), vec![1, 2]);
-    assert_eq!(updates[0]["candidates"].as_array().unwrap().len(), 26, "25 (ν, c) pairs and path tracing");
+    // the default path-tracing start decides from the reduced set (ν ∈ {0.5, 1} × c ∈ {0, 1}
+    // × merging on or off, and path tracing) until light paths win, then from the full set
+    // (25 (ν, c) pairs and path tracing)
+    assert_eq!(updates[0]["reduced"].as_bool(), Some(true));
+    for u in updates {
+        let expected = if u["reduced"].as_bool().unwrap() { 9 } else { 26 };
+        assert_eq!(u["candidates"].as_array().unwrap().len(), expected, "{u}");
+    }
     assert_eq!(report["final"]["nu"].as_f64().unwrap() as f32, nu as f32);
 }
 

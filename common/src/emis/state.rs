@@ -376,10 +376,10 @@ mod tests {
         }
     }
 
-    /// The bidirectional pilot (the default) never restarts, even when its first update
-    /// chooses a bidirectional strategy.
+    /// The bidirectional pilot (`EmisConfig::new`'s) never restarts, even when its first
+    /// update chooses a bidirectional strategy.
     #[test]
-    fn the_default_pilot_never_restarts() {
+    fn the_bidirectional_pilot_never_restarts() {
         let mut state = EmisState::new(EmisConfig::new(EmisMethod::Bdpt), SIDE, SIDE);
         assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Full, 26));
         state.absorb(&pilot(&state, |c| if c.nu == 2.0 && c.connections == 1 { 1e-3 } else { 1.0 })).unwrap();

@@ -175,7 +175,7 @@ fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() 
     state.kept_from = 4;
     let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
     assert_eq!((back.candidate_set, back.candidates.len(), back.kept_from), (CandidateSet::Full, 51, 4));
-    // a reduced set after a restart, or with the default pilot, is corrupt
+    // a reduced set after a restart, or with the bidirectional pilot, is corrupt
     state.candidate_set = CandidateSet::Reduced;
     assert!(EmisState::decode(config, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
     state.kept_from = 0;
