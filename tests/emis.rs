@@ -1,6 +1,7 @@
 //! EMIS jobs on the farm, each equal to `tessera render` bit for bit: the bidirectional pilot
-//! with its per-pixel merge mask, a path-tracing start that a restart discards, and per-pixel
-//! connection counts; the decisions, strategy PNG and report survive a coordinator restart.
+//! with its per-pixel merge mask, a path-tracing start that a restart discards, one that keeps
+//! path tracing to the end, and per-pixel connection counts; the decisions, strategy PNG and
+//! report survive a coordinator restart.
 
 use super::{download, job_url, wait_done};
 use serde_json::json;
@@ -140,4 +141,38 @@ fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
     let key = "tessera/emis_mean_connections";
     assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap());
     assert_same_emis_outputs(&out, &local);
+}
+
+/// Path tracing kept to the end on the farm: after the update at 1 the 199 iterations left are
+/// cut into calls of a sixteenth of what is left (12, 11, ... then 8s), as `tessera render`
+/// cuts them, and the image is the same bit for bit.
+#[test]
+fn rest_submit_emis_keeping_path_tracing_renders_the_local_calls() {
+    use tessera_common::film::exr::read_attribute;
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _w) = farm(dir.path(), 2);
+    let xml = std::fs::read(scene("glossy-interreflection")).unwrap();
+    let settings = json!({"integrator": "emis-vcm", "spp": 200, "seed": 5, "emis_updates": [1]});
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&c, id, None);
+    let updates = done["strategy"]["updates"].as_array().expect("EMIS decisions in the status");
+    assert!(updates.iter().all(|u| u["restarted"] == false), "path tracing kept: {updates:?}");
+    assert_eq!(done["strategy"]["nu"].as_f64(), Some(0.0), "{}", done["strategy"]);
+    let mut calls = vec![];
+    let mut begin = 1;
+    while begin < 200 {
+        let call = tessera_common::emis::final_call(begin..200, 0.0, 256 * 256);
+        begin = call.end;
+        calls.push(call);
+    }
+    assert_eq!(calls[0], 1..13);
+    assert_eq!(done["tiles_total"].as_u64(), Some(1 + calls.len() as u64), "the pilot and the calls: {done}");
+    let out = dir.path().join("farm.exr");
+    download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
+    let local =
+        local_render_with(dir.path(), &scene("glossy-interreflection"), "emis-vcm", 200, 5, &["--emis-updates", "1"]);
+    assert_same_image(&out, &local);
+    assert_eq!(read_attribute(&out, "tessera/emis_nu").unwrap(), Some(0.0));
 }

@@ -35,9 +35,9 @@ mod state;
 mod wire;
 
 pub use render::{
-    CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, GUIDE_ITERATIONS, PilotData,
-    PilotStart, SPARSE_FROM, Strategy, collecting_call, collects_moments, render_emis, render_iterations,
-    render_iterations_until,
+    CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX,
+    GUIDE_ITERATIONS, PilotData, PilotStart, SPARSE_FROM, Strategy, collecting_call, collects_moments, final_call,
+    render_emis, render_iterations, render_iterations_until,
 };
 pub use state::{EmisState, UpdateReport};
 pub use wire::Decisions;

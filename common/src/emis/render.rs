@@ -28,7 +28,7 @@
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
 //! merges what workers return and runs the update at each barrier. [`render_emis`] is the
 //! local loop over both. Farm and local cut the iterations into the same calls
-//! ([`collecting_call`] while collecting, [`FINAL_ITERATIONS_PER_CALL`] after that), so they
+//! ([`collecting_call`] while collecting, [`final_call`] after that), so they
 //! sum the same numbers in the same order and their images are bit-identical.
 
 use super::EmisState;
@@ -50,10 +50,40 @@ use std::ops::Range;
 use std::time::Instant;
 
 /// Iterations one [`render_iterations`] call (one farm tile) renders once moments are no
-/// longer collected. Why eight: a call is a barrier at which the threads wait for each other;
-/// eight make that wait small while a farm still gets one tile per worker out of a pass of a
-/// few dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
+/// longer collected, with a bidirectional strategy, and the fewest [`final_call`] gives path
+/// tracing. Why eight: a call is a barrier at which the threads wait for each other; eight
+/// make that wait small while a farm still gets one tile per worker out of a pass of a few
+/// dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
+
+/// The most iterations [`final_call`] gives path tracing in one call.
+pub const FINAL_PT_ITERATIONS_MAX: u32 = 64;
+
+/// The camera samples (pixels × iterations) above which [`final_call`] stops growing a path
+/// tracing call: about a second of work on two threads, so that progress still moves.
+const FINAL_PT_SAMPLES: u64 = 1 << 23;
+
+/// The first call (farm tile) of a pass over the non-empty `iterations` that collects no
+/// moments, for a strategy with `nu` light paths per pixel on an image of `pixels`.
+/// - A bidirectional strategy: [`FINAL_ITERATIONS_PER_CALL`] iterations.
+/// - Path tracing: a sixteenth of the iterations left, between [`FINAL_ITERATIONS_PER_CALL`]
+///   and [`FINAL_PT_ITERATIONS_MAX`] (and [`FINAL_PT_SAMPLES`]). `pt` renders a pixel's
+///   iterations of a call one after the other, and more of them in a row run faster (5 % from
+///   8 to 64 on env-lit); shrinking calls keep sixteen farm tiles in every remaining stretch
+///   and a short tail (docs/decisions/0034-longer-path-tracing-calls.md).
+///
+/// Like [`collecting_call`], it depends on iteration numbers, the strategy and the image
+/// only, so a farm cutting a pass and a local render cutting what is left add the same calls.
+pub fn final_call(iterations: Range<u32>, nu: f32, pixels: u64) -> Range<u32> {
+    let len = iterations.end - iterations.start;
+    let count = if nu > 0.0 {
+        FINAL_ITERATIONS_PER_CALL
+    } else {
+        let by_samples = (FINAL_PT_SAMPLES / pixels.max(1)).min(u32::MAX as u64) as u32;
+        (len / 16).min(by_samples).clamp(FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX)
+    };
+    iterations.start..iterations.end.min(iterations.start + count)
+}
 
 /// Whether a collecting call over `iterations` records moments when the current strategy
 /// has `nu` light paths per pixel. While path tracing is the strategy, only iteration 0 (the
@@ -397,7 +427,7 @@ pub struct EmisOutput {
 
 /// Renders `scene` locally with `emis-*` on the caller's pool (`opts.threads`): collecting
 /// iterations in the calls of [`collecting_call`], updates at the configured barriers, then
-/// the rest [`FINAL_ITERATIONS_PER_CALL`] at a time. `progress(done, total)` counts
+/// the rest in the calls of [`final_call`]. `progress(done, total)` counts
 /// pixel-iterations.
 pub fn render_emis(
     scene: &Scene,
@@ -448,7 +478,7 @@ pub fn render_emis(
         let count = match state.next_update().filter(|_| collect.is_some()) {
             // a collecting pass ends at the next update, which is within a sample budget
             Some(update) => collecting_call(done..update.max(done + 1), state.strategy.nu).len() as u32,
-            None => FINAL_ITERATIONS_PER_CALL,
+            None => final_call(done..done + left, state.strategy.nu, pixels).len() as u32,
         }
         .min(left);
         let (accum, pilot) = pool.install(|| {
@@ -472,4 +502,43 @@ pub fn render_emis(
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The calls a pass over `iterations` is cut into.
+    fn cut(iterations: Range<u32>, nu: f32, pixels: u64) -> Vec<Range<u32>> {
+        let mut calls = vec![];
+        let mut begin = iterations.start;
+        while begin < iterations.end {
+            let call = final_call(begin..iterations.end, nu, pixels);
+            begin = call.end;
+            calls.push(call);
+        }
+        calls
+    }
+
+    #[test]
+    fn path_tracing_calls_take_a_sixteenth_of_what_is_left_within_limits() {
+        let small = 256 * 256;
+        assert_eq!(final_call(64..400, 0.0, small), 64..85);
+        assert_eq!(final_call(64..4000, 0.0, small), 64..128);
+        assert_eq!(final_call(64..100, 0.0, small), 64..72);
+        assert_eq!(final_call(64..67, 0.0, small), 64..67);
+        // the sample cap: 2²³ / (640 × 480) = 27; 1080p gets the fewest
+        assert_eq!(final_call(0..4000, 0.0, 640 * 480), 0..27);
+        assert_eq!(final_call(0..4000, 0.0, 1920 * 1080), 0..8);
+        // a bidirectional strategy keeps eight
+        assert_eq!(final_call(64..4000, 0.5, small), 64..72);
+        for (range, nu) in [(64..400, 0.0), (7..2000, 0.0), (0..1, 0.0), (64..400, 1.0)] {
+            let calls = cut(range.clone(), nu, small);
+            assert_eq!((calls[0].start, calls.last().unwrap().end), (range.start, range.end));
+            assert!(calls.windows(2).all(|w| w[0].end == w[1].start && w[0].len() >= w[1].len()), "{calls:?}");
+            assert!(calls.iter().all(|c| c.len() <= FINAL_PT_ITERATIONS_MAX as usize));
+            // sixteen or more farm tiles in every pass long enough for them
+            assert!(calls.len() >= 16.min(range.len().div_ceil(8)), "{calls:?}");
+        }
+    }
 }

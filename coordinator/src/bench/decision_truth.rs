@@ -16,7 +16,7 @@
 //!    benchmark drops them): the relMSE × iterations it converges to, free of the reference's
 //!    own noise and of bias;
 //! 3. each candidate is timed (CPU seconds per iteration) the way a final pass renders it,
-//!    in [`FINAL_ITERATIONS_PER_CALL`] calls, path tracing by `pt`, on `--timing-threads`
+//!    in the calls of [`final_call`], path tracing by `pt`, on `--timing-threads`
 //!    threads (one by default: CPU time then counts no thread waiting at a barrier for a
 //!    sibling that another process descheduled); rounds alternate over the candidates and the
 //!    least time counts, as the machine's load drifts.
@@ -33,9 +33,7 @@ use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneT
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
-use tessera_common::emis::{
-    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, render_iterations,
-};
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, final_call, render_iterations};
 use tessera_common::film::Film;
 use tessera_common::film::compare::{DROPPED_FRACTION, mean_without_top, relmse};
 use tessera_common::integrator::PathSettings;
@@ -229,9 +227,10 @@ fn relative_variance(
 /// CPU seconds per iteration of `strategy`, rendered as a final pass renders it.
 fn seconds_per_iteration(s: &Subject, strategy: &Strategy, iterations: u32, pool: &rayon::ThreadPool) -> f64 {
     let started = cpu_seconds();
+    let pixels = s.scene.camera.width as u64 * s.scene.camera.height as u64;
     let mut done = 0;
     while done < iterations {
-        let count = FINAL_ITERATIONS_PER_CALL.min(iterations - done);
+        let count = final_call(done..iterations, strategy.nu, pixels).len() as u32;
         pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 2000, done..done + count, None));
         done += count;
     }

@@ -2,14 +2,15 @@
 //! while path tracing is the strategy (the path-tracing start's pilot, then every fourth
 //! iteration and from `emis::SPARSE_FROM` every eighth, `emis::collects_moments`), against
 //! the `pt` iteration it replaces; and what `pt`'s iterations cost as EMIS renders them, in
-//! calls of [`FINAL_ITERATIONS_PER_CALL`], against one pass of `tessera render --integrator
-//! pt`.
+//! calls of [`FINAL_ITERATIONS_PER_CALL`] and of [`FINAL_PT_ITERATIONS_MAX`] (the range of
+//! `emis::final_call`), against one pass of `tessera render --integrator pt`.
 
 use super::{SceneArgs, cpu_seconds};
 use crate::options::scene_name;
 use std::time::Instant;
 use tessera_common::emis::{
-    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, Strategy, collects_moments, render_iterations,
+    CandidateSet, EmisConfig, EmisMethod, FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX, Strategy,
+    collects_moments, render_iterations,
 };
 use tessera_common::film::{Film, Rect, TileAccum};
 use tessera_common::integrator::{Integrator, PathSettings, PathTracer, TileRequest};
@@ -58,28 +59,35 @@ fn recording(r: u32) -> u32 {
 }
 
 /// Iterations of one round of [`final_round`].
-const FINAL_ROUND: u32 = 4 * FINAL_ITERATIONS_PER_CALL;
+const FINAL_ROUND: u32 = 2 * FINAL_PT_ITERATIONS_MAX;
+
+/// The calls of [`final_round`]: eight iterations (a bidirectional strategy's, and the
+/// fewest path tracing gets), [`FINAL_PT_ITERATIONS_MAX`] (path tracing's most).
+const FINAL_CALLS: [u32; 2] = [FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX];
 
 /// Wall and CPU seconds of [`FINAL_ROUND`] `pt` iterations from `first` on: in EMIS's calls
-/// (merged into a film as `render_emis` does), then as one pass of `tessera render` (its
-/// 32² tiles, on a pool of `threads`).
-fn final_round(scene: &Scene, config: &EmisConfig, first: u32, threads: usize) -> [(f64, f64); 2] {
+/// of each size of [`FINAL_CALLS`] (merged into a film as `render_emis` does), then as one
+/// pass of `tessera render` (its 32² tiles, on a pool of `threads`).
+fn final_round(scene: &Scene, config: &EmisConfig, first: u32, threads: usize) -> [(f64, f64); 3] {
     let settings = PathSettings::from_scene(scene, None);
     let pt = Strategy::path_tracing();
-    let (t, c) = (Instant::now(), cpu_seconds());
-    let mut film = Film::new(&scene.film);
-    for call in (first..first + FINAL_ROUND).step_by(FINAL_ITERATIONS_PER_CALL as usize) {
-        let (accum, _) =
-            render_iterations(scene, settings, config, &pt, 1, call..call + FINAL_ITERATIONS_PER_CALL, None);
-        film.merge_tile(&accum);
+    let mut out = [(0.0, 0.0); 3];
+    for (slot, per_call) in out.iter_mut().zip(FINAL_CALLS) {
+        let (t, c) = (Instant::now(), cpu_seconds());
+        let mut film = Film::new(&scene.film);
+        for call in (first..first + FINAL_ROUND).step_by(per_call as usize) {
+            let (accum, _) = render_iterations(scene, settings, config, &pt, 1, call..call + per_call, None);
+            film.merge_tile(&accum);
+        }
+        std::hint::black_box(film);
+        *slot = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     }
-    std::hint::black_box(film);
-    let emis = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     let (t, c) = (Instant::now(), cpu_seconds());
     let opts = RenderOptions { budget: Budget::Samples(FINAL_ROUND), seed: 1, threads, tile_size: 32 };
-    let out = render(scene, &PathTracer { settings }, &opts, &|_, _| {}).expect("a pool of the bench's threads");
-    std::hint::black_box(out);
-    [emis, (t.elapsed().as_secs_f64(), cpu_seconds() - c)]
+    let out_pt = render(scene, &PathTracer { settings }, &opts, &|_, _| {}).expect("a pool of the bench's threads");
+    std::hint::black_box(out_pt);
+    out[2] = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    out
 }
 
 /// Prints one row per scene: `pt`'s fastest iteration and, as medians over `repeats` rounds of
@@ -108,23 +116,36 @@ pub fn table(args: &SceneArgs, repeats: u32, pool: &rayon::ThreadPool) -> anyhow
         println!("| {} | {:.0} | {} |", scene_name(path), best * 1e3, cells.join(" | "));
     }
     println!(
-        "\n`pt`'s iterations in EMIS's calls of {FINAL_ITERATIONS_PER_CALL} (16² tiles, merged call by call) against one pass of `tessera render --integrator pt` (32² tiles), {FINAL_ROUND} iterations each, {repeats} rounds; medians of the ratio within a round (wall / CPU):"
+        "\n`pt`'s iterations in EMIS's calls of {} and of {} (16² tiles, merged call by call) against one pass of `tessera render --integrator pt` (32² tiles), {FINAL_ROUND} iterations each, {repeats} rounds; medians of the ratio within a round (wall / CPU):",
+        FINAL_CALLS[0], FINAL_CALLS[1]
     );
-    println!("| scene | pt pass ms/it | EMIS calls / pt pass |");
-    println!("|---|---|---|");
+    println!(
+        "| scene | pt pass ms/it | calls of {} / pt pass | calls of {} / pt pass |",
+        FINAL_CALLS[0], FINAL_CALLS[1]
+    );
+    println!("|---|---|---|---|");
     let threads = pool.current_num_threads();
     for path in &args.scenes()? {
         let scene = Scene::load(path)?;
-        let rounds: Vec<[(f64, f64); 2]> = (0..repeats)
+        let rounds: Vec<[(f64, f64); 3]> = (0..repeats)
             .map(|r| pool.install(|| final_round(&scene, &config, 1000 + r * FINAL_ROUND, threads)))
             .collect();
-        let best = rounds.iter().map(|r| r[1].0).fold(f64::INFINITY, f64::min) / FINAL_ROUND as f64;
-        let median = |cpu: bool| {
-            let mut v: Vec<f64> = rounds.iter().map(|r| if cpu { r[0].1 / r[1].1 } else { r[0].0 / r[1].0 }).collect();
+        let best = rounds.iter().map(|r| r[2].0).fold(f64::INFINITY, f64::min) / FINAL_ROUND as f64;
+        let median = |run: usize, cpu: bool| {
+            let mut v: Vec<f64> =
+                rounds.iter().map(|r| if cpu { r[run].1 / r[2].1 } else { r[run].0 / r[2].0 }).collect();
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
         };
-        println!("| {} | {:.1} | {:.3}× / {:.3}× |", scene_name(path), best * 1e3, median(false), median(true));
+        println!(
+            "| {} | {:.1} | {:.3}× / {:.3}× | {:.3}× / {:.3}× |",
+            scene_name(path),
+            best * 1e3,
+            median(0, false),
+            median(0, true),
+            median(1, false),
+            median(1, true)
+        );
     }
     Ok(())
 }

@@ -7,7 +7,9 @@
 //! tile size does not change a single bit. Full-frame integrators (lt, bdpt, vcm) render one
 //! iteration per pass and add the passes in iteration order. The farm therefore uses
 //! * pt: [`TILE_SIZE`]² rectangles × the whole range `[0, spp)`, any merge order;
-//! * lt, bdpt, vcm: the full frame × `[i, i + 1)` per tile, merged in iteration order.
+//! * lt, bdpt, vcm: the full frame × `[i, i + 1)` per tile, merged in iteration order;
+//! * emis-*: the full frame × the calls `render_emis` makes (`emis::collecting_call` while
+//!   collecting moments, `emis::final_call` after), merged in iteration order.
 //!
 //! Tiles are numbered in merge order across passes, and the coordinator merges strictly in
 //! that order (holding results that arrive early), so the film gets the same additions in the
@@ -17,7 +19,7 @@
 //! one pass at a time at the barrier that ends the previous one.
 
 use super::spec::{JobSpec, TileSpec};
-use tessera_common::emis::{FINAL_ITERATIONS_PER_CALL, Strategy, collecting_call};
+use tessera_common::emis::{Strategy, collecting_call, final_call};
 use tessera_common::film::Rect;
 
 /// Edge of the rectangles of image-tile integrators.
@@ -104,8 +106,19 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
         }
         return PassPlan { tiles, collect };
     }
-    let per_tile = if is_emis(spec) { FINAL_ITERATIONS_PER_CALL } else { 1 };
-    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done, per_tile), collect }
+    if is_emis(spec) {
+        // as `render_emis` does: the calls of `final_call`
+        let pixels = spec.width as u64 * spec.height as u64;
+        let mut tiles = Vec::new();
+        let mut begin = spp_done;
+        while begin < end {
+            let samples = final_call(begin..end, nu, pixels);
+            begin = samples.end;
+            tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
+        }
+        return PassPlan { tiles, collect };
+    }
+    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done), collect }
 }
 
 /// The first pass (the pilot for EMIS). A time budget starts with one iteration to measure
@@ -115,16 +128,12 @@ pub fn first_pass(spec: &JobSpec) -> PassPlan {
     plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0), initial_nu(spec))
 }
 
-/// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take
-/// `per_tile` iterations each (the last one the rest).
-pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32, per_tile: u32) -> Vec<TileSpec> {
+/// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take one
+/// iteration each.
+pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32) -> Vec<TileSpec> {
     if spec.full_frame {
         (begin..begin + count)
-            .step_by(per_tile as usize)
-            .map(|i| TileSpec {
-                rect: Rect::full(spec.width, spec.height),
-                samples: i..(i + per_tile).min(begin + count),
-            })
+            .map(|i| TileSpec { rect: Rect::full(spec.width, spec.height), samples: i..i + 1 })
             .collect()
     } else {
         Rect::tiles(spec.width, spec.height, TILE_SIZE)
@@ -266,6 +275,29 @@ mod tests {
         assert!(!one.collect);
         // other integrators never collect
         assert!(!first_pass(&spec(IntegratorName::Vcm, Some(12), None)).collect);
+    }
+
+    /// After the last update path tracing's calls take a sixteenth of what is left, from 64
+    /// down to 8, as `render_emis` cuts them; a bidirectional strategy keeps calls of 8.
+    #[test]
+    fn plan_path_tracing_after_the_last_update_in_shrinking_calls() {
+        let s = spec(IntegratorName::EmisVcm, Some(400), None);
+        assert_eq!(after_pass(&s, 64, 0, 1.0, true, 0.0), BarrierAction::Optimize);
+        let pt = pass_after_update(&s, 64, 0, 1.0, 0.0);
+        assert!(!pt.collect);
+        let ranges: Vec<_> = pt.tiles.iter().map(|t| t.samples.clone()).collect();
+        // 336 left: 21, then 315 left: 19, ...
+        assert_eq!(ranges[..2], [64..85, 85..104]);
+        assert!(ranges.windows(2).all(|w| w[0].end == w[1].start && w[0].len() >= w[1].len()));
+        assert_eq!((ranges[0].start, ranges.last().unwrap().end), (64, 400));
+        // the tail: calls of 8, the last one the rest
+        assert_eq!((ranges[ranges.len() - 2].len(), ranges.last().unwrap().len()), (8, 5));
+        assert!(ranges.len() >= 16 && ranges.len() < 42, "{}", ranges.len());
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(4000), None), 64, 0, 1.0, 0.0);
+        assert_eq!(long.tiles[0].samples, 64..128);
+        let bidir = pass_after_update(&s, 64, 0, 1.0, 0.5);
+        assert_eq!(bidir.tiles.len(), 42);
+        assert!(bidir.tiles[..41].iter().all(|t| t.samples.len() == 8));
     }
 
     /// A path-tracing start discarded at the update after iteration 1: the sample budget
