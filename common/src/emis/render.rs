@@ -68,9 +68,9 @@ const FINAL_PT_SAMPLES: u64 = 1 << 23;
 /// - A bidirectional strategy: [`FINAL_ITERATIONS_PER_CALL`] iterations.
 /// - Path tracing: a sixteenth of the iterations left, between [`FINAL_ITERATIONS_PER_CALL`]
 ///   and [`FINAL_PT_ITERATIONS_MAX`] (and [`FINAL_PT_SAMPLES`]). `pt` renders a pixel's
-///   iterations of a call one after the other, and more of them in a row run faster (5 % from
-///   8 to 64 on env-lit); shrinking calls keep sixteen farm tiles in every remaining stretch
-///   and a short tail (docs/decisions/0034-longer-path-tracing-calls.md).
+///   iterations of a call one after the other, and more of them in a row run faster;
+///   shrinking calls keep sixteen farm tiles in every remaining stretch and a short tail
+///   (docs/decisions/0034-longer-path-tracing-calls.md).
 ///
 /// Like [`collecting_call`], it depends on iteration numbers, the strategy and the image
 /// only, so a farm cutting a pass and a local render cutting what is left add the same calls.
