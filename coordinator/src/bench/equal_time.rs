@@ -1,5 +1,6 @@
 //! `tessera bench equal-time 20,60`: every scene rendered by every integrator of
-//! `--integrators` for the same wall time; relMSE against the scene's `reference.exr` (top
+//! `--integrators` for the same wall time (the columns of a seed one after another, in a
+//! rotating order, `--repeats` rounds); relMSE against the scene's `reference.exr` (top
 //! 0.1 % of pixel errors dropped), speed-ups (relMSE_B / relMSE_A), the EMIS targets
 //! (geometric mean of emis-vcm over vcm and of emis-bdpt over bdpt, emis-vcm against the
 //! better of pt and vcm) and, with `--chart`, an SVG bar chart per duration.
@@ -37,6 +38,11 @@ pub struct EqualTimeArgs {
     /// reported per seed, so that a verdict shows the run-to-run spread.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     pub seeds: Vec<u64>,
+    /// Render every cell this many times per seed (relMSE per seed is the mean). Each round
+    /// renders a seed's columns one after another, in an order that rotates from round to
+    /// round, so that a host whose speed drifts slows every column alike.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub repeats: u32,
     /// The EMIS optimiser's model.
     #[command(flatten)]
     pub model: EmisModelArgs,
@@ -82,16 +88,20 @@ fn parse_durations(s: &str) -> Result<Durations, String> {
 /// One integrator's equal-time results on one scene.
 struct Cell {
     name: String,
-    /// relMSE per seed of `--seeds`.
+    /// relMSE per seed of `--seeds`, the mean over `--repeats`.
     relmse: Vec<f64>,
-    /// Mean samples per second over the seeds.
-    samples_per_s: f64,
+    /// Samples per second of every run.
+    samples_per_s: Vec<f64>,
 }
 
 impl Cell {
     fn mean(&self) -> f64 {
-        self.relmse.iter().sum::<f64>() / self.relmse.len().max(1) as f64
+        mean(&self.relmse)
     }
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
 /// One scene's equal-time results, a cell per column.
@@ -172,9 +182,12 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
     out
 }
 
+/// One scene, every column: round after round, each seed's columns in an order rotated by
+/// one per seed and round.
 fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::Result<Row> {
     let scene = Scene::load(path)?;
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+    let mut renderers = Vec::new();
     let mut rows = Vec::new();
     for Column { kind, pilot, connections, variant, name } in columns(args) {
         let mut settings = RenderSettings {
@@ -193,24 +206,31 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
         if let Some(image) = variant.image {
             settings.emis_image = image;
         }
-        let renderer = make_renderer(&settings, &scene)?;
-        let mut cell = Cell { name, relmse: Vec::new(), samples_per_s: 0.0 };
-        for &seed in &args.seeds {
-            let opts = RenderOptions {
-                budget: Budget::Time(Duration::from_secs_f64(seconds)),
-                seed,
-                threads: args.scenes.threads.unwrap_or(0),
-                tile_size: 32,
-            };
-            let (out, _) = renderer.render(&scene, &opts, &|_, _| {})?;
-            cell.relmse.push(tessera_common::film::compare::relmse(
-                &out.film.average(),
-                &reference.pixels,
-                tessera_common::film::compare::DROPPED_FRACTION,
-            ));
-            cell.samples_per_s += out.film.total_samples() as f64 / out.elapsed.as_secs_f64() / args.seeds.len() as f64;
+        renderers.push(make_renderer(&settings, &scene)?);
+        rows.push(Cell { name, relmse: vec![0.0; args.seeds.len()], samples_per_s: Vec::new() });
+    }
+    let columns = rows.len();
+    let mut turn = 0;
+    for _ in 0..args.repeats {
+        for (i, &seed) in args.seeds.iter().enumerate() {
+            for c in (0..columns).map(|c| (c + turn) % columns) {
+                let opts = RenderOptions {
+                    budget: Budget::Time(Duration::from_secs_f64(seconds)),
+                    seed,
+                    threads: args.scenes.threads.unwrap_or(0),
+                    tile_size: 32,
+                };
+                let (out, _) = renderers[c].render(&scene, &opts, &|_, _| {})?;
+                let relmse = tessera_common::film::compare::relmse(
+                    &out.film.average(),
+                    &reference.pixels,
+                    tessera_common::film::compare::DROPPED_FRACTION,
+                );
+                rows[c].relmse[i] += relmse / args.repeats as f64;
+                rows[c].samples_per_s.push(out.film.total_samples() as f64 / out.elapsed.as_secs_f64());
+            }
+            turn += 1;
         }
-        rows.push(cell);
     }
     Ok(rows)
 }
@@ -231,7 +251,7 @@ fn table_line(name: &str, rows: &Row) -> String {
     let cells: Vec<String> = rows
         .iter()
         .map(|c| {
-            let (e, sps) = (c.mean(), c.samples_per_s);
+            let (e, sps) = (c.mean(), mean(&c.samples_per_s));
             match pt {
                 Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
                 None => format!("{e:.5} ({:.2e} S/s)", sps),
@@ -348,6 +368,22 @@ fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
     }
 }
 
+/// How far pt's samples/s moved between its runs of a scene: the host's drift, which an
+/// equal-time cell absorbs as noise.
+fn print_drift(table: &[(String, Row)]) {
+    let spreads: Vec<String> = table
+        .iter()
+        .filter_map(|(s, r)| {
+            let runs = &r.iter().find(|c| c.name == "pt")?.samples_per_s;
+            let (lo, hi) = runs.iter().fold((f64::MAX, 0.0f64), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+            (runs.len() > 1).then(|| format!("{s} {:.0} %", 100.0 * (hi / lo - 1.0)))
+        })
+        .collect();
+    if !spreads.is_empty() {
+        println!("pt's samples/s, fastest run over slowest: {}", spreads.join(", "));
+    }
+}
+
 /// Draws the speed-ups over pt of one duration as `CHART-{seconds}s.svg`.
 fn write_chart(chart: &Path, seconds: f64, names: &[String], table: &[(String, Row)]) -> anyhow::Result<()> {
     let stem = chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time");
@@ -372,8 +408,9 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
         let threads = args.scenes.threads.map_or("all".into(), |t| t.to_string());
         println!("\n## equal time {seconds} s ({threads} threads)\n");
         println!(
-            "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}), speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
-            args.seeds
+            "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}, {} run(s) each), \
+             speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
+            args.seeds, args.repeats
         );
         println!("| scene | {} |", names.join(" | "));
         println!("|---|{}", "---|".repeat(names.len()));
@@ -384,6 +421,7 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
             table.push((scene_name(path), rows));
         }
         println!();
+        print_drift(&table);
         print_speedups(&table);
         print_floor(&table, &args.seeds);
         if let Some(chart) = &args.chart {
