@@ -160,13 +160,7 @@ fn rest_submit_emis_keeping_path_tracing_renders_the_local_calls() {
     let updates = done["strategy"]["updates"].as_array().expect("EMIS decisions in the status");
     assert!(updates.iter().all(|u| u["restarted"] == false), "path tracing kept: {updates:?}");
     assert_eq!(done["strategy"]["nu"].as_f64(), Some(0.0), "{}", done["strategy"]);
-    let mut calls = vec![];
-    let mut begin = 1;
-    while begin < 200 {
-        let call = tessera_common::emis::final_call(begin..200, 0.0, 256 * 256);
-        begin = call.end;
-        calls.push(call);
-    }
+    let calls = tessera_common::emis::calls(1..200, |r| tessera_common::emis::final_call(r, 0.0, 256 * 256));
     assert_eq!(calls[0], 1..13);
     assert_eq!(done["tiles_total"].as_u64(), Some(1 + calls.len() as u64), "the pilot and the calls: {done}");
     let out = dir.path().join("farm.exr");

@@ -31,13 +31,17 @@ pub mod optimize;
 pub mod proxy;
 mod quantile;
 pub mod render;
+mod schedule;
 mod state;
 mod wire;
 
 pub use render::{
-    CandidateSet, EmisConfig, EmisMethod, EmisOutput, FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX,
-    GUIDE_ITERATIONS, PilotData, PilotStart, SPARSE_FROM, Strategy, collecting_call, collects_moments, final_call,
-    render_emis, render_iterations, render_iterations_until,
+    CandidateSet, EmisConfig, EmisMethod, EmisOutput, GUIDE_ITERATIONS, PilotData, PilotStart, Strategy, render_emis,
+    render_iterations, render_iterations_until,
+};
+pub use schedule::{
+    FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX, SPARSE_FROM, calls, collecting_call, collects_moments,
+    final_call, update_pays,
 };
 pub use state::{EmisState, UpdateReport};
 pub use wire::Decisions;

@@ -9,7 +9,8 @@
 //! image and the path statistics; rendering continues with that strategy (moments still
 //! collected, each sample with the counts it was drawn with; while that strategy is pt, in a
 //! quarter and later an eighth of the iterations, see [`collects_moments`]) until the last
-//! update the budget can reach, then without moments. Every iteration, pilot included, stays
+//! update the budget can reach and that pays ([`update_pays`]), then without moments. Every
+//! iteration, pilot included, stays
 //! in the image with equal weight. When path tracing wins, the remaining iterations are
 //! rendered by `pt` itself (same integral, faster estimator).
 //!
@@ -39,6 +40,7 @@ use super::estimator::{MomentEstimator, MomentSettings};
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
+use super::schedule::{collecting_call, collects_moments, final_call, update_pays};
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
@@ -48,88 +50,6 @@ use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::time::Instant;
-
-/// Iterations one [`render_iterations`] call (one farm tile) renders once moments are no
-/// longer collected, with a bidirectional strategy, and the fewest [`final_call`] gives path
-/// tracing. Why eight: a call is a barrier at which the threads wait for each other; eight
-/// make that wait small while a farm still gets one tile per worker out of a pass of a few
-/// dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
-pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
-
-/// The most iterations [`final_call`] gives path tracing in one call.
-pub const FINAL_PT_ITERATIONS_MAX: u32 = 64;
-
-/// The camera samples (pixels × iterations) above which [`final_call`] stops growing a path
-/// tracing call: about a second of work on two threads, so that progress still moves.
-const FINAL_PT_SAMPLES: u64 = 1 << 23;
-
-/// The first call (farm tile) of a pass over the non-empty `iterations` that collects no
-/// moments, for a strategy with `nu` light paths per pixel on an image of `pixels`.
-/// - A bidirectional strategy: [`FINAL_ITERATIONS_PER_CALL`] iterations.
-/// - Path tracing: a sixteenth of the iterations left, between [`FINAL_ITERATIONS_PER_CALL`]
-///   and [`FINAL_PT_ITERATIONS_MAX`] (and [`FINAL_PT_SAMPLES`]). `pt` renders a pixel's
-///   iterations of a call one after the other, and more of them in a row run faster;
-///   shrinking calls keep sixteen farm tiles in every remaining stretch and a short tail
-///   (docs/decisions/0034-longer-path-tracing-calls.md).
-///
-/// Like [`collecting_call`], it depends on iteration numbers, the strategy and the image
-/// only, so a farm cutting a pass and a local render cutting what is left add the same calls.
-pub fn final_call(iterations: Range<u32>, nu: f32, pixels: u64) -> Range<u32> {
-    let len = iterations.end - iterations.start;
-    let count = if nu > 0.0 {
-        FINAL_ITERATIONS_PER_CALL
-    } else {
-        let by_samples = (FINAL_PT_SAMPLES / pixels.max(1)).min(u32::MAX as u64) as u32;
-        (len / 16).min(by_samples).clamp(FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX)
-    };
-    iterations.start..iterations.end.min(iterations.start + count)
-}
-
-/// Whether a collecting call over `iterations` records moments when the current strategy
-/// has `nu` light paths per pixel. While path tracing is the strategy, only iteration 0 (the
-/// pilot of a path-tracing start), a quarter of the iterations before [`SPARSE_FROM`] (those
-/// ≡ 2 mod 4) and an eighth after it (≡ 6 mod 8) do: recording a pt iteration's moments needs
-/// the bidirectional integrator's densities of every technique plus the estimator, which
-/// costs more than the pt iteration itself and on a scene where pt stays best is pure
-/// overhead (docs/decisions/0005-recording-under-path-tracing.md,
-/// 0033-sparser-recording-under-path-tracing.md). The updates at 4, 16 and 64 get 1, 4 and
-/// 10 iterations of moments on top of the pilot's. With a bidirectional strategy the
-/// estimator adds a smaller share and every iteration records.
-pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
-    nu > 0.0 || iterations.clone().any(records_under_path_tracing)
-}
-
-/// The iteration from which path tracing records an eighth of its iterations, not a quarter:
-/// the update there has seen five recordings, and the decision they give rarely moves.
-pub const SPARSE_FROM: u32 = 16;
-
-fn records_under_path_tracing(iteration: u32) -> bool {
-    iteration == 0 || if iteration < SPARSE_FROM { iteration % 4 == 2 } else { iteration % 8 == 6 }
-}
-
-/// The first call (farm tile) of a collecting pass over the non-empty `iterations` when the
-/// current strategy has `nu` light paths per pixel.
-/// - A bidirectional strategy records every iteration: calls of up to
-///   [`FINAL_ITERATIONS_PER_CALL`] iterations, so that a worker sums that many iterations'
-///   moments into one upload (docs/decisions/0019-compact-pilot-data.md).
-/// - Under path tracing, one iteration if it records moments ([`collects_moments`]), else the
-///   run of iterations up to the next one that does (at most [`FINAL_ITERATIONS_PER_CALL`]):
-///   such a run is rendered by `pt` in one call, not one call per iteration, each a barrier
-///   for the threads (docs/decisions/0006-path-tracing-runs-in-one-call.md).
-///
-/// The cut depends on iteration numbers and the strategy only, which a farm knows when it
-/// plans a pass, so local and farm renders add the same calls.
-pub fn collecting_call(iterations: Range<u32>, nu: f32) -> Range<u32> {
-    let start = iterations.start;
-    let end = if nu > 0.0 {
-        iterations.end
-    } else if records_under_path_tracing(start) {
-        start + 1
-    } else {
-        (start + 1..iterations.end).find(|&i| records_under_path_tracing(i)).unwrap_or(iterations.end)
-    };
-    start..end.min(start + FINAL_ITERATIONS_PER_CALL)
-}
 
 /// Side of the square tiles in which path tracing renders the iterations it wins. Why small
 /// tiles: a call is a barrier, and at its end one thread may still render a last piece while
@@ -462,8 +382,12 @@ pub fn render_emis(
         if !more {
             break;
         }
-        // moments are only worth collecting while another update can still come
-        if state.next_update().is_none_or(|u| u >= expected_total(done, state.kept_from)) {
+        // moments are only worth collecting while another update can still come and pay
+        let timed = matches!(opts.budget, Budget::Time(_));
+        if state
+            .next_update()
+            .is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from), state.strategy.nu, timed))
+        {
             state.stop_collecting();
         }
         let collect = state.collecting().then_some(state.candidate_set);
@@ -502,43 +426,4 @@ pub fn render_emis(
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The calls a pass over `iterations` is cut into.
-    fn cut(iterations: Range<u32>, nu: f32, pixels: u64) -> Vec<Range<u32>> {
-        let mut calls = vec![];
-        let mut begin = iterations.start;
-        while begin < iterations.end {
-            let call = final_call(begin..iterations.end, nu, pixels);
-            begin = call.end;
-            calls.push(call);
-        }
-        calls
-    }
-
-    #[test]
-    fn path_tracing_calls_take_a_sixteenth_of_what_is_left_within_limits() {
-        let small = 256 * 256;
-        assert_eq!(final_call(64..400, 0.0, small), 64..85);
-        assert_eq!(final_call(64..4000, 0.0, small), 64..128);
-        assert_eq!(final_call(64..100, 0.0, small), 64..72);
-        assert_eq!(final_call(64..67, 0.0, small), 64..67);
-        // the sample cap: 2²³ / (640 × 480) = 27; 1080p gets the fewest
-        assert_eq!(final_call(0..4000, 0.0, 640 * 480), 0..27);
-        assert_eq!(final_call(0..4000, 0.0, 1920 * 1080), 0..8);
-        // a bidirectional strategy keeps eight
-        assert_eq!(final_call(64..4000, 0.5, small), 64..72);
-        for (range, nu) in [(64..400, 0.0), (7..2000, 0.0), (0..1, 0.0), (64..400, 1.0)] {
-            let calls = cut(range.clone(), nu, small);
-            assert_eq!((calls[0].start, calls.last().unwrap().end), (range.start, range.end));
-            assert!(calls.windows(2).all(|w| w[0].end == w[1].start && w[0].len() >= w[1].len()), "{calls:?}");
-            assert!(calls.iter().all(|c| c.len() <= FINAL_PT_ITERATIONS_MAX as usize));
-            // sixteen or more farm tiles in every pass long enough for them
-            assert!(calls.len() >= 16.min(range.len().div_ceil(8)), "{calls:?}");
-        }
-    }
 }

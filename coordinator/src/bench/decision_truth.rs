@@ -33,7 +33,7 @@ use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneT
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
-use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, final_call, render_iterations};
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, calls, final_call, render_iterations};
 use tessera_common::film::Film;
 use tessera_common::film::compare::{DROPPED_FRACTION, mean_without_top, relmse};
 use tessera_common::integrator::PathSettings;
@@ -228,11 +228,8 @@ fn relative_variance(
 fn seconds_per_iteration(s: &Subject, strategy: &Strategy, iterations: u32, pool: &rayon::ThreadPool) -> f64 {
     let started = cpu_seconds();
     let pixels = s.scene.camera.width as u64 * s.scene.camera.height as u64;
-    let mut done = 0;
-    while done < iterations {
-        let count = final_call(done..iterations, strategy.nu, pixels).len() as u32;
-        pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 2000, done..done + count, None));
-        done += count;
+    for call in calls(0..iterations, |r| final_call(r, strategy.nu, pixels)) {
+        pool.install(|| render_iterations(&s.scene, s.settings, &s.config, strategy, 2000, call, None));
     }
     (cpu_seconds() - started) / iterations as f64
 }

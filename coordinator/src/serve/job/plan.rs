@@ -19,7 +19,7 @@
 //! one pass at a time at the barrier that ends the previous one.
 
 use super::spec::{JobSpec, TileSpec};
-use tessera_common::emis::{Strategy, collecting_call, final_call};
+use tessera_common::emis::{Strategy, calls, collecting_call, final_call, update_pays};
 use tessera_common::film::Rect;
 
 /// Edge of the rectangles of image-tile integrators.
@@ -87,38 +87,27 @@ fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> 
 }
 
 /// A pass from `spp_done` of at most `count` iterations. EMIS collects moments while another
-/// update can come within the budget (`may_collect`: no earlier pass stopped collecting), and
-/// then ends the pass at that update, where the barrier runs it; `nu` is the current
-/// strategy's light paths per pixel, on which the cut of a collecting pass depends.
+/// update can come within the budget and pay (`emis::update_pays`; `may_collect`: no earlier
+/// pass stopped collecting), and then ends the pass at that update, where the barrier runs
+/// it; `nu` is the current strategy's light paths per pixel, on which the cut of a pass
+/// depends.
 fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total: u32, nu: f32) -> PassPlan {
-    let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done).filter(|&u| u < total);
-    let update = update.filter(|_| may_collect && is_emis(spec));
+    let timed = spec.settings.spp.is_none();
+    let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done);
+    let update = update.filter(|&u| may_collect && is_emis(spec) && update_pays(u, total, nu, timed));
     let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
     let collect = update.is_some();
-    if collect {
-        // as `render_emis` does: the calls of `collecting_call`
-        let mut tiles = Vec::new();
-        let mut begin = spp_done;
-        while begin < end {
-            let samples = collecting_call(begin..end, nu);
-            begin = samples.end;
-            tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
-        }
-        return PassPlan { tiles, collect };
-    }
-    if is_emis(spec) {
-        // as `render_emis` does: the calls of `final_call`
+    let full_frame = |samples| TileSpec { rect: Rect::full(spec.width, spec.height), samples };
+    let tiles = if collect {
+        // as `render_emis` does: the calls of `collecting_call`, then of `final_call`
+        calls(spp_done..end, |r| collecting_call(r, nu)).into_iter().map(full_frame).collect()
+    } else if is_emis(spec) {
         let pixels = spec.width as u64 * spec.height as u64;
-        let mut tiles = Vec::new();
-        let mut begin = spp_done;
-        while begin < end {
-            let samples = final_call(begin..end, nu, pixels);
-            begin = samples.end;
-            tiles.push(TileSpec { rect: Rect::full(spec.width, spec.height), samples });
-        }
-        return PassPlan { tiles, collect };
-    }
-    PassPlan { tiles: pass_tiles(spec, spp_done, end - spp_done), collect }
+        calls(spp_done..end, |r| final_call(r, nu, pixels)).into_iter().map(full_frame).collect()
+    } else {
+        pass_tiles(spec, spp_done, end - spp_done)
+    };
+    PassPlan { tiles, collect }
 }
 
 /// The first pass (the pilot for EMIS). A time budget starts with one iteration to measure
@@ -298,6 +287,22 @@ mod tests {
         let bidir = pass_after_update(&s, 64, 0, 1.0, 0.5);
         assert_eq!(bidir.tiles.len(), 42);
         assert!(bidir.tiles[..41].iter().all(|t| t.samples.len() == 8));
+    }
+
+    /// A time budget under path tracing collects for an update only with at least as many
+    /// iterations after it as before (`emis::update_pays`), as `render_emis` does: after 4 of
+    /// about 22 iterations the update at 16 is skipped, after 4 of 40 it is not, and a
+    /// bidirectional strategy collects for it either way.
+    #[test]
+    fn plan_a_short_timed_path_tracing_render_skips_a_late_update() {
+        let s = spec(IntegratorName::EmisVcm, None, Some(20.0));
+        let short = pass_after_update(&s, 4, 0, 3.6, 0.0);
+        assert!(!short.collect);
+        assert!(short.tiles.iter().all(|t| t.samples.start >= 4));
+        let long = pass_after_update(&s, 4, 0, 2.0, 0.0);
+        assert!(long.collect);
+        assert!(long.tiles.last().unwrap().samples.end <= 16);
+        assert!(pass_after_update(&s, 4, 0, 3.6, 0.5).collect);
     }
 
     /// A path-tracing start discarded at the update after iteration 1: the sample budget
