@@ -10,9 +10,8 @@
 //! collected, each sample with the counts it was drawn with; while that strategy is pt, in a
 //! quarter and later an eighth of the iterations, see [`collects_moments`]) until the last
 //! update the budget can reach and that pays ([`update_pays`]), then without moments. Every
-//! iteration, pilot included, stays
-//! in the image with equal weight. When path tracing wins, the remaining iterations are
-//! rendered by `pt` itself (same integral, faster estimator).
+//! iteration, pilot included, stays in the image with equal weight. When path tracing wins,
+//! the remaining iterations are rendered by `pt` itself (same integral, faster estimator).
 //!
 //! [`PilotStart::PathTracing`], the default, starts with path tracing instead (the
 //! reference's `OnDemandVcm`; docs/emis.md, decision 5 and checklist 13): its updates choose
