@@ -5,9 +5,9 @@
 
 use std::ops::Range;
 
-/// Iterations one [`render_iterations`](super::render_iterations) call (one farm tile) renders once moments are no
-/// longer collected, with a bidirectional strategy, and the fewest [`final_call`] gives path
-/// tracing. Why eight: a call is a barrier at which the threads wait for each other; eight
+/// Iterations one [`render_iterations`](super::render_iterations) call (one farm tile)
+/// renders once moments are no longer collected, with a bidirectional strategy, and the fewest
+/// [`final_call`] gives path tracing. Why eight: a call is a barrier at which the threads wait for each other; eight
 /// make that wait small while a farm still gets one tile per worker out of a pass of a few
 /// dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
