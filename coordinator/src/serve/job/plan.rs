@@ -99,7 +99,7 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
     let collect = update.is_some();
     let full_frame = |samples| TileSpec { rect: Rect::full(spec.width, spec.height), samples };
     let tiles = if collect {
-        // as `render_emis` does: the calls of `collecting_call`, then of `final_call`
+        // the calls `render_emis` makes: `collecting_call` while collecting, `final_call` after
         calls(spp_done..end, |r| collecting_call(r, nu)).into_iter().map(full_frame).collect()
     } else if is_emis(spec) {
         let pixels = spec.width as u64 * spec.height as u64;
