@@ -140,7 +140,9 @@ fn caustic_glass_decisions_keep_light_paths() {
 /// Fails: the update after 4 iterations chooses ν 0.25 or 0.5 (regret 1.37–1.71); after 16
 /// it is within 1.24. With the converged reference as Ī the same moments choose within
 /// 1.12–1.45 after 4, so what is left is mostly the moments (decision 0028,
-/// `tests/decision_diagnosis.rs`). Run with `--ignored`.
+/// `tests/decision_diagnosis.rs`): their light-path part is heavy-tailed, and a short pilot
+/// sees a fraction of it (decisions 0036, 0037, `tests/light_path_moments.rs`). Run with
+/// `--ignored`.
 #[test]
 #[ignore = "known failure, issue 21: regret 1.37-1.71 after 4 iterations (decision 0028)"]
 fn caustic_glass_decisions_are_near_the_best() {
