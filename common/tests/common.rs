@@ -100,3 +100,18 @@ pub fn mean_and_standard_error(v: impl Iterator<Item = f64>) -> (f64, f64) {
     let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
     (mean, (var / n).sqrt())
 }
+
+/// The channel mean of `scenes/NAME/reference.exr` (square), averaged down to `size`² over
+/// blocks of whole pixels, row-major.
+pub fn reference_intensity(name: &str, size: usize) -> Vec<f32> {
+    let file = scene_path(name).with_file_name("reference.exr");
+    let full = tessera_common::film::exr::read_rgb(&file).expect("the scene has a reference");
+    let side = (full.pixels.len() as f64).sqrt() as usize;
+    let f = side / size;
+    let mut out = vec![0.0f32; size * size];
+    for (i, p) in full.pixels.iter().enumerate() {
+        let (x, y) = (i % side, i / side);
+        out[(y / f) * size + x / f] += (p[0] + p[1] + p[2]) / (3 * f * f) as f32;
+    }
+    out
+}

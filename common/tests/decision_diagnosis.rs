@@ -31,18 +31,10 @@ const LEVELS: [u32; 5] = [5, 3, 2, 1, 0];
 /// Side of the square images, as in the cached truth.
 const SIZE: usize = 128;
 
-/// The reference's channel mean averaged over 2 × 2 blocks, box-blurred as the denoiser's
+/// The reference's channel mean averaged down to `SIZE`², box-blurred as the denoiser's
 /// final box.
-fn intensity(scene: &std::path::Path) -> Image {
-    let full = tessera_common::film::exr::read_rgb(&scene.with_file_name("reference.exr")).expect("reference");
-    let side = (full.pixels.len() as f64).sqrt() as usize;
-    let f = side / SIZE;
-    let mut out = vec![0.0f32; SIZE * SIZE];
-    for (i, p) in full.pixels.iter().enumerate() {
-        let (x, y) = (i % side, i / side);
-        out[(y / f) * SIZE + x / f] += (p[0] + p[1] + p[2]) / (3 * f * f) as f32;
-    }
-    Image::from_data(SIZE, SIZE, out).box_blur(DenoiseSettings::default().final_box)
+fn intensity(name: &str) -> Image {
+    Image::from_data(SIZE, SIZE, common::reference_intensity(name, SIZE)).box_blur(DenoiseSettings::default().final_box)
 }
 
 /// The pilot's data, Ī through the guided filter with each of [`LEVELS`], and the pilot's
@@ -123,7 +115,7 @@ fn decisions_by_outlier_rule_and_normaliser() {
     for name in ["caustic-glass", "cornell-box", "veach-mis"] {
         let file = scene_path(name);
         let scene = Scene::load(&file).expect("loads").with_resolution(SIZE as u32, SIZE as u32).expect("square");
-        let image = intensity(&file);
+        let image = intensity(name);
         let config = EmisConfig::new(EmisMethod::Vcm);
         let t = truth.scene(name).expect("in the truth");
         let cell = |(nu, c): (f32, u32)| format!("ν {nu} c {c} | {:.2}", t.regret(nu, c).unwrap_or(f64::NAN));

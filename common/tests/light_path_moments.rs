@@ -47,20 +47,6 @@ fn pilot(scene: &Scene, iterations: u32) -> EmisState {
     render_emis(scene, PathSettings::from_scene(scene, None), &config, &opts, &|_, _| {}).expect("render").state
 }
 
-/// The reference's channel mean, averaged down to `SIZE`².
-fn reference() -> Vec<f64> {
-    let file = scene_path(SCENE).with_file_name("reference.exr");
-    let full = tessera_common::film::exr::read_rgb(&file).expect("reference");
-    let side = (full.pixels.len() as f64).sqrt() as usize;
-    let f = side / SIZE;
-    let mut out = vec![0.0f64; SIZE * SIZE];
-    for (i, p) in full.pixels.iter().enumerate() {
-        let (x, y) = (i % side, i / side);
-        out[(y / f) * SIZE + x / f] += (p[0] + p[1] + p[2]) as f64 / (3 * f * f) as f64;
-    }
-    out
-}
-
 fn predicted(report: &UpdateReport, nu: f32) -> f64 {
     let score = report.candidates.iter().find(|s| s.nu == nu && s.connections == Some(1));
     score.expect("an image-level candidate (ν, 1)").relative_moment
@@ -97,7 +83,7 @@ fn first_iterations_against_the_next() {
     let scene = scene();
     let (short, long) = (pilot(&scene, 4), pilot(&scene, 64));
     // the same seed: the long pilot's first 4 iterations are the short one's
-    let reference = reference();
+    let reference = common::reference_intensity(SCENE, SIZE);
     let k = short.candidates.len();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let without_top = |v: &[f64]| {
@@ -109,10 +95,10 @@ fn first_iterations_against_the_next() {
     eprintln!("|---|---|---|---|---|---|---|---|---|");
     for (i, c) in short.candidates.iter().enumerate().filter(|(_, c)| c.connections == 1 || c.nu == 0.0) {
         let (mut first, mut next) = (Vec::new(), Vec::new());
-        for (p, r) in reference.iter().enumerate() {
+        for (p, &r) in reference.iter().enumerate() {
             let (s4, s64) = (short.moments.sums[p * k + i] as f64, long.moments.sums[p * k + i] as f64);
             if s64.is_finite() {
-                let norm = r * r + 1e-4;
+                let norm = (r * r) as f64 + 1e-4;
                 first.push(s4 / 4.0 / norm);
                 next.push((s64 - s4) / 60.0 / norm);
             }
