@@ -39,7 +39,7 @@ use super::estimator::{MomentEstimator, MomentSettings};
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
-use super::schedule::{collecting_call, collects_moments, final_call, update_pays};
+use super::schedule::{collecting_call, collects_moments, final_call, seconds_per_iteration, update_pays};
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
@@ -362,21 +362,27 @@ pub fn render_emis(
     let mut film = Film::new(&scene.film);
     let start = Instant::now();
     let mut done = 0u32;
-    // iterations the budget allows at the rate so far (unknown before the first); a sample
-    // budget counts the iterations the image keeps, from `kept_from` (after a path-tracing
-    // start was discarded) on
-    let expected_total = |done: u32, kept_from: u32| match opts.budget {
+    // seconds per iteration of the last call: a strategy change (a restart from path tracing
+    // above all) makes iterations several times dearer than the average so far
+    let mut last_rate = 0.0f64;
+    // an update ran since the last call: its strategy's iterations may cost more again
+    let mut updated = false;
+    // the seconds an iteration is expected to take from now on (unknown before the first)
+    let rate = |done: u32, last_rate: f64| seconds_per_iteration(start.elapsed().as_secs_f64(), done, last_rate);
+    // iterations the budget allows at that rate; a sample budget counts the iterations the
+    // image keeps, from `kept_from` (after a path-tracing start was discarded) on
+    let expected_total = |done: u32, kept_from: u32, last_rate: f64| match opts.budget {
         Budget::Samples(n) => kept_from + n,
         Budget::Time(_) if done == 0 => u32::MAX,
-        Budget::Time(t) => ((t.as_secs_f64() / (start.elapsed().as_secs_f64() / done as f64)) as u32).max(done),
+        Budget::Time(t) => {
+            let left = (t.as_secs_f64() - start.elapsed().as_secs_f64()).max(0.0) / rate(done, last_rate);
+            done.saturating_add(left.min(u32::MAX as f64) as u32)
+        }
     };
     loop {
         let more = match opts.budget {
             Budget::Samples(n) => done < state.kept_from + n,
-            Budget::Time(t) => {
-                done == 0
-                    || start.elapsed().as_secs_f64() + start.elapsed().as_secs_f64() / done as f64 <= t.as_secs_f64()
-            }
+            Budget::Time(t) => done == 0 || start.elapsed().as_secs_f64() + rate(done, last_rate) <= t.as_secs_f64(),
         };
         if !more {
             break;
@@ -385,7 +391,7 @@ pub fn render_emis(
         let timed = matches!(opts.budget, Budget::Time(_));
         if state
             .next_update()
-            .is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from), state.strategy.nu, timed))
+            .is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from, last_rate), state.strategy.nu, timed))
         {
             state.stop_collecting();
         }
@@ -394,16 +400,21 @@ pub fn render_emis(
             Budget::Samples(n) => state.kept_from + n - done,
             Budget::Time(_) if done == 0 => 1,
             Budget::Time(t) => {
-                let per_iteration = start.elapsed().as_secs_f64() / done as f64;
-                ((t.as_secs_f64() - start.elapsed().as_secs_f64()) / per_iteration).floor().max(1.0) as u32
+                // the first call after an update renders one iteration, which measures the new
+                // strategy's pace: after a restart at 16 a call of eight VCM iterations planned
+                // at pt's pace would overrun the budget by half
+                let fit = ((t.as_secs_f64() - start.elapsed().as_secs_f64()) / rate(done, last_rate)).floor();
+                if updated { 1 } else { fit.max(1.0) as u32 }
             }
         };
+        updated = false;
         let count = match state.next_update().filter(|_| collect.is_some()) {
             // a collecting pass ends at the next update, which is within a sample budget
             Some(update) => collecting_call(done..update.max(done + 1), state.strategy.nu).len() as u32,
             None => final_call(done..done + left, state.strategy.nu, pixels).len() as u32,
         }
         .min(left);
+        let call_start = Instant::now();
         let (accum, pilot) = pool.install(|| {
             render_iterations(scene, settings, config, &state.strategy, opts.seed, done..done + count, collect)
         });
@@ -412,16 +423,17 @@ pub fn render_emis(
             state.absorb(&p).expect("invariant: a local pilot has the state's shape");
         }
         done += count;
-        let total = expected_total(done, state.kept_from);
+        last_rate = call_start.elapsed().as_secs_f64() / count as f64;
+        let total = expected_total(done, state.kept_from, last_rate);
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
         // a restart now would render a sample budget's N iterations after the ones so far
         let restart_total = if let Budget::Samples(n) = opts.budget { done.saturating_add(n) } else { total };
-        if state.update_due(done)
-            && done < total
-            && pool.install(|| state.update(&film.average(), done, restart_total)).restarted
-        {
-            film = Film::new(&scene.film);
+        if state.update_due(done) && done < total {
+            updated = true;
+            if pool.install(|| state.update(&film.average(), done, restart_total)).restarted {
+                film = Film::new(&scene.film);
+            }
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })

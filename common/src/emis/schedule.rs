@@ -117,6 +117,15 @@ pub fn update_pays(update: u32, total: u32, nu: f32, timed: bool) -> bool {
     update < total && (nu > 0.0 || !timed || update.saturating_mul(2) <= total)
 }
 
+/// The seconds a timed render expects its next iteration to take, after `done` iterations in
+/// `elapsed` seconds whose last call took `last_call` seconds per iteration: the dearer of the
+/// two. After a path-tracing start restarts into a bidirectional strategy the average holds
+/// cheap pt iterations, and calls planned by it overran a 20 s budget by 10 %
+/// (docs/decisions/0038-time-budget-after-a-restart.md).
+pub fn seconds_per_iteration(elapsed: f64, done: u32, last_call: f64) -> f64 {
+    (elapsed / done.max(1) as f64).max(last_call)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -148,6 +157,15 @@ mod tests {
         let cut = calls(0..24, |r| collecting_call(r, 0.0));
         assert_eq!(cut, [0..1, 1..2, 2..3, 3..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..22, 22..23, 23..24]);
         assert_eq!(calls(3..20, |r| collecting_call(r, 1.0)), [3..11, 11..19, 19..20]);
+    }
+
+    #[test]
+    fn a_dearer_last_call_sets_the_pace() {
+        // one pt iteration of 0.5 s, then three bidirectional ones of 3 s each
+        assert_eq!(seconds_per_iteration(9.5, 4, 3.0), 3.0);
+        // a cheap last call does not undo the pilot's and updates' share of the average
+        assert_eq!(seconds_per_iteration(10.0, 4, 1.0), 2.5);
+        assert_eq!(seconds_per_iteration(0.0, 0, 0.0), 0.0);
     }
 
     #[test]

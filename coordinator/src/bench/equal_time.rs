@@ -1,7 +1,9 @@
 //! `tessera bench equal-time 20,60`: every scene rendered by every integrator of
 //! `--integrators` for the same wall time (the columns of a seed one after another, in a
 //! rotating order, `--repeats` rounds); relMSE against the scene's `reference.exr` (top
-//! 0.1 % of pixel errors dropped), speed-ups (relMSE_B / relMSE_A), the EMIS targets
+//! 0.1 % of pixel errors dropped), scaled to the budget by the time each render took
+//! (relMSE × elapsed / budget: a render stops between iterations, and one that overran the
+//! budget would otherwise win by the overrun), speed-ups (relMSE_B / relMSE_A), the EMIS targets
 //! (geometric mean of emis-vcm over vcm and of emis-bdpt over bdpt, emis-vcm against the
 //! better of pt and vcm) and, with `--chart`, an SVG bar chart per duration.
 
@@ -88,8 +90,10 @@ fn parse_durations(s: &str) -> Result<Durations, String> {
 /// One integrator's equal-time results on one scene.
 struct Cell {
     name: String,
-    /// relMSE per seed of `--seeds`, the mean over `--repeats`.
+    /// relMSE × elapsed / budget per seed of `--seeds`, the mean over `--repeats`.
     relmse: Vec<f64>,
+    /// Seconds every run took.
+    elapsed: Vec<f64>,
     /// Samples per second of every run.
     samples_per_s: Vec<f64>,
 }
@@ -207,7 +211,7 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
             settings.emis_image = image;
         }
         renderers.push(make_renderer(&settings, &scene)?);
-        rows.push(Cell { name, relmse: vec![0.0; args.seeds.len()], samples_per_s: Vec::new() });
+        rows.push(Cell { name, relmse: vec![0.0; args.seeds.len()], elapsed: Vec::new(), samples_per_s: Vec::new() });
     }
     let columns = rows.len();
     let mut turn = 0;
@@ -226,7 +230,10 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
                     &reference.pixels,
                     tessera_common::film::compare::DROPPED_FRACTION,
                 );
-                rows[c].relmse[i] += relmse / args.repeats as f64;
+                // error × time is what equal time compares; relMSE falls as 1 / time
+                let elapsed = out.elapsed.as_secs_f64();
+                rows[c].relmse[i] += relmse * elapsed / seconds / args.repeats as f64;
+                rows[c].elapsed.push(elapsed);
                 rows[c].samples_per_s.push(out.film.total_samples() as f64 / out.elapsed.as_secs_f64());
             }
             turn += 1;
@@ -245,16 +252,17 @@ fn err_at(rows: &Row, name: &str, i: usize) -> Option<f64> {
     rows.iter().find(|c| c.name == name).map(|c| c.relmse[i])
 }
 
-/// One scene's line of the table: each column's relMSE, speed-up over pt and samples/s.
+/// One scene's line of the table: each column's scaled relMSE, speed-up over pt, samples/s
+/// and mean seconds.
 fn table_line(name: &str, rows: &Row) -> String {
     let pt = err(rows, "pt");
     let cells: Vec<String> = rows
         .iter()
         .map(|c| {
-            let (e, sps) = (c.mean(), mean(&c.samples_per_s));
+            let (e, sps, secs) = (c.mean(), mean(&c.samples_per_s), mean(&c.elapsed));
             match pt {
-                Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s)", p / e, sps),
-                None => format!("{e:.5} ({:.2e} S/s)", sps),
+                Some(p) => format!("{e:.5} ({:.2}x, {:.2e} S/s, {secs:.1} s)", p / e, sps),
+                None => format!("{e:.5} ({:.2e} S/s, {secs:.1} s)", sps),
             }
         })
         .collect();
@@ -408,8 +416,8 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
         let threads = args.scenes.threads.map_or("all".into(), |t| t.to_string());
         println!("\n## equal time {seconds} s ({threads} threads)\n");
         println!(
-            "relMSE against the reference (top 0.1 % dropped; mean over seeds {:?}, {} run(s) each), \
-             speed-up over pt = relMSE(pt) / relMSE, samples/s\n",
+            "relMSE against the reference (top 0.1 % dropped) × seconds taken / {seconds} s (mean over \
+             seeds {:?}, {} run(s) each), speed-up over pt = relMSE(pt) / relMSE, samples/s, mean seconds taken\n",
             args.seeds, args.repeats
         );
         println!("| scene | {} |", names.join(" | "));
