@@ -401,8 +401,8 @@ pub fn render_emis(
             Budget::Time(_) if done == 0 => 1,
             Budget::Time(t) => {
                 // the first call after an update renders one iteration, which measures the new
-                // strategy's pace: after a restart at 16 a call of eight VCM iterations planned
-                // at pt's pace would overrun the budget by half
+                // strategy's pace: after a restart, a call of eight VCM iterations planned at
+                // pt's pace could overrun the budget
                 let fit = ((t.as_secs_f64() - start.elapsed().as_secs_f64()) / rate(done, last_rate)).floor();
                 if updated { 1 } else { fit.max(1.0) as u32 }
             }

@@ -120,7 +120,7 @@ pub fn update_pays(update: u32, total: u32, nu: f32, timed: bool) -> bool {
 /// The seconds a timed render expects its next iteration to take, after `done` iterations in
 /// `elapsed` seconds whose last call took `last_call` seconds per iteration: the dearer of the
 /// two. After a path-tracing start restarts into a bidirectional strategy the average holds
-/// cheap pt iterations, and calls planned by it overran a 20 s budget by 10 %
+/// cheap pt iterations, and calls planned by it overran the budget
 /// (docs/decisions/0038-time-budget-after-a-restart.md).
 pub fn seconds_per_iteration(elapsed: f64, done: u32, last_call: f64) -> f64 {
     (elapsed / done.max(1) as f64).max(last_call)
