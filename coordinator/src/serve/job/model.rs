@@ -92,6 +92,11 @@ pub struct Pass {
     /// pass depends on it; 0 in rows written before it was kept, which planned that cut).
     #[serde(default)]
     pub nu: f32,
+    /// When it was planned at the barrier of the pass before it (`None` for a job's first
+    /// pass, and in rows written before it was kept): a time budget plans the next pass by
+    /// this pass's pace too.
+    #[serde(default)]
+    pub planned_ms: Option<u64>,
 }
 
 /// Where a tile is.
@@ -235,7 +240,33 @@ impl Job {
         self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
     }
 
-    fn append_pass(&mut self, kind: PassKind, plan: PassPlan, restart: bool, nu: f32) -> Range<usize> {
+    /// How long the job has rendered at `now_ms`, and the pace of its last pass if that pass
+    /// was planned at a barrier and is merged.
+    pub(super) fn clock(&self, now_ms: u64) -> plan::Clock {
+        let elapsed_s = now_ms.saturating_sub(self.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
+        let last_pass_s = self
+            .passes
+            .last()
+            .filter(|p| p.tiles.end <= self.merged)
+            .and_then(|p| {
+                let tiles = &self.tiles[p.tiles.clone()];
+                let begin = tiles.iter().map(|t| t.spec.samples.start).min()?;
+                let end = tiles.iter().map(|t| t.spec.samples.end).max()?;
+                let seconds = now_ms.saturating_sub(p.planned_ms?) as f64 / 1000.0;
+                Some(seconds / end.saturating_sub(begin).max(1) as f64)
+            })
+            .unwrap_or(0.0);
+        plan::Clock { elapsed_s, last_pass_s }
+    }
+
+    fn append_pass(
+        &mut self,
+        kind: PassKind,
+        plan: PassPlan,
+        restart: bool,
+        nu: f32,
+        now_ms: Option<u64>,
+    ) -> Range<usize> {
         let start = self.tiles.len();
         self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
             spec,
@@ -245,7 +276,7 @@ impl Job {
         }));
         let range = start..self.tiles.len();
         self.index.queued.extend(range.clone());
-        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart, nu });
+        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart, nu, planned_ms: now_ms });
         range
     }
 
@@ -347,7 +378,7 @@ impl JobsModel {
         };
         let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
         let nu = plan::initial_nu(&job.spec);
-        let range = job.append_pass(kind, first, false, nu);
+        let range = job.append_pass(kind, first, false, nu, None);
         self.jobs.insert(id.to_string(), job);
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
@@ -436,8 +467,7 @@ impl JobsModel {
         if let Some(n) = j.spec.settings.spp {
             return j.spp_merged().saturating_add(n);
         }
-        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
-        plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s)
+        plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms))
     }
 
     /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
@@ -447,9 +477,8 @@ impl JobsModel {
             return false;
         }
         let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
-        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
-        plan::after_pass(&j.spec, spp, j.kept_from(), elapsed_s, collected, j.nu()) == BarrierAction::Finish
+        plan::after_pass(&j.spec, spp, j.kept_from(), j.clock(now_ms), collected, j.nu()) == BarrierAction::Finish
     }
 
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
@@ -468,13 +497,12 @@ impl JobsModel {
             return (None, changes);
         }
         // every planned tile is merged: the last pass's barrier
-        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let collected = j.passes.last().is_some_and(|p| p.collect);
         let nu = j.nu();
-        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), elapsed_s, collected, nu);
+        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms), collected, nu);
         match &action {
             BarrierAction::NextPass(plan) => {
-                let range = j.append_pass(PassKind::Final, plan.clone(), false, nu);
+                let range = j.append_pass(PassKind::Final, plan.clone(), false, nu, Some(now_ms));
                 changes.entry(job.to_string()).or_default().extend(range);
             }
             BarrierAction::Optimize => j.state = JobState::Optimizing,
@@ -492,11 +520,10 @@ impl JobsModel {
             return Err(TransitionError::NotOptimizing(job.to_string()));
         }
         j.state = JobState::Final;
-        let elapsed_s = now_ms.saturating_sub(j.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
         let spp = j.spp_merged();
         let kept_from = if restart { spp } else { j.kept_from() };
-        let plan = plan::pass_after_update(&j.spec, spp, kept_from, elapsed_s, nu);
-        let range = j.append_pass(PassKind::Final, plan, restart, nu);
+        let plan = plan::pass_after_update(&j.spec, spp, kept_from, j.clock(now_ms), nu);
+        let range = j.append_pass(PassKind::Final, plan, restart, nu, Some(now_ms));
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());
         Ok(changes)

@@ -16,10 +16,11 @@
 //! same order as locally: bit-for-bit equality, not just equality within rounding.
 //!
 //! Time budgets have no local bit-exact twin (local passes depend on wall time too); they plan
-//! one pass at a time at the barrier that ends the previous one.
+//! one pass at a time at the barrier that ends the previous one, by the dearer of the average
+//! pace and the last pass's ([`Clock`]), as `render_emis` plans its calls.
 
 use super::spec::{JobSpec, TileSpec};
-use tessera_common::emis::{Strategy, calls, collecting_call, final_call, update_pays};
+use tessera_common::emis::{Strategy, calls, collecting_call, final_call, seconds_per_iteration, update_pays};
 use tessera_common::film::Rect;
 
 /// Edge of the rectangles of image-tile integrators.
@@ -55,15 +56,44 @@ pub fn initial_nu(spec: &JobSpec) -> f32 {
     spec.settings.integrator.emis_method().map_or(0.0, |m| Strategy::initial(m, spec.settings.emis_pilot).nu)
 }
 
-/// Iterations the budget allows in total, as far as is known after `spp_done` took
-/// `elapsed_s` seconds (a time budget's is unknown before the first iteration). A sample
-/// budget counts the iterations the film keeps, from `kept_from` on (EMIS: a path-tracing
-/// start's iterations are discarded when a bidirectional strategy wins).
-pub fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
+/// How long a job has rendered, which is what a time budget plans by.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Clock {
+    /// Seconds since the job's first lease.
+    pub elapsed_s: f64,
+    /// Seconds per iteration of the pass that just ended, from its planning to its barrier;
+    /// 0 while unknown.
+    pub last_pass_s: f64,
+}
+
+impl Clock {
+    /// The seconds the next iteration is expected to take after `spp_done`: the dearer of the
+    /// average and the last pass's. After an EMIS restart from path tracing the average still
+    /// holds cheap pt iterations, and a pass planned by it overruns the budget
+    /// (docs/decisions/0038-time-budget-after-a-restart.md).
+    fn pace(&self, spp_done: u32) -> f64 {
+        seconds_per_iteration(self.elapsed_s, spp_done, self.last_pass_s).max(1e-9)
+    }
+}
+
+impl From<f64> for Clock {
+    /// A clock of `elapsed_s` seconds whose last pass's pace is unknown.
+    fn from(elapsed_s: f64) -> Self {
+        Clock { elapsed_s, last_pass_s: 0.0 }
+    }
+}
+
+/// Iterations the budget allows in total, as far as is known after `spp_done` at `clock`
+/// (a time budget's is unknown before the first iteration). A sample budget counts the
+/// iterations the film keeps, from `kept_from` on (EMIS: a path-tracing start's iterations are
+/// discarded when a bidirectional strategy wins).
+pub fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: impl Into<Clock>) -> u32 {
+    let clock = clock.into();
     match (spec.settings.spp, spec.settings.time_s) {
         (Some(n), _) => kept_from + n,
-        (None, Some(budget)) if spp_done > 0 && elapsed_s > 0.0 => {
-            ((budget / (elapsed_s / spp_done as f64)) as u32).max(spp_done)
+        (None, Some(budget)) if spp_done > 0 && clock.elapsed_s > 0.0 => {
+            let left = (budget - clock.elapsed_s).max(0.0) / clock.pace(spp_done);
+            spp_done.saturating_add(left.min(u32::MAX as f64) as u32)
         }
         _ => u32::MAX,
     }
@@ -71,16 +101,17 @@ pub fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: 
 
 /// Iterations the next pass may render: the rest of a sample budget, or for a time budget
 /// about a tenth of it, never planned past the deadline (as locally). 0: finished.
-fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64) -> u32 {
+fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: Clock) -> u32 {
     match (spec.settings.spp, spec.settings.time_s) {
         (Some(n), _) => (kept_from + n).saturating_sub(spp_done),
         (None, Some(budget)) => {
-            let remaining = budget - elapsed_s;
+            let remaining = budget - clock.elapsed_s;
             if remaining <= 0.0 || spp_done == 0 {
                 return 0;
             }
-            let per_spp = (elapsed_s / spp_done as f64).max(1e-9);
-            ((remaining / per_spp).floor() as u32).min(((budget * 0.1 / per_spp) as u32).max(1))
+            let pace = clock.pace(spp_done);
+            let fit = (remaining / pace).floor().min(u32::MAX as f64) as u32;
+            fit.min(((budget * 0.1 / pace) as u32).max(1))
         }
         (None, None) => 0,
     }
@@ -114,7 +145,7 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
 /// the speed.
 pub fn first_pass(spec: &JobSpec) -> PassPlan {
     let count = spec.settings.spp.unwrap_or(1);
-    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, 0.0), initial_nu(spec))
+    plan_from(spec, 0, count, true, expected_total(spec, 0, 0, Clock::default()), initial_nu(spec))
 }
 
 /// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take one
@@ -133,23 +164,24 @@ pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32) -> Vec<TileSpec> {
 }
 
 /// What to do at the barrier after a pass. `spp_done` samples per pixel are merged (the film
-/// keeps those from `kept_from` on), rendering has run for `elapsed_s` seconds, and
-/// `collected` says whether the pass collected moments; `nu` is the current strategy's.
+/// keeps those from `kept_from` on), `clock` says how long rendering took, and `collected`
+/// says whether the pass collected moments; `nu` is the current strategy's.
 /// An EMIS update is due when the pass collected up to an update point and iterations remain
 /// to use it (as `render_emis` decides locally).
 pub fn after_pass(
     spec: &JobSpec,
     spp_done: u32,
     kept_from: u32,
-    elapsed_s: f64,
+    clock: impl Into<Clock>,
     collected: bool,
     nu: f32,
 ) -> BarrierAction {
-    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
+    let clock = clock.into();
+    let total = expected_total(spec, spp_done, kept_from, clock);
     if collected && spec.settings.emis_updates.contains(&spp_done) && spp_done < total {
         return BarrierAction::Optimize;
     }
-    match next_count(spec, spp_done, kept_from, elapsed_s) {
+    match next_count(spec, spp_done, kept_from, clock) {
         0 => BarrierAction::Finish,
         count => BarrierAction::NextPass(plan_from(spec, spp_done, count, collected, total, nu)),
     }
@@ -157,10 +189,14 @@ pub fn after_pass(
 
 /// The pass after an EMIS update at `spp_done` that chose a strategy with `nu` light paths
 /// per pixel (at least one iteration: the update was run because iterations remain;
-/// `kept_from` is `spp_done` if the update restarted the film).
-pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, elapsed_s: f64, nu: f32) -> PassPlan {
-    let total = expected_total(spec, spp_done, kept_from, elapsed_s);
-    plan_from(spec, spp_done, next_count(spec, spp_done, kept_from, elapsed_s).max(1), true, total, nu)
+/// `kept_from` is `spp_done` if the update restarted the film). Under a time budget that pass
+/// is one iteration, which measures the new strategy's pace before a longer pass is planned
+/// by it, as `render_emis` does locally.
+pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: impl Into<Clock>, nu: f32) -> PassPlan {
+    let clock = clock.into();
+    let total = expected_total(spec, spp_done, kept_from, clock);
+    let count = if spec.settings.spp.is_none() { 1 } else { next_count(spec, spp_done, kept_from, clock).max(1) };
+    plan_from(spec, spp_done, count, true, total, nu)
 }
 
 #[cfg(test)]
@@ -303,6 +339,30 @@ mod tests {
         assert!(long.collect);
         assert!(long.tiles.last().unwrap().samples.end <= 16);
         assert!(pass_after_update(&s, 4, 0, 3.6, 0.5).collect);
+    }
+
+    /// A time budget plans a pass by the dearer of the average pace and the last pass's: after
+    /// a restart from path tracing (4 pt iterations in 1 s), one VCM iteration measures the new
+    /// pace first, and the 2 s it took, not the 0.6 s average, plans the pass after it. By the
+    /// average the job would collect for the update at 16, which it cannot reach.
+    #[test]
+    fn plan_a_timed_pass_by_the_dearer_of_the_average_and_the_last_pace() {
+        let s = spec(IntegratorName::EmisVcm, None, Some(20.0));
+        let first = pass_after_update(&s, 4, 4, 1.0, 1.0);
+        assert_eq!(first.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..5]);
+        let next = |clock: Clock| match after_pass(&s, 5, 4, clock, first.collect, 1.0) {
+            BarrierAction::NextPass(p) => (p.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), p.collect),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(next(Clock { elapsed_s: 3.0, last_pass_s: 2.0 }), (vec![5..6], false));
+        assert_eq!(next(Clock::from(3.0)), (vec![5..8], true));
+        assert_eq!(expected_total(&s, 5, 4, Clock { elapsed_s: 3.0, last_pass_s: 2.0 }), 13);
+        assert_eq!(expected_total(&s, 5, 4, 3.0), 33);
+        // a last pass cheaper than the average does not shorten the estimate
+        assert_eq!(expected_total(&s, 5, 4, Clock { elapsed_s: 3.0, last_pass_s: 0.1 }), 33);
+        // a sample budget ignores the clock
+        let n = spec(IntegratorName::EmisVcm, Some(40), None);
+        assert_eq!(pass_after_update(&n, 4, 4, Clock { elapsed_s: 3.0, last_pass_s: 2.0 }, 1.0).tiles.len(), 2);
     }
 
     /// A path-tracing start discarded at the update after iteration 1: the sample budget

@@ -203,6 +203,44 @@ fn time_budget_plans_passes_at_barriers() {
     assert_eq!(m.jobs["a"].tiles[4].spec.samples.start, 1);
 }
 
+/// A timed EMIS job plans by the dearer of the average pace and its last pass's: after a
+/// cheap path-tracing start (4 iterations in 30 ms) restarts into VCM, one iteration of 1.9 s
+/// measures the new pace, and the pass after it gets 3 iterations (a tenth of 60 s at 1.9 s
+/// each), not the 11 up to the update at 16 that the average of 0.38 s would give.
+#[test]
+fn a_timed_emis_job_paces_the_pass_after_a_restart_by_its_last_pass() {
+    let mut m = JobsModel::default();
+    let mut s = spec(IntegratorName::EmisVcm, 1, 0);
+    (s.settings.spp, s.settings.time_s) = (None, Some(60.0));
+    m.submit("a", s, 0).unwrap();
+    // leases, renders and merges everything planned, finishing at `now`
+    let step = |m: &mut JobsModel, now: u64| {
+        for l in m.lease("w", 64, now, TTL).0 {
+            m.result("w", &l, Ok(()), now);
+        }
+        let r = m.mergeable("a");
+        m.merged("a", r.end, now).0
+    };
+    let mut now = 0;
+    while m.jobs["a"].spp_merged() < 4 {
+        now += 10;
+        if let Some(BarrierAction::Optimize) = step(&mut m, now) {
+            // the update after 1 keeps path tracing; the one after 4 restarts into VCM
+            let restart = m.jobs["a"].spp_merged() == 4;
+            m.optimized("a", restart, if restart { 1.0 } else { 0.0 }, now).unwrap();
+        }
+    }
+    assert_eq!((now, m.jobs["a"].kept_from()), (40, 4));
+    let ranges = |m: &JobsModel| {
+        let pass = m.jobs["a"].passes.last().unwrap().tiles.clone();
+        m.jobs["a"].tiles[pass].iter().map(|t| t.spec.samples.clone()).collect::<Vec<_>>()
+    };
+    assert_eq!(ranges(&m), [4..5]);
+    assert_eq!(m.jobs["a"].passes.last().unwrap().planned_ms, Some(40));
+    assert!(matches!(step(&mut m, 1940), Some(BarrierAction::NextPass(_))));
+    assert_eq!(ranges(&m), [5..8]);
+}
+
 #[test]
 fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     let mut m = JobsModel::default();
