@@ -41,7 +41,7 @@ pub use render::{
 };
 pub use schedule::{
     FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX, SPARSE_FROM, calls, collecting_call, collects_moments,
-    final_call, seconds_per_iteration, update_pays,
+    final_call, iterations_at_pace, seconds_per_iteration, update_pays,
 };
 pub use state::{EmisState, UpdateReport};
 pub use wire::Decisions;

@@ -39,7 +39,9 @@ use super::estimator::{MomentEstimator, MomentSettings};
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
-use super::schedule::{collecting_call, collects_moments, final_call, seconds_per_iteration, update_pays};
+use super::schedule::{
+    collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
+};
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
@@ -375,8 +377,7 @@ pub fn render_emis(
         Budget::Samples(n) => kept_from + n,
         Budget::Time(_) if done == 0 => u32::MAX,
         Budget::Time(t) => {
-            let left = (t.as_secs_f64() - start.elapsed().as_secs_f64()).max(0.0) / rate(done, last_rate);
-            done.saturating_add(left.min(u32::MAX as f64) as u32)
+            iterations_at_pace(t.as_secs_f64(), start.elapsed().as_secs_f64(), done, rate(done, last_rate))
         }
     };
     loop {

@@ -126,6 +126,13 @@ pub fn seconds_per_iteration(elapsed: f64, done: u32, last_call: f64) -> f64 {
     (elapsed / done.max(1) as f64).max(last_call)
 }
 
+/// The iterations a time budget of `budget` seconds allows in all, after `done` in `elapsed`
+/// seconds, at `pace` seconds per iteration from now on ([`seconds_per_iteration`]).
+pub fn iterations_at_pace(budget: f64, elapsed: f64, done: u32, pace: f64) -> u32 {
+    let left = (budget - elapsed).max(0.0) / pace;
+    done.saturating_add(left.min(u32::MAX as f64) as u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -166,6 +173,13 @@ mod tests {
         // a cheap last call does not undo the pilot's and updates' share of the average
         assert_eq!(seconds_per_iteration(10.0, 4, 1.0), 2.5);
         assert_eq!(seconds_per_iteration(0.0, 0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn a_time_budget_allows_what_is_left_at_the_pace() {
+        assert_eq!(iterations_at_pace(20.0, 8.0, 4, 2.0), 10);
+        assert_eq!(iterations_at_pace(20.0, 21.0, 4, 2.0), 4);
+        assert_eq!(iterations_at_pace(20.0, 8.0, 4, 1e-30), u32::MAX);
     }
 
     #[test]

@@ -20,7 +20,9 @@
 //! pace and the last pass's ([`Clock`]), as `render_emis` plans its calls.
 
 use super::spec::{JobSpec, TileSpec};
-use tessera_common::emis::{Strategy, calls, collecting_call, final_call, seconds_per_iteration, update_pays};
+use tessera_common::emis::{
+    Strategy, calls, collecting_call, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
+};
 use tessera_common::film::Rect;
 
 /// Edge of the rectangles of image-tile integrators.
@@ -92,8 +94,7 @@ pub fn expected_total(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: impl
     match (spec.settings.spp, spec.settings.time_s) {
         (Some(n), _) => kept_from + n,
         (None, Some(budget)) if spp_done > 0 && clock.elapsed_s > 0.0 => {
-            let left = (budget - clock.elapsed_s).max(0.0) / clock.pace(spp_done);
-            spp_done.saturating_add(left.min(u32::MAX as f64) as u32)
+            iterations_at_pace(budget, clock.elapsed_s, spp_done, clock.pace(spp_done))
         }
         _ => u32::MAX,
     }
