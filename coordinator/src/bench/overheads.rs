@@ -1,7 +1,8 @@
 //! `tessera bench overheads`: what EMIS costs beyond its integrator. Moment accumulation as a
 //! fraction of a pilot iteration's time (pilot iterations with and without the estimator,
-//! interleaved), one optimiser and one denoiser run at 256² and 1920×1080 on synthetic inputs,
-//! and the memory of the moment buffers. With `--path-tracing`: what recording moments costs
+//! interleaved), the updates a render runs (denoiser and optimiser; a path-tracing start's,
+//! a bidirectional strategy's, and with the guided Ī) at 256² and 1920×1080 on synthetic
+//! inputs, and the memory of the moment buffers. With `--path-tracing`: what recording moments costs
 //! while path tracing is the strategy, against `pt` itself.
 
 use super::{SceneArgs, cpu_seconds};
@@ -96,9 +97,43 @@ fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, rep
     Overhead { best, wall: [median(w0), median(w1)], cpu: [median(c0), median(c1)] }
 }
 
-/// One optimiser and one denoiser run on synthetic inputs of `w × h` with the VCM candidates.
-fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
-    let candidates = EmisConfig::new(EmisMethod::Vcm).candidates.candidates();
+/// The updates a render runs, each timed on synthetic inputs: which candidates it chooses
+/// from and the Ī it makes the moments relative to.
+#[derive(Clone, Copy)]
+enum UpdateKind {
+    /// A path-tracing start's update (the default pilot): the reduced set, the guided Ī.
+    PathTracingStart,
+    /// Every update after a restart, and the bidirectional pilot's: the full set, the default Ī.
+    Bidirectional,
+    /// The full set with the guided Ī (`--emis-image denoised`): the dearest update.
+    BidirectionalGuided,
+}
+
+impl UpdateKind {
+    const ALL: [UpdateKind; 3] = [Self::PathTracingStart, Self::Bidirectional, Self::BidirectionalGuided];
+
+    fn label(self) -> &'static str {
+        match self {
+            Self::PathTracingStart => "path-tracing start (reduced set, guided Ī)",
+            Self::Bidirectional => "bidirectional (full set, default Ī)",
+            Self::BidirectionalGuided => "bidirectional, --emis-image denoised (full set, guided Ī)",
+        }
+    }
+}
+
+/// One denoiser and one optimiser run of the VCM update `kind` on synthetic inputs of
+/// `w × h`: (optimiser seconds, denoiser seconds, candidates, moment bytes).
+fn update_time(w: u32, h: u32, kind: UpdateKind) -> (f64, f64, usize, usize) {
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    let set = match kind {
+        UpdateKind::PathTracingStart => CandidateSet::Reduced,
+        UpdateKind::Bidirectional | UpdateKind::BidirectionalGuided => CandidateSet::Full,
+    };
+    let denoise = match kind {
+        UpdateKind::BidirectionalGuided => &DenoiseSettings::GUIDED,
+        _ => config.denoise_of(set),
+    };
+    let candidates = config.candidates_of(set);
     let mut moments = MomentBuffer::new(w, h, candidates.len());
     for (i, v) in moments.sums.iter_mut().enumerate() {
         *v = Sampler::for_pixel(9, i as u32, 0).next_1d() + 0.01;
@@ -109,30 +144,31 @@ fn optimizer_time(w: u32, h: u32) -> (f64, f64, usize) {
     let albedo = vec![[0.5f32; 3]; n];
     let normal: Vec<[f32; 3]> = (0..n).map(|i| if i % 7 == 0 { [1.0, 0.0, 0.0] } else { [0.0, 0.0, 1.0] }).collect();
     let depth = vec![1.0f32; n];
-    let config = EmisConfig::new(EmisMethod::Vcm);
     let t = Instant::now();
     let image = denoised_intensity(
         w as usize,
         h as usize,
         &color,
         &Guides { albedo: &albedo, normal: &normal, depth: &depth },
-        &config.denoise,
+        denoise,
     );
-    let denoise = t.elapsed().as_secs_f64();
+    let denoise_s = t.elapsed().as_secs_f64();
+    let reduced = set == CandidateSet::Reduced;
     let t = Instant::now();
     let decision = optimize(&OptimizerInput {
-        restart_share: 0.0,
+        // a restart after the first of 64 iterations, as a path-tracing start's first update
+        restart_share: if reduced { 1.0 / 64.0 } else { 0.0 },
         candidates: &candidates,
         moments: &moments,
         image: &Image::from_data(w as usize, h as usize, image.data),
         statistics: PathStatistics::default(),
         constants: config.constants,
         filters: config.filters,
-        merge_scope: MergeScope::PerPixel,
+        merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
         connection_scope: config.connection_scope,
     });
     std::hint::black_box(decision);
-    (t.elapsed().as_secs_f64(), denoise, moments.sums.len() * 4)
+    (t.elapsed().as_secs_f64(), denoise_s, candidates.len(), moments.sums.len() * 4)
 }
 
 /// Runs `tessera bench overheads`.
@@ -144,22 +180,25 @@ pub fn run(args: &OverheadsArgs) -> anyhow::Result<()> {
     if !args.update_only {
         accumulation_table(args, &pool)?;
     }
-    println!("\noptimiser (51 candidates, synthetic moments) and denoiser, best of {} runs:", args.repeats.max(1));
+    println!(
+        "\nEMIS updates (VCM candidates, synthetic moments): denoiser of the pilot image, then optimiser, best of {} runs:",
+        args.repeats.max(1)
+    );
     for (w, h) in [(256u32, 256u32), (1920, 1080)] {
-        let runs: Vec<(f64, f64, usize)> =
-            (0..args.repeats.max(1)).map(|_| pool.install(|| optimizer_time(w, h))).collect();
-        let best_opt = runs.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
-        let best_den = runs.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
-        let best_update = runs.iter().map(|r| r.0 + r.1).fold(f64::INFINITY, f64::min);
-        let guides = (w * h) as usize * (3 + 3 + 1) * 4;
-        println!(
-            "{w}x{h}: update {:.1} ms (optimiser {:.1} ms, denoiser {:.1} ms); moment buffer {:.1} MB (+{:.1} MB guides; the optimiser holds a filtered copy of the same size)",
-            best_update * 1e3,
-            best_opt * 1e3,
-            best_den * 1e3,
-            runs[0].2 as f64 / 1e6,
-            guides as f64 / 1e6
-        );
+        for kind in UpdateKind::ALL {
+            let runs: Vec<_> = (0..args.repeats.max(1)).map(|_| pool.install(|| update_time(w, h, kind))).collect();
+            let best = |f: &dyn Fn(&(f64, f64, usize, usize)) -> f64| runs.iter().map(f).fold(f64::INFINITY, f64::min);
+            let (update, opt, den) = (best(&|r| r.0 + r.1), best(&|r| r.0), best(&|r| r.1));
+            let (candidates, bytes) = (runs[0].2, runs[0].3);
+            println!(
+                "{w}x{h}, {}: update {:.1} ms (optimiser {:.1} ms, denoiser {:.1} ms); {candidates} candidates, moment buffer {:.1} MB (the optimiser holds a filtered copy of the same size)",
+                kind.label(),
+                update * 1e3,
+                opt * 1e3,
+                den * 1e3,
+                bytes as f64 / 1e6,
+            );
+        }
     }
     Ok(())
 }
