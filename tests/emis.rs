@@ -1,5 +1,5 @@
 //! EMIS jobs on the farm, each equal to `tessera render` bit for bit: the bidirectional pilot
-//! with its per-pixel merge mask, a path-tracing start that a restart discards, one that keeps
+//! with its per-pixel merge mask, a path-tracing start that a restart sets aside, one that keeps
 //! path tracing to the end, and per-pixel connection counts; the decisions, strategy PNG and
 //! report survive a coordinator restart.
 
@@ -66,12 +66,13 @@ fn rest_submit_emis_vcm_equals_local_render_with_the_same_decisions() {
 
 /// The path-tracing start on the farm. On caustic-glass (seed 4) the updates after 1 and 2
 /// keep path tracing (pt passes: iterations 1 and 3 return no moments), the one after 4 picks a
-/// bidirectional strategy: the coordinator discards its film and renders the budget's 6
-/// iterations, 4..10, into a new one. The image, its sample counts and the decisions equal a
-/// local render's, bit for bit. The start's updates use the guided Ī: with the pilot image
+/// bidirectional strategy: the coordinator sets its film aside in the EMIS state and renders
+/// the budget's 6 iterations, 4..10, into a new one; the update after 8 weighs the start, which
+/// rejoins the image. The image, its sample counts, the start's weight and the decisions equal
+/// a local render's, bit for bit. The start's updates use the guided Ī: with the pilot image
 /// alone path tracing stays there at every seed (decisions 0028 and 0029).
 #[test]
-fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() {
+fn rest_submit_emis_with_a_path_tracing_start_sets_it_aside_like_a_local_render() {
     use tessera_common::film::exr::{read_attribute, read_sample_counts};
     let dir = tempfile::tempdir().unwrap();
     let (c, _w) = farm(dir.path(), 2);
@@ -79,7 +80,7 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
     let gem = std::fs::read(scene("caustic-glass").with_file_name("gem.obj")).unwrap();
     let settings = json!({
         "integrator": "emis-vcm", "spp": 6, "seed": 4,
-        "emis_pilot": "path-tracing", "emis_updates": [1, 2, 4],
+        "emis_pilot": "path-tracing", "emis_updates": [1, 2, 4, 8],
     });
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![("gem.obj".into(), gem)], settings);
     assert_eq!(status, 201, "{job}");
@@ -90,15 +91,23 @@ fn rest_submit_emis_with_a_path_tracing_start_discards_it_like_a_local_render() 
         .iter()
         .map(|u| (u["iteration"].as_u64().unwrap(), u["reduced"].as_bool().unwrap(), u["restarted"].as_bool().unwrap()))
         .collect();
-    assert_eq!(summary, [(1, true, false), (2, true, false), (4, true, true)], "{updates:?}");
+    assert_eq!(summary, [(1, true, false), (2, true, false), (4, true, true), (8, false, false)], "{updates:?}");
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
-    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4"];
+    let more = ["--emis-pilot", "path-tracing", "--emis-updates", "1,2,4,8"];
     let local = local_render_with(dir.path(), &scene("caustic-glass"), "emis-vcm", 6, 4, &more);
     assert_same_image(&out, &local);
-    assert!(read_sample_counts(&out).unwrap().iter().all(|&n| n == 6), "the kept iterations only");
+    assert!(read_sample_counts(&out).unwrap().iter().all(|&n| n == 6), "the counts of the new film");
     assert_eq!(read_attribute(&out, "tessera/emis_kept_from").unwrap(), Some(4.0));
-    for key in ["tessera/emis_nu", "tessera/emis_connections", "tessera/emis_updates", "tessera/emis_kept_from"] {
+    let weight = read_attribute(&out, "tessera/emis_start_weight").unwrap();
+    assert!(weight.is_some_and(|k| k > 0.0), "the update after 8 weighs the start: {weight:?}");
+    for key in [
+        "tessera/emis_nu",
+        "tessera/emis_connections",
+        "tessera/emis_updates",
+        "tessera/emis_kept_from",
+        "tessera/emis_start_weight",
+    ] {
         assert_eq!(read_attribute(&out, key).unwrap(), read_attribute(&local, key).unwrap(), "{key}");
     }
 }

@@ -310,10 +310,11 @@ fn coordinator_killed_mid_emis_job_resumes_with_its_moments() {
 }
 
 /// A path-tracing start survives the crash with its restart: on caustic-glass (seed 8) the
-/// update after 1 iteration picks a bidirectional strategy and clears the film; the crash
-/// comes inside the pass collecting moments for the update at 32 (tiles 4..12, 12..20,
-/// 20..28, 28..32 of eight iterations each at most, after tiles 0..1, 1..2 and 2..4), so the
-/// restarted film, the full-set moments and the first kept iteration come back from the
+/// update after 1 iteration picks a bidirectional strategy and sets the film aside as the
+/// kept start; the crash comes inside the pass collecting moments for the update at 32
+/// (tiles 4..12, 12..20, 20..28, 28..32 of eight iterations each at most, after tiles 0..1,
+/// 1..2 and 2..4), so the restarted film, the full-set moments, the kept start (which the
+/// update at 32 weighs into the image) and the first kept iteration come back from the
 /// checkpoint.
 #[test]
 fn coordinator_killed_mid_emis_job_after_a_restart_resumes_with_the_new_film() {

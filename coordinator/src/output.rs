@@ -87,10 +87,15 @@ impl<'a> Outputs<'a> {
                 }
             }
             attributes.push(("tessera/emis_updates".into(), Attribute::Int(e.updates_done as i32)));
-            // a path-tracing start's discarded iterations: the image holds kept_from.. only
+            // a path-tracing start's iterations: the counts layer holds kept_from.. only, and
+            // the start enters the image by its weight (absent or 0: left out)
             attributes.push(("tessera/emis_kept_from".into(), Attribute::Int(e.kept_from as i32)));
+            if let Some(k) = e.start.as_ref().and_then(|s| s.weight) {
+                attributes.push(("tessera/emis_start_weight".into(), Attribute::Float(k as f32)));
+            }
         }
-        Outputs { film, rgb: film.average(), emis: emis.map(|e| (e, e.merge_mask())), attributes }
+        let rgb = emis.map_or_else(|| film.average(), |e| e.image(film));
+        Outputs { film, rgb, emis: emis.map(|e| (e, e.merge_mask())), attributes }
     }
 
     /// The averaged linear RGB image.

@@ -32,6 +32,7 @@ pub mod proxy;
 mod quantile;
 pub mod render;
 mod schedule;
+pub mod start;
 mod state;
 mod wire;
 

@@ -237,6 +237,8 @@ pub struct Decision {
     pub merge_mask: Image,
     /// Scores of every image-level candidate.
     pub scores: Vec<ImageLevelScore>,
+    /// The index in [`Decision::scores`] of the chosen candidate (`None`: nothing was finite).
+    pub chosen: Option<usize>,
     /// Per pixel, the filtered relative moment M_j / (Ī_j² + 1e-4) of the chosen strategy.
     pub relative_moment: Image,
 }
@@ -315,7 +317,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
             })
             .collect(),
     );
-    Decision { nu, connections, connection_mask, merge_mask, scores, relative_moment }
+    Decision { nu, connections, connection_mask, merge_mask, scores, chosen, relative_moment }
 }
 
 /// The pixel level: per pixel, the merge bit of the candidate with the lowest filtered

@@ -16,11 +16,14 @@
 //! [`PilotStart::PathTracing`], the default, starts with path tracing instead (the
 //! reference's `OnDemandVcm`; docs/emis.md, decision 5 and checklist 13): its updates choose
 //! from a reduced set (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt
-//! wins. The first update a bidirectional candidate wins discards the image so far, restarts
-//! the moments for the full set and renders a sample budget's iterations in full after it;
-//! the updates that follow keep the schedule (their iteration counts include the discarded
-//! ones). A candidate wins that update only by more than the share of the render it
-//! discards. Its recording iterations carry a light probe (`integrator::LightProbe`): without
+//! wins. The first update a bidirectional candidate wins starts a new image, keeping the
+//! old one aside (`EmisState::start`, combined by the weight the next update estimates),
+//! restarts the moments for the full set and renders a sample budget's iterations in full
+//! after it; the updates that follow keep the schedule (their iteration counts include the
+//! start's). When no update would follow to weigh the start, the restart discards it, and a
+//! candidate wins only by more than the share of the render it discards
+//! (docs/decisions/0040-keep-the-path-tracing-start.md). The pt start's recording
+//! iterations carry a light probe (`integrator::LightProbe`): without
 //! it the cost model would know neither the light paths' length nor the photons a merge
 //! finds, and price merging as free (docs/decisions/0032-light-probe-and-restart-share.md).
 //!
@@ -85,9 +88,10 @@ pub enum PilotStart {
     Bidirectional,
     /// Path tracing first (the reference's `OnDemandVcm`, docs/emis.md §1.2 and §4): updates
     /// choose from the reduced set ([`CandidateSet::Reduced`]) while path tracing wins. The
-    /// first update a bidirectional candidate wins discards the iterations rendered so far
-    /// (the image restarts with the new strategy, and a sample budget counts the kept
-    /// iterations only) and switches to the full set for the updates that follow.
+    /// first update a bidirectional candidate wins sets the iterations rendered so far aside
+    /// (the film restarts with the new strategy, a sample budget counts its iterations only,
+    /// and the start rejoins the image by a weight the next update estimates) and switches to
+    /// the full set for the updates that follow.
     #[default]
     PathTracing,
 }
@@ -372,7 +376,7 @@ pub fn render_emis(
     // the seconds an iteration is expected to take from now on (unknown before the first)
     let rate = |done: u32, last_rate: f64| seconds_per_iteration(start.elapsed().as_secs_f64(), done, last_rate);
     // iterations the budget allows at that rate; a sample budget counts the iterations the
-    // image keeps, from `kept_from` (after a path-tracing start was discarded) on
+    // film holds, from `kept_from` (after a path-tracing start was set aside) on
     let expected_total = |done: u32, kept_from: u32, last_rate: f64| match opts.budget {
         Budget::Samples(n) => kept_from + n,
         Budget::Time(_) if done == 0 => u32::MAX,

@@ -107,9 +107,9 @@ pub fn calls(iterations: Range<u32>, first: impl Fn(Range<u32>) -> Range<u32>) -
 /// - Only an update that iterations follow can change anything.
 /// - Under path tracing and a time budget, an update also needs at least as many iterations
 ///   after it as before it. Its recordings cost more than the pt iterations they replace, and
-///   under a path-tracing start a switch discards the iterations so far, so a late one must
-///   more than double the efficiency of a shorter rest to pay
-///   (docs/decisions/0035-updates-a-short-render-skips.md).
+///   a late switch has a short rest to gain on (and, when no update follows to weigh the
+///   start, discards the iterations so far), so it must more than double that rest's
+///   efficiency to pay (docs/decisions/0035-updates-a-short-render-skips.md).
 /// - A sample budget's restart renders all its iterations after the update, which then
 ///   governs at least as many as precede it; a bidirectional strategy records every
 ///   iteration at a small extra cost.

@@ -3,11 +3,12 @@
 //! Pure and synchronous (the farm calls it between passes); reports every update.
 //!
 //! A path-tracing start ([`PilotStart::PathTracing`]) decides from the reduced candidate set
-//! with global merging until a bidirectional candidate wins, by more than the share of the
-//! render's iterations a restart would discard. That update restarts: the
-//! caller discards its image (the report says `restarted`), the moments and statistics
-//! start again for the full set, and [`EmisState::kept_from`] records the first iteration
-//! the image keeps.
+//! with global merging until a bidirectional candidate wins (when no later update could weigh
+//! the start, by more than the share of the render a restart discards). That update restarts: the
+//! caller starts a new image (the report says `restarted`), the moments and statistics
+//! start again for the full set, [`EmisState::kept_from`] records the first iteration of
+//! the new image, and [`EmisState::start`] keeps the old one, which the updates after it
+//! weigh ([`super::start`]) and [`EmisState::image`] combines with the new.
 
 use super::candidate::Candidate;
 use super::cost::{CostConstants, PathStatistics, StatisticsSums};
@@ -17,7 +18,9 @@ use super::guides::GuideBuffer;
 use super::measured::measured_constants;
 use super::moments::MomentBuffer;
 use super::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
+use super::start::{KeptStart, relative_mean_square, start_weight};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
+use crate::film::Film;
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
@@ -32,9 +35,14 @@ pub struct UpdateReport {
     /// The candidate set decided from (the path-tracing start's reduced one, or the full).
     #[serde(default)]
     pub reduced: bool,
-    /// A path-tracing start ended: the iterations so far were discarded.
+    /// A path-tracing start ended: the iterations so far left the image, to be combined
+    /// with it at the end by the weight later updates estimate.
     #[serde(default)]
     pub restarted: bool,
+    /// After a restart: the weight of one start iteration against one later iteration this
+    /// update estimated (0: the start is left out).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_weight: Option<f64>,
     /// Chosen light paths per pixel (0: path tracing).
     pub nu: f32,
     /// Chosen connections per camera vertex (0 with per-pixel connections).
@@ -100,8 +108,11 @@ pub struct EmisState {
     pub candidate_set: CandidateSet,
     /// The candidates, in the moment buffer's order.
     pub candidates: Vec<Candidate>,
-    /// The first iteration the image keeps (0 unless a path-tracing start was discarded).
+    /// The first iteration of the image (0 unless a path-tracing start restarted; the
+    /// iterations before it are in [`EmisState::start`]).
     pub kept_from: u32,
+    /// The path-tracing start's image, once a restart ended it.
+    pub start: Option<KeptStart>,
     /// What the next iterations render with.
     pub strategy: Strategy,
     /// Merged moments.
@@ -134,6 +145,7 @@ impl EmisState {
             strategy,
             candidate_set,
             kept_from: 0,
+            start: None,
             moments: MomentBuffer::new(width, height, candidates.len()),
             statistics: StatisticsSums::default(),
             guides: GuideBuffer::new(width, height),
@@ -182,12 +194,12 @@ impl EmisState {
 
     /// Runs an update on the image so far (per-pixel means, row-major): denoise, optimise,
     /// switch the strategy. After the last configured update, moments are no longer collected.
-    /// When the report says `restarted`, the caller must discard its image: the iterations
-    /// before `iteration` are no longer part of the render. `restart_total` is how many
+    /// When the report says `restarted`, the caller must start a new film: the iterations
+    /// before `iteration` now live in [`EmisState::start`]. `restart_total` is how many
     /// iterations the render would run in all if this update restarted it (a time budget's
-    /// expected total, a sample budget's `iteration + N`; `u32::MAX` when unknown): a
-    /// path-tracing start switches only to a candidate that beats path tracing by more than
-    /// the share of them the restart discards.
+    /// expected total, a sample budget's `iteration + N`; `u32::MAX` when unknown): when no
+    /// update would follow before it to weigh the start, a path-tracing start switches only
+    /// to a candidate that beats path tracing by more than the share of them it discards.
     pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: u32) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
@@ -214,15 +226,28 @@ impl EmisState {
             filters: self.config.filters,
             merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
             connection_scope: self.config.connection_scope,
-            restart_share: if reduced { iteration as f64 / restart_total.max(1) as f64 } else { 0.0 },
+            restart_share: if reduced && !self.start_confirmable(iteration, restart_total) {
+                iteration as f64 / restart_total.max(1) as f64
+            } else {
+                0.0
+            },
         });
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
         let restarted = reduced && decision.nu > 0.0;
+        let start_weight = match (&mut self.start, decision.chosen) {
+            (Some(start), Some(chosen)) if !reduced => {
+                let k = start_weight(&decision.scores, chosen, relative_mean_square(&intensity.data));
+                start.weight = Some(k);
+                Some(k)
+            }
+            _ => None,
+        };
         let report = UpdateReport {
             iteration,
             reduced,
             restarted,
+            start_weight,
             nu: decision.nu,
             connections: decision.connections,
             mean_connections: decision.connection_mask.as_ref().map(|m| m.mean()),
@@ -262,6 +287,7 @@ impl EmisState {
             self.moments = MomentBuffer::new(w as u32, h as u32, self.candidates.len());
             self.statistics = StatisticsSums::default();
             self.kept_from = iteration;
+            self.start = Some(KeptStart { image: image.to_vec(), iterations: iteration, weight: None });
         }
         self.relative_moment = Some(decision.relative_moment);
         self.updates_done += 1;
@@ -270,6 +296,24 @@ impl EmisState {
         }
         self.reports.push(report);
         self.reports.last().expect("invariant: just pushed")
+    }
+
+    /// The render's image from `film`, which holds the iterations from
+    /// [`EmisState::kept_from`] on: combined with a kept path-tracing start once an update
+    /// weighed it.
+    pub fn image(&self, film: &Film) -> Vec<[f32; 3]> {
+        let after = film.average();
+        match &self.start {
+            Some(start) if start.weight.is_some() => start.combine(&after, &film.count),
+            _ => after,
+        }
+    }
+
+    /// Whether a restart now would be followed by an update of the full set before
+    /// `restart_total` iterations, which weighs the start for the image to keep: such a
+    /// restart discards nothing.
+    fn start_confirmable(&self, iteration: u32, restart_total: u32) -> bool {
+        self.config.updates.iter().find(|&&u| u > iteration).is_some_and(|&u| u < restart_total)
     }
 
     /// The per-pixel merge probability the final strategy uses (0 without merging).
@@ -333,24 +377,37 @@ mod tests {
         assert!(state.moments.sums.iter().all(|&s| s == 0.0));
         assert_eq!(state.statistics, StatisticsSums::default());
         assert!(state.collecting(), "the update after 16 follows, on the full set");
+        let start = state.start.clone().expect("the start is kept");
+        assert_eq!((start.image, start.iterations, start.weight), (image.clone(), 4, None));
         state.absorb(&pilot(&state, |c| if c.nu == 0.5 && c.connections == 2 { 1e-3 } else { 1.0 })).unwrap();
         let report = state.update(&image, 16, 64).clone();
         assert!(!report.reduced && !report.restarted, "{report:?}");
+        // pt's relative variance is about 3, the winner's almost 0: the start weighs little
+        let k = state.start.as_ref().and_then(|s| s.weight).expect("the full set's update weighs the start");
+        assert!(k > 0.0 && k < 1e-3 && report.start_weight == Some(k), "{k} {report:?}");
         assert_eq!((state.strategy.nu, &state.strategy.connections, state.kept_from), (0.5, &Connections::Fixed(2), 4));
         assert!(matches!(state.strategy.merge, Some(MergeMask::PerPixel(_))));
     }
 
     /// A path-tracing start switches only to a candidate that beats path tracing by more than
     /// the share of the render a restart discards: 1.5× better is worth discarding 1 of 64
-    /// iterations, not 16 of 20.
+    /// iterations, not 16 of 20. A restart that an update of the full set follows (after 4 of
+    /// 20, the next update after 16) discards nothing, and 1.05× better is enough.
     #[test]
     fn a_restart_must_win_back_the_iterations_it_discards() {
         let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
         let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
         let target = Candidate { nu: 1.0, connections: 0, merge: false };
-        for (iteration, total, restarts) in [(1, 64, true), (16, 64, true), (16, 20, false), (16, 16, false)] {
+        for (iteration, total, better, restarts) in [
+            (1, 64, 1.5, true),
+            (16, 64, 1.5, true),
+            (16, 20, 1.5, false),
+            (16, 16, 1.5, false),
+            (4, 20, 1.05, true),
+            (16, 64, 1.05, false),
+        ] {
             let mut state = EmisState::new(config.clone(), SIDE, SIDE);
-            // the target's moment × cost is 1.5× lower than path tracing's
+            // the target's moment × cost is `better` times lower than path tracing's
             let (pt_cost, target_cost) = {
                 // the statistics of `pilot`: three camera vertices per pixel
                 let sums =
@@ -366,7 +423,7 @@ mod tests {
             };
             let moment = |c: &Candidate| match c {
                 c if c.is_path_tracing() => 1.0,
-                c if *c == target => (pt_cost / target_cost / 1.5) as f32,
+                c if *c == target => (pt_cost / target_cost / better) as f32,
                 _ => 1e3,
             };
             state.absorb(&pilot(&state, moment)).unwrap();

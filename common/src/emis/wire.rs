@@ -8,6 +8,7 @@ use super::cost::StatisticsSums;
 use super::filter::Image;
 use super::guides::GuideBuffer;
 use super::moments::MomentBuffer;
+use super::start::KeptStart;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
 use crate::integrator::observer::WorkTimes;
 use crate::integrator::path::connections::Connections;
@@ -347,6 +348,16 @@ struct StateMeta {
     /// Connections per pixel follow the merge mask (`connections` is then 0).
     #[serde(default)]
     connection_mask: bool,
+    /// A kept path-tracing start: its iterations and the bits of its weight (JSON numbers
+    /// need not read back to the same f64); its image follows the buffers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    start: Option<StartMeta>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct StartMeta {
+    iterations: u32,
+    weight_bits: Option<u64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -377,6 +388,10 @@ impl EmisState {
             reduced: self.candidate_set == CandidateSet::Reduced,
             kept_from: self.kept_from,
             connection_mask: matches!(self.strategy.connections, Connections::PerPixel(_)),
+            start: self
+                .start
+                .as_ref()
+                .map(|s| StartMeta { iterations: s.iterations, weight_bits: s.weight.map(f64::to_bits) }),
         };
         let json = serde_json::to_vec(&meta).expect("invariant: plain data serialises");
         let mut w = Writer(Vec::new());
@@ -392,6 +407,9 @@ impl EmisState {
         }
         if let Some(image) = &self.relative_moment {
             w.f32s(image.data.iter().copied());
+        }
+        if let Some(start) = &self.start {
+            w.f32s(start.image.iter().flatten().copied());
         }
         w.0
     }
@@ -449,6 +467,18 @@ impl EmisState {
         if meta.relative_moment {
             let data = r.f32s(pixels, "the relative moment")?;
             state.relative_moment = Some(Image { width: width as usize, height: height as usize, data });
+        }
+        if let Some(start) = meta.start {
+            if meta.reduced || start.iterations != meta.kept_from {
+                return Err("EMIS checkpoint: a kept start that does not end where the image begins".into());
+            }
+            let weight = start.weight_bits.map(f64::from_bits);
+            if weight.is_some_and(|k| !(k.is_finite() && k >= 0.0)) {
+                return Err("EMIS checkpoint: the kept start's weight is not a finite number ≥ 0".into());
+            }
+            let flat = r.f32s(pixels * 3, "the kept start's image")?;
+            let image = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+            state.start = Some(KeptStart { image, iterations: start.iterations, weight });
         }
         if !r.0.is_empty() {
             return Err(format!("EMIS checkpoint has {} bytes too many", r.0.len()));

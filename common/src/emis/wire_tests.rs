@@ -182,3 +182,25 @@ fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() 
     let bidirectional = EmisConfig::new(EmisMethod::Vcm);
     assert!(EmisState::decode(bidirectional, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
 }
+
+/// A kept path-tracing start travels with its image and the exact bits of its weight, and
+/// one that does not end where the image begins is refused.
+#[test]
+fn emis_state_checkpoint_keeps_the_path_tracing_start() {
+    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let mut state = EmisState::new(config.clone(), 3, 2);
+    state.candidate_set = CandidateSet::Full;
+    state.candidates = config.candidates_of(CandidateSet::Full);
+    state.moments = MomentBuffer::new(3, 2, 51);
+    state.kept_from = 4;
+    let image: Vec<[f32; 3]> = (0..6).map(|p| [p as f32, 0.1 * p as f32, 1.0 / (1 + p) as f32]).collect();
+    state.start = Some(KeptStart { image, iterations: 4, weight: None });
+    let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
+    assert_eq!(back.start, state.start);
+    state.start.as_mut().unwrap().weight = Some(0.1 + 0.2);
+    let back = EmisState::decode(config.clone(), 3, 2, &state.encode()).unwrap();
+    assert_eq!(back.start, state.start);
+    state.start.as_mut().unwrap().iterations = 3;
+    let err = EmisState::decode(config, 3, 2, &state.encode()).err().unwrap();
+    assert!(err.contains("kept start"), "{err}");
+}

@@ -224,9 +224,10 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
                     threads: args.scenes.threads.unwrap_or(0),
                     tile_size: 32,
                 };
-                let (out, _) = renderers[c].render(&scene, &opts, &|_, _| {})?;
+                let (out, emis) = renderers[c].render(&scene, &opts, &|_, _| {})?;
+                let image = emis.map_or_else(|| out.film.average(), |e| e.image(&out.film));
                 let relmse = tessera_common::film::compare::relmse(
-                    &out.film.average(),
+                    &image,
                     &reference.pixels,
                     tessera_common::film::compare::DROPPED_FRACTION,
                 );

@@ -79,8 +79,8 @@ impl JobService {
             super::events::emis_update(job, report);
         }
         if restarted {
-            // a path-tracing start ended: its iterations leave the image (the checkpoint
-            // below stores the empty film with the new strategy)
+            // a path-tracing start ended: its iterations leave the film for the EMIS state,
+            // which combines them at the end (the checkpoint stores both)
             *film = Film::for_filter(film.width, film.height, &filter);
         }
         let nu = emis.state.strategy.nu;
