@@ -43,7 +43,7 @@ use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
 use super::schedule::{
-    collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
+    RestartTotal, collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
 };
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
@@ -433,7 +433,10 @@ pub fn render_emis(
         progress(done as u64 * pixels, total as u64 * pixels);
         // an update is only worth it if iterations remain to use it
         // a restart now would render a sample budget's N iterations after the ones so far
-        let restart_total = if let Budget::Samples(n) = opts.budget { done.saturating_add(n) } else { total };
+        let restart_total = match opts.budget {
+            Budget::Samples(n) => RestartTotal::Samples(done.saturating_add(n)),
+            Budget::Time(_) => RestartTotal::Time(total),
+        };
         if state.update_due(done) && done < total {
             updated = true;
             if pool.install(|| state.update(&film.average(), done, restart_total)).restarted {

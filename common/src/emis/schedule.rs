@@ -101,6 +101,35 @@ pub fn calls(iterations: Range<u32>, first: impl Fn(Range<u32>) -> Range<u32>) -
     out
 }
 
+/// How many iterations a render would run in all if an update restarted it from a
+/// path-tracing start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RestartTotal {
+    /// A sample budget: exactly this many (the budget's N after those so far).
+    Samples(u32),
+    /// A time budget: this many at the pace so far (`u32::MAX` while unknown); a dearer
+    /// strategy after the restart runs fewer.
+    Time(u32),
+}
+
+impl RestartTotal {
+    /// The iterations at the pace so far.
+    pub fn at_current_pace(self) -> u32 {
+        match self {
+            RestartTotal::Samples(n) | RestartTotal::Time(n) => n,
+        }
+    }
+
+    /// The iterations a strategy `dearer` times as costly per iteration as the current one
+    /// would reach after `done`.
+    pub fn at_cost_ratio(self, done: u32, dearer: f64) -> f64 {
+        match self {
+            RestartTotal::Samples(n) => n as f64,
+            RestartTotal::Time(n) => done as f64 + n.saturating_sub(done) as f64 / dearer.max(1e-9),
+        }
+    }
+}
+
 /// Whether moments are worth collecting for the update after `update` iterations of a render
 /// expected to run `total` (`timed`: under a time budget) while the current strategy has `nu`
 /// light paths per pixel.

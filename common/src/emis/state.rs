@@ -17,7 +17,8 @@ use super::filter::Image;
 use super::guides::GuideBuffer;
 use super::measured::measured_constants;
 use super::moments::MomentBuffer;
-use super::optimize::{ImageLevelScore, MergeScope, OptimizerInput, optimize};
+use super::optimize::{Decision, ImageLevelScore, MergeScope, OptimizerInput, optimize};
+use super::schedule::RestartTotal;
 use super::start::{KeptStart, relative_mean_square, start_weight};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
 use crate::film::Film;
@@ -196,11 +197,11 @@ impl EmisState {
     /// switch the strategy. After the last configured update, moments are no longer collected.
     /// When the report says `restarted`, the caller must start a new film: the iterations
     /// before `iteration` now live in [`EmisState::start`]. `restart_total` is how many
-    /// iterations the render would run in all if this update restarted it (a time budget's
-    /// expected total, a sample budget's `iteration + N`; `u32::MAX` when unknown): when no
-    /// update would follow before it to weigh the start, a path-tracing start switches only
-    /// to a candidate that beats path tracing by more than the share of them it discards.
-    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: u32) -> &UpdateReport {
+    /// iterations the render would run in all if this update restarted it: when no update
+    /// would follow before its end to weigh the start (under a time budget, at the winner's
+    /// pace), a path-tracing start switches only to a candidate that beats path tracing by
+    /// more than the share of them the restart discards.
+    pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: RestartTotal) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
         let reduced = self.candidate_set == CandidateSet::Reduced;
@@ -217,21 +218,29 @@ impl EmisState {
         } else {
             None
         };
-        let decision = optimize(&OptimizerInput {
-            candidates: &self.candidates,
-            moments: &self.moments,
-            image: &intensity,
-            statistics,
-            constants: measured.unwrap_or(self.config.constants),
-            filters: self.config.filters,
-            merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
-            connection_scope: self.config.connection_scope,
-            restart_share: if reduced && !self.start_confirmable(iteration, restart_total) {
-                iteration as f64 / restart_total.max(1) as f64
-            } else {
-                0.0
-            },
-        });
+        let constants = measured.unwrap_or(self.config.constants);
+        let decide = |restart_share: f64| {
+            optimize(&OptimizerInput {
+                candidates: &self.candidates,
+                moments: &self.moments,
+                image: &intensity,
+                statistics,
+                constants,
+                filters: self.config.filters,
+                merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
+                connection_scope: self.config.connection_scope,
+                restart_share,
+            })
+        };
+        // a restart discards the start unless an update of the full set follows to weigh it
+        let share = iteration as f64 / restart_total.at_current_pace().max(1) as f64;
+        let weighing = self.config.updates.iter().copied().find(|&u| u > iteration);
+        let kept = reduced && weighing.is_some_and(|u| u < restart_total.at_current_pace());
+        let mut decision = decide(if reduced && !kept { share } else { 0.0 });
+        if kept && decision.nu > 0.0 && !reaches(&decision, restart_total, iteration, weighing) {
+            // at the winner's pace the render would end before that update
+            decision = decide(share);
+        }
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
         let restarted = reduced && decision.nu > 0.0;
@@ -309,13 +318,6 @@ impl EmisState {
         }
     }
 
-    /// Whether a restart now would be followed by an update of the full set before
-    /// `restart_total` iterations, which weighs the start for the image to keep: such a
-    /// restart discards nothing.
-    fn start_confirmable(&self, iteration: u32, restart_total: u32) -> bool {
-        self.config.updates.iter().find(|&&u| u > iteration).is_some_and(|&u| u < restart_total)
-    }
-
     /// The per-pixel merge probability the final strategy uses (0 without merging).
     pub fn merge_mask(&self) -> Vec<f32> {
         let n = (self.moments.width * self.moments.height) as usize;
@@ -324,6 +326,21 @@ impl EmisState {
             Some(m) => (0..n as u32).map(|p| m.at(p)).collect(),
         }
     }
+}
+
+/// Whether a render restarted into `decision`'s winner after `iteration` would still reach
+/// the update at `weighing` (before `restart_total`, scaled by the winner's cost per iteration
+/// over path tracing's under a time budget).
+fn reaches(decision: &Decision, restart_total: RestartTotal, iteration: u32, weighing: Option<u32>) -> bool {
+    let Some(update) = weighing else { return false };
+    let cost = |s: Option<&ImageLevelScore>| s.map(|s| s.cost).filter(|c| c.is_finite() && *c > 0.0);
+    let pt = cost(decision.scores.iter().find(|s| s.nu == 0.0));
+    let winner = cost(decision.chosen.and_then(|c| decision.scores.get(c)));
+    let dearer = match (pt, winner) {
+        (Some(pt), Some(winner)) => winner / pt,
+        _ => 1.0,
+    };
+    restart_total.at_cost_ratio(iteration, dearer) > update as f64
 }
 
 #[cfg(test)]
@@ -357,7 +374,7 @@ mod tests {
         let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
         let pt_wins = pilot(&state, |c| if c.is_path_tracing() { 1.0 } else { 1e3 });
         state.absorb(&pt_wins).unwrap();
-        let report = state.update(&image, 1, 64).clone();
+        let report = state.update(&image, 1, RestartTotal::Samples(64)).clone();
         assert!(report.reduced && !report.restarted, "{report:?}");
         assert_eq!(report.candidates.len(), 9);
         assert_eq!((state.strategy.nu, state.candidate_set, state.kept_from), (0.0, CandidateSet::Reduced, 0));
@@ -365,7 +382,7 @@ mod tests {
         // merged with the first iteration's moments, the target's mean is 10× lower than pt's
         let target = Candidate { nu: 1.0, connections: 0, merge: true };
         state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
-        let report = state.update(&image, 4, 64).clone();
+        let report = state.update(&image, 4, RestartTotal::Samples(64)).clone();
         assert!(report.reduced && report.restarted, "{report:?}");
         assert_eq!(
             state.strategy,
@@ -380,7 +397,7 @@ mod tests {
         let start = state.start.clone().expect("the start is kept");
         assert_eq!((start.image, start.iterations, start.weight), (image.clone(), 4, None));
         state.absorb(&pilot(&state, |c| if c.nu == 0.5 && c.connections == 2 { 1e-3 } else { 1.0 })).unwrap();
-        let report = state.update(&image, 16, 64).clone();
+        let report = state.update(&image, 16, RestartTotal::Samples(64)).clone();
         assert!(!report.reduced && !report.restarted, "{report:?}");
         // pt's relative variance is about 3, the winner's almost 0: the start weighs little
         let k = state.start.as_ref().and_then(|s| s.weight).expect("the full set's update weighs the start");
@@ -392,19 +409,23 @@ mod tests {
     /// A path-tracing start switches only to a candidate that beats path tracing by more than
     /// the share of the render a restart discards: 1.5× better is worth discarding 1 of 64
     /// iterations, not 16 of 20. A restart that an update of the full set follows (after 4 of
-    /// 20, the next update after 16) discards nothing, and 1.05× better is enough.
+    /// 17, the next update after 16) discards nothing, and 1.05× better is enough; under a
+    /// time budget of 17 iterations at pt's pace the dearer winner would not reach 16.
     #[test]
     fn a_restart_must_win_back_the_iterations_it_discards() {
         let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
         let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
         let target = Candidate { nu: 1.0, connections: 0, merge: false };
+        use RestartTotal::{Samples, Time};
         for (iteration, total, better, restarts) in [
-            (1, 64, 1.5, true),
-            (16, 64, 1.5, true),
-            (16, 20, 1.5, false),
-            (16, 16, 1.5, false),
-            (4, 20, 1.05, true),
-            (16, 64, 1.05, false),
+            (1, Samples(64), 1.5, true),
+            (16, Samples(64), 1.5, true),
+            (16, Samples(20), 1.5, false),
+            (16, Samples(16), 1.5, false),
+            (4, Samples(17), 1.05, true),
+            (16, Samples(64), 1.05, false),
+            (4, Time(17), 1.05, false),
+            (4, Time(u32::MAX), 1.05, true),
         ] {
             let mut state = EmisState::new(config.clone(), SIDE, SIDE);
             // the target's moment × cost is `better` times lower than path tracing's
@@ -421,6 +442,8 @@ mod tests {
                 );
                 (terms[0].at(0.0), terms[1].at(0.0))
             };
+            // the time-budget case needs 4 + 13 · pt / target ≤ 16
+            assert!(target_cost / pt_cost > 1.1, "{target_cost} {pt_cost}");
             let moment = |c: &Candidate| match c {
                 c if c.is_path_tracing() => 1.0,
                 c if *c == target => (pt_cost / target_cost / better) as f32,
@@ -428,7 +451,7 @@ mod tests {
             };
             state.absorb(&pilot(&state, moment)).unwrap();
             let report = state.update(&image, iteration, total).clone();
-            assert_eq!(report.restarted, restarts, "update after {iteration} of {total}: {report:?}");
+            assert_eq!(report.restarted, restarts, "update after {iteration} of {total:?}: {report:?}");
             assert_eq!(state.strategy.nu > 0.0, restarts);
         }
     }
@@ -440,7 +463,7 @@ mod tests {
         let mut state = EmisState::new(EmisConfig::new(EmisMethod::Bdpt), SIDE, SIDE);
         assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Full, 26));
         state.absorb(&pilot(&state, |c| if c.nu == 2.0 && c.connections == 1 { 1e-3 } else { 1.0 })).unwrap();
-        let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1, 64).clone();
+        let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1, RestartTotal::Samples(64)).clone();
         assert!(!report.reduced && !report.restarted);
         assert_eq!((state.strategy.nu, state.kept_from, state.moments.iterations), (2.0, 0, 1));
     }

@@ -109,7 +109,7 @@ fn pilot_data_round_trips_and_refuses_bad_sizes_and_values() {
 fn decisions_read_from_a_checkpoint_head_alone() {
     let config = EmisConfig::new(EmisMethod::Vcm);
     let mut state = EmisState::new(config, 4, 3);
-    state.update(&[[0.5; 3]; 12], 1, u32::MAX);
+    state.update(&[[0.5; 3]; 12], 1, crate::emis::RestartTotal::Time(u32::MAX));
     let bytes = state.encode();
     let d = EmisState::read_decisions(&mut &bytes[..]).unwrap();
     assert_eq!(

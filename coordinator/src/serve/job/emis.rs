@@ -7,7 +7,7 @@
 use super::model::{JobSpec, TileSpec};
 use super::view::StrategyView;
 use crate::serve::storage::BlobStore;
-use tessera_common::emis::{CandidateSet, EmisState, PilotData, collects_moments};
+use tessera_common::emis::{CandidateSet, EmisState, PilotData, RestartTotal, collects_moments};
 use tessera_common::film::Film;
 use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
@@ -193,7 +193,7 @@ impl EmisJob {
     /// the barrier with the state the update already produced. That state's last report is
     /// for this barrier (updates are at increasing iteration counts), so it is not run twice.
     /// `restart_total`: the iterations the job would run in all if this update restarted it.
-    pub fn update(&mut self, film: &Film, iterations: u32, restart_total: u32) -> bool {
+    pub fn update(&mut self, film: &Film, iterations: u32, restart_total: RestartTotal) -> bool {
         self.mask_digest = None;
         self.connection_digest = None;
         if let Some(done) = self.state.reports.last().filter(|r| r.iteration == iterations) {
@@ -248,14 +248,14 @@ mod tests {
         let mut job = EmisJob::new(&spec()).unwrap();
         job.absorb(&pilot(&job, 1)).unwrap();
         let film = Film::for_filter(4, 2, &tessera_common::film::filter::Filter::BOX);
-        let restarted = job.update(&film, 1, 64);
+        let restarted = job.update(&film, 1, RestartTotal::Samples(64));
         let (strategy, reports) = (job.state.strategy.clone(), job.state.reports.len());
-        assert_eq!(job.update(&film, 1, 64), restarted);
+        assert_eq!(job.update(&film, 1, RestartTotal::Samples(64)), restarted);
         assert_eq!(
             (job.state.strategy.clone(), job.state.reports.len(), job.state.updates_done),
             (strategy, reports, 1)
         );
-        job.update(&film, 4, 64);
+        job.update(&film, 4, RestartTotal::Samples(64));
         assert_eq!(job.state.reports.len(), 2, "the next barrier's update runs");
     }
 

@@ -18,6 +18,7 @@ pub use super::spec::{JobSpec, TileSpec};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
+use tessera_common::emis::RestartTotal;
 
 /// A worker that failed this many leases of one job gets no more of its tiles.
 pub const BLOCKLIST_AFTER_FAILURES: u32 = 3;
@@ -462,12 +463,12 @@ impl JobsModel {
     /// The iterations `job` would run in all if its EMIS update at `now_ms` restarted it (as
     /// `render_emis`): a sample budget's N after those merged, else what the budget expects
     /// (`u32::MAX` while unknown).
-    pub fn restart_total(&self, job: &str, now_ms: u64) -> u32 {
-        let Some(j) = self.jobs.get(job) else { return u32::MAX };
+    pub fn restart_total(&self, job: &str, now_ms: u64) -> RestartTotal {
+        let Some(j) = self.jobs.get(job) else { return RestartTotal::Time(u32::MAX) };
         if let Some(n) = j.spec.settings.spp {
-            return j.spp_merged().saturating_add(n);
+            return RestartTotal::Samples(j.spp_merged().saturating_add(n));
         }
-        plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms))
+        RestartTotal::Time(plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms)))
     }
 
     /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
