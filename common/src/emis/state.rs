@@ -3,12 +3,12 @@
 //! Pure and synchronous (the farm calls it between passes); reports every update.
 //!
 //! A path-tracing start ([`PilotStart::PathTracing`]) decides from the reduced candidate set
-//! with global merging until a bidirectional candidate wins (when no later update could weigh
-//! the start, by more than the share of the render a restart discards). That update restarts: the
-//! caller starts a new image (the report says `restarted`), the moments and statistics
-//! start again for the full set, [`EmisState::kept_from`] records the first iteration of
-//! the new image, and [`EmisState::start`] keeps the old one, which the updates after it
-//! weigh ([`super::start`]) and [`EmisState::image`] combines with the new.
+//! with global merging until a bidirectional candidate wins (when no later update could
+//! weigh the start, by more than the share of the render a restart discards). That update
+//! restarts: the caller starts a new image (the report says `restarted`), the moments and
+//! statistics start again for the full set, [`EmisState::kept_from`] records the first
+//! iteration of the new image, and [`EmisState::start`] keeps the old one, which the updates
+//! after it weigh ([`super::start`]) and [`EmisState::image`] combines with the new.
 
 use super::candidate::Candidate;
 use super::cost::{CostConstants, PathStatistics, StatisticsSums};
