@@ -38,6 +38,10 @@ impl KeptStart {
             .map(|((a, &n), s)| {
                 let total = start + n as f64;
                 let alpha = if total > 0.0 { start / total } else { 0.0 };
+                // a start left out leaves the image as it is, bit for bit
+                if alpha == 0.0 {
+                    return *a;
+                }
                 std::array::from_fn(|c| (alpha * s[c] as f64 + (1.0 - alpha) * a[c] as f64) as f32)
             })
             .collect()
@@ -103,6 +107,9 @@ mod tests {
         start.weight = Some(start_weight(&[score(0.0, f64::INFINITY), score(1.0, 2.0)], 1, 0.5));
         assert_eq!(start.weight, Some(0.0));
         assert_eq!(start.combine(&[[3.0; 3]], &[2]), vec![[3.0; 3]]);
+        start.image = vec![[f32::INFINITY; 3]];
+        assert_eq!(start.combine(&[[3.0; 3]], &[2]), vec![[3.0; 3]], "weight 0 leaves the image alone");
+        start.image = vec![[1.0; 3]];
         // a pixel no later iteration reached keeps the start
         start.weight = Some(1.0);
         assert_eq!(start.combine(&[[0.0; 3]], &[0]), vec![[1.0; 3]]);
