@@ -44,5 +44,5 @@ pub use schedule::{
     FINAL_ITERATIONS_PER_CALL, FINAL_PT_ITERATIONS_MAX, RestartTotal, SPARSE_FROM, calls, collecting_call,
     collects_moments, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
 };
-pub use state::{EmisState, UpdateReport};
+pub use state::{EmisState, SETTLE_RECORDINGS, UpdateReport};
 pub use wire::Decisions;

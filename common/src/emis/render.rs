@@ -135,11 +135,21 @@ pub struct EmisConfig {
     pub pilot: PilotStart,
     /// One c for the image or one per pixel (the reduced set's decisions are image-level).
     pub connection_scope: ConnectionScope,
+    /// A path-tracing start settles on path tracing, collecting no more moments and running
+    /// no more updates, once path tracing won two updates in a row with every bidirectional
+    /// candidate's moment × cost at least this many times its own, the second on
+    /// [`super::SETTLE_RECORDINGS`] recorded iterations or more (infinity: never).
+    pub settle_margin: f64,
 }
 
 impl EmisConfig {
     /// The update schedule of docs/emis.md, decision 5.
     pub const DEFAULT_UPDATES: [u32; 4] = [1, 4, 16, 64];
+
+    /// The default [`EmisConfig::settle_margin`]: where path tracing won after 1 and 4
+    /// iterations by 10 % or more, the later updates chose it too, and their recordings cost
+    /// a few per cent of the render (docs/decisions/0041-path-tracing-settles.md).
+    pub const SETTLE_MARGIN: f64 = 1.1;
 
     /// The paper's configuration of `method`, with the method's own pilot
     /// ([`PilotStart::Bidirectional`], what the decision tests and benches study); a render's
@@ -161,6 +171,7 @@ impl EmisConfig {
             start_denoise: DenoiseSettings::GUIDED,
             pilot: PilotStart::Bidirectional,
             connection_scope: ConnectionScope::default(),
+            settle_margin: Self::SETTLE_MARGIN,
         }
     }
 

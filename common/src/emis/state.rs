@@ -28,6 +28,10 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// The recorded iterations an update needs before path tracing may settle
+/// ([`EmisConfig::settle_margin`]).
+pub const SETTLE_RECORDINGS: u32 = 2;
+
 /// One update, as reported in the JSON report.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct UpdateReport {
@@ -40,6 +44,10 @@ pub struct UpdateReport {
     /// with it at the end by the weight later updates estimate.
     #[serde(default)]
     pub restarted: bool,
+    /// Path tracing won this update and the one before by [`EmisConfig::settle_margin`]:
+    /// no moments are collected and no update runs after this one.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub settled: bool,
     /// After a restart: the weight of one start iteration against one later iteration this
     /// update estimated (0: the start is left out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -86,6 +94,18 @@ pub struct ScoreReport {
     pub cost: f64,
     /// Their product (lower is better).
     pub work_normalised: f64,
+}
+
+impl UpdateReport {
+    /// The reduced set's best bidirectional moment × cost over path tracing's: below 1 a
+    /// bidirectional candidate wins; NaN where both are infinite or the set is the full one.
+    pub fn path_tracing_margin(&self) -> f64 {
+        let best = |bidirectional: bool| {
+            let scores = self.candidates.iter().filter(|c| (c.nu > 0.0) == bidirectional);
+            scores.map(|c| c.work_normalised).fold(f64::INFINITY, f64::min)
+        };
+        if self.reduced { best(true) / best(false) } else { f64::NAN }
+    }
 }
 
 impl From<&ImageLevelScore> for ScoreReport {
@@ -244,6 +264,7 @@ impl EmisState {
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mask = &decision.merge_mask.data;
         let restarted = reduced && decision.nu > 0.0;
+        let recorded = self.moments.iterations;
         let start_weight = match (&mut self.start, decision.chosen) {
             (Some(start), Some(chosen)) if !reduced => {
                 let k = start_weight(&decision.scores, chosen, relative_mean_square(&intensity.data));
@@ -252,10 +273,11 @@ impl EmisState {
             }
             _ => None,
         };
-        let report = UpdateReport {
+        let mut report = UpdateReport {
             iteration,
             reduced,
             restarted,
+            settled: false,
             start_weight,
             nu: decision.nu,
             connections: decision.connections,
@@ -268,6 +290,11 @@ impl EmisState {
             denoise_ms,
             optimize_ms,
         };
+        // later recordings would cost more than the rare switch they could find
+        // path tracing won twice by the margin, and on two recorded iterations at least: a
+        // caustic can look like path tracing's after one (docs/decisions/0041)
+        let wins = |r: &UpdateReport| r.reduced && !r.restarted && r.path_tracing_margin() >= self.config.settle_margin;
+        report.settled = wins(&report) && self.reports.last().is_some_and(wins) && recorded >= SETTLE_RECORDINGS;
         tracing::info!(
             iteration,
             nu = decision.nu,
@@ -275,6 +302,7 @@ impl EmisState {
             mean_connections = report.mean_connections,
             merging = report.merging_pixels,
             restarted,
+            settled = report.settled,
             "emis update"
         );
         let merge = match (self.config.method, reduced) {
@@ -300,7 +328,7 @@ impl EmisState {
         }
         self.relative_moment = Some(decision.relative_moment);
         self.updates_done += 1;
-        if self.updates_done >= self.config.updates.len() {
+        if self.updates_done >= self.config.updates.len() || report.settled {
             self.collecting = false;
         }
         self.reports.push(report);
@@ -346,6 +374,7 @@ fn reaches(decision: &Decision, restart_total: RestartTotal, iteration: u32, wei
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::emis::cost::CostTerms;
 
     const SIDE: u32 = 16;
 
@@ -454,6 +483,74 @@ mod tests {
             assert_eq!(report.restarted, restarts, "update after {iteration} of {total:?}: {report:?}");
             assert_eq!(state.strategy.nu > 0.0, restarts);
         }
+    }
+
+    /// A path-tracing start settles on path tracing when it wins two updates in a row by the
+    /// margin: not after a narrow win (every bidirectional candidate 1.05× path tracing's
+    /// moment × cost, over the iterations so far), nor after one clear win (1000×), and
+    /// never with an infinite margin.
+    #[test]
+    fn path_tracing_settles_after_two_clear_wins_in_a_row() {
+        let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+        let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+        // one iteration in which path tracing's moment is `pt` and every other candidate's
+        // moment × cost is `other` times path tracing's cost
+        let iteration_of = |state: &EmisState, pt: f64, other: f64| {
+            let sums =
+                StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
+            let statistics = sums.statistics(SIDE * SIDE);
+            let terms = CostTerms::of_candidates(&config.constants, &statistics, &state.candidates, SIDE * SIDE);
+            let pt_cost = terms[state.candidates.iter().position(Candidate::is_path_tracing).unwrap()].at(0.0);
+            let moments: Vec<f32> = (terms.iter().zip(&state.candidates))
+                .map(|(t, c)| if c.is_path_tracing() { pt } else { other * pt_cost / t.at(c.merge as u8 as f64) })
+                .map(|m| m as f32)
+                .collect();
+            let mut data = pilot(state, |_| 0.0);
+            let k = moments.len();
+            data.moments.sums.iter_mut().enumerate().for_each(|(i, s)| *s = moments[i % k]);
+            data
+        };
+        // the margins each update sees over the iterations so far: path tracing's moment grows
+        // a thousandfold per update, so a later update can undo an earlier clear win
+        let run = |config: &EmisConfig, margins: &[f64]| {
+            let mut state = EmisState::new(config.clone(), SIDE, SIDE);
+            let (mut pt_sum, mut other_sum) = (0.0, 0.0);
+            for (i, (&margin, iteration)) in margins.iter().zip([1, 4, 16]).enumerate() {
+                if !state.collecting() {
+                    break;
+                }
+                let pt = 1e3f64.powi(i as i32);
+                let other = margin * (pt_sum + pt) - other_sum;
+                (pt_sum, other_sum) = (pt_sum + pt, other_sum + other);
+                state.absorb(&iteration_of(&state, pt, other)).unwrap();
+                let report = state.update(&image, iteration, RestartTotal::Samples(1000)).clone();
+                let seen = report.path_tracing_margin();
+                assert!((seen / margin - 1.0).abs() < 0.01, "{margins:?}: {seen} {report:?}");
+                assert_eq!(report.settled, !state.collecting(), "{margins:?}: {report:?}");
+                if report.settled {
+                    assert_eq!(state.next_update(), None);
+                    return Some(iteration);
+                }
+            }
+            None
+        };
+        for (margins, settles_at) in [
+            ([1e3, 1e3, 1e3], Some(4)),
+            ([1.05, 1e3, 1e3], Some(16)),
+            ([1e3, 1.05, 1e3], None),
+            ([1.05, 1.05, 1.05], None),
+        ] {
+            assert_eq!(run(&config, &margins), settles_at, "{margins:?}");
+        }
+        let never = EmisConfig { settle_margin: f64::INFINITY, ..config.clone() };
+        assert_eq!(run(&never, &[1e3, 1e3, 1e3]), None);
+        // updates after 1 and 2 see the same single recording (iteration 1 records nothing)
+        let mut state = EmisState::new(EmisConfig { updates: vec![1, 2, 4], ..config.clone() }, SIDE, SIDE);
+        state.absorb(&iteration_of(&state, 1.0, 1e3)).unwrap();
+        assert!(!state.update(&image, 1, RestartTotal::Samples(1000)).settled);
+        assert!(!state.update(&image, 2, RestartTotal::Samples(1000)).settled);
+        state.absorb(&iteration_of(&state, 1.0, 1e3)).unwrap();
+        assert!(state.update(&image, 4, RestartTotal::Samples(1000)).settled);
     }
 
     /// The bidirectional pilot (`EmisConfig::new`'s) never restarts, even when its first

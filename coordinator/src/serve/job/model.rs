@@ -515,7 +515,15 @@ impl JobsModel {
     /// The optimiser has chosen a strategy, with `nu` light paths per pixel, at an EMIS
     /// barrier: plan the next pass with it. `restart`: the update ended a path-tracing start,
     /// and the service cleared the film, so a sample budget counts from the next pass on.
-    pub fn optimized(&mut self, job: &str, restart: bool, nu: f32, now_ms: u64) -> Result<Changes, TransitionError> {
+    /// `collect`: the EMIS state still collects moments (path tracing may have settled).
+    pub fn optimized(
+        &mut self,
+        job: &str,
+        restart: bool,
+        nu: f32,
+        collect: bool,
+        now_ms: u64,
+    ) -> Result<Changes, TransitionError> {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state != JobState::Optimizing {
             return Err(TransitionError::NotOptimizing(job.to_string()));
@@ -523,7 +531,7 @@ impl JobsModel {
         j.state = JobState::Final;
         let spp = j.spp_merged();
         let kept_from = if restart { spp } else { j.kept_from() };
-        let plan = plan::pass_after_update(&j.spec, spp, kept_from, j.clock(now_ms), nu);
+        let plan = plan::pass_after_update(&j.spec, spp, kept_from, j.clock(now_ms), nu, collect);
         let range = j.append_pass(PassKind::Final, plan, restart, nu, Some(now_ms));
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());

@@ -192,12 +192,20 @@ pub fn after_pass(
 /// per pixel (at least one iteration: the update was run because iterations remain;
 /// `kept_from` is `spp_done` if the update restarted the film). Under a time budget that pass
 /// is one iteration, which measures the new strategy's pace before a longer pass is planned
-/// by it, as `render_emis` does locally.
-pub fn pass_after_update(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: impl Into<Clock>, nu: f32) -> PassPlan {
+/// by it, as `render_emis` does locally. `may_collect`: the update left the EMIS state
+/// collecting (a path-tracing start that settled collects no more).
+pub fn pass_after_update(
+    spec: &JobSpec,
+    spp_done: u32,
+    kept_from: u32,
+    clock: impl Into<Clock>,
+    nu: f32,
+    may_collect: bool,
+) -> PassPlan {
     let clock = clock.into();
     let total = expected_total(spec, spp_done, kept_from, clock);
     let count = if spec.settings.spp.is_none() { 1 } else { next_count(spec, spp_done, kept_from, clock).max(1) };
-    plan_from(spec, spp_done, count, true, total, nu)
+    plan_from(spec, spp_done, count, may_collect, total, nu)
 }
 
 #[cfg(test)]
@@ -259,42 +267,46 @@ mod tests {
         assert_eq!(first.tiles.len(), 1);
         assert!(first.collect);
         assert_eq!(after_pass(&s, 1, 0, 1.0, true, 0.0), BarrierAction::Optimize);
-        let second = pass_after_update(&s, 1, 0, 1.0, 0.0);
+        let second = pass_after_update(&s, 1, 0, 1.0, 0.0, true);
         assert_eq!((second.tiles.first().unwrap().samples.start, second.tiles.len(), second.collect), (1, 3, true));
         assert_eq!(after_pass(&s, 4, 0, 1.0, true, 0.0), BarrierAction::Optimize);
-        let third = pass_after_update(&s, 4, 0, 1.0, 0.0);
+        let third = pass_after_update(&s, 4, 0, 1.0, 0.0, true);
         // after the last update the pass is cut into calls of FINAL_ITERATIONS_PER_CALL
         assert_eq!(third.collect, false);
         let ranges: Vec<_> = third.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12]);
         // a collecting pass: a call per iteration that records under path tracing (0 and
         // ≡ 2 mod 4 before 16), one per run between them
-        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0, 0.0);
+        let collecting = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 4, 0, 1.0, 0.0, true);
         let ranges: Vec<_> = collecting.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..6, 6..7, 7..10, 10..11, 11..14, 14..15, 15..16]);
         assert!(collecting.collect);
         // from SPARSE_FROM (16) on, every eighth iteration records (≡ 6 mod 8)
-        let sparse = pass_after_update(&spec(IntegratorName::EmisVcm, Some(100), None), 16, 0, 1.0, 0.0);
+        let sparse = pass_after_update(&spec(IntegratorName::EmisVcm, Some(100), None), 16, 0, 1.0, 0.0, true);
         let ranges: Vec<_> = sparse.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges[..5], [16..22, 22..23, 23..30, 30..31, 31..38]);
         assert_eq!(ranges[ranges.len() - 2..], [62..63, 63..64]);
         assert!(sparse.collect);
-        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0, 0.0);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(42), None), 16, 0, 1.0, 0.0, true);
         let ranges: Vec<_> = long.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [16..24, 24..32, 32..40, 40..42]);
+        // path tracing settled at 4: no more moments, path tracing's final calls
+        let settled = pass_after_update(&spec(IntegratorName::EmisVcm, Some(100), None), 4, 0, 1.0, 0.0, false);
+        let ranges: Vec<_> = settled.tiles.iter().map(|t| t.samples.clone()).collect();
+        assert_eq!((settled.collect, ranges[0].clone()), (false, 4..12));
         // a bidirectional strategy records every iteration: calls of up to eight iterations
         // (one upload each), cut at the update
-        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 4, 0, 1.0, 0.5);
+        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 4, 0, 1.0, 0.5, true);
         let ranges: Vec<_> = bidir.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!(ranges, [4..12, 12..16]);
-        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 16, 0, 1.0, 1.0);
+        let bidir = pass_after_update(&spec(IntegratorName::EmisVcm, Some(80), None), 16, 0, 1.0, 1.0, true);
         assert_eq!(bidir.tiles.len(), 6);
         assert!(bidir.tiles.iter().all(|t| t.samples.len() == 8));
         assert_eq!(after_pass(&s, 12, 0, 1.0, false, 0.0), BarrierAction::Finish);
         // a budget that ends at an update point runs no update there, and collects nothing
         // for it
         let s = spec(IntegratorName::EmisBdpt, Some(4), None);
-        let after = pass_after_update(&s, 1, 0, 1.0, 0.0);
+        let after = pass_after_update(&s, 1, 0, 1.0, 0.0, true);
         assert!(!after.collect);
         assert_eq!(after.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [1..4]);
         let one = first_pass(&spec(IntegratorName::EmisVcm, Some(1), None));
@@ -309,7 +321,7 @@ mod tests {
     fn plan_path_tracing_after_the_last_update_in_shrinking_calls() {
         let s = spec(IntegratorName::EmisVcm, Some(400), None);
         assert_eq!(after_pass(&s, 64, 0, 1.0, true, 0.0), BarrierAction::Optimize);
-        let pt = pass_after_update(&s, 64, 0, 1.0, 0.0);
+        let pt = pass_after_update(&s, 64, 0, 1.0, 0.0, true);
         assert!(!pt.collect);
         let ranges: Vec<_> = pt.tiles.iter().map(|t| t.samples.clone()).collect();
         // 336 left: 21, then 315 left: 19, ...
@@ -319,9 +331,9 @@ mod tests {
         // the tail: calls of 8, the last one the rest
         assert_eq!((ranges[ranges.len() - 2].len(), ranges.last().unwrap().len()), (8, 5));
         assert!(ranges.len() >= 16 && ranges.len() < 42, "{}", ranges.len());
-        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(4000), None), 64, 0, 1.0, 0.0);
+        let long = pass_after_update(&spec(IntegratorName::EmisVcm, Some(4000), None), 64, 0, 1.0, 0.0, true);
         assert_eq!(long.tiles[0].samples, 64..128);
-        let bidir = pass_after_update(&s, 64, 0, 1.0, 0.5);
+        let bidir = pass_after_update(&s, 64, 0, 1.0, 0.5, true);
         assert_eq!(bidir.tiles.len(), 42);
         assert!(bidir.tiles[..41].iter().all(|t| t.samples.len() == 8));
     }
@@ -333,13 +345,13 @@ mod tests {
     #[test]
     fn plan_a_short_timed_path_tracing_render_skips_a_late_update() {
         let s = spec(IntegratorName::EmisVcm, None, Some(20.0));
-        let short = pass_after_update(&s, 4, 0, 3.6, 0.0);
+        let short = pass_after_update(&s, 4, 0, 3.6, 0.0, true);
         assert!(!short.collect);
         assert!(short.tiles.iter().all(|t| t.samples.start >= 4));
-        let long = pass_after_update(&s, 4, 0, 2.0, 0.0);
+        let long = pass_after_update(&s, 4, 0, 2.0, 0.0, true);
         assert!(long.collect);
         assert!(long.tiles.last().unwrap().samples.end <= 16);
-        assert!(pass_after_update(&s, 4, 0, 3.6, 0.5).collect);
+        assert!(pass_after_update(&s, 4, 0, 3.6, 0.5, true).collect);
     }
 
     /// A time budget plans a pass by the dearer of the average pace and the last pass's: after
@@ -349,7 +361,7 @@ mod tests {
     #[test]
     fn plan_a_timed_pass_by_the_dearer_of_the_average_and_the_last_pace() {
         let s = spec(IntegratorName::EmisVcm, None, Some(20.0));
-        let first = pass_after_update(&s, 4, 4, 1.0, 1.0);
+        let first = pass_after_update(&s, 4, 4, 1.0, 1.0, true);
         assert_eq!(first.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..5]);
         let next = |clock: Clock| match after_pass(&s, 5, 4, clock, first.collect, 1.0) {
             BarrierAction::NextPass(p) => (p.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), p.collect),
@@ -363,7 +375,7 @@ mod tests {
         assert_eq!(expected_total(&s, 5, 4, Clock { elapsed_s: 3.0, last_pass_s: 0.1 }), 33);
         // a sample budget ignores the clock
         let n = spec(IntegratorName::EmisVcm, Some(40), None);
-        assert_eq!(pass_after_update(&n, 4, 4, Clock { elapsed_s: 3.0, last_pass_s: 2.0 }, 1.0).tiles.len(), 2);
+        assert_eq!(pass_after_update(&n, 4, 4, Clock { elapsed_s: 3.0, last_pass_s: 2.0 }, 1.0, true).tiles.len(), 2);
     }
 
     /// A path-tracing start discarded at the update after iteration 1: the sample budget
@@ -372,11 +384,11 @@ mod tests {
     #[test]
     fn plan_after_a_restart_renders_the_whole_budget_into_the_new_film() {
         let s = spec(IntegratorName::EmisVcm, Some(12), None);
-        let second = pass_after_update(&s, 1, 1, 1.0, 0.0);
+        let second = pass_after_update(&s, 1, 1, 1.0, 0.0, true);
         let ranges: Vec<_> = second.tiles.iter().map(|t| t.samples.clone()).collect();
         assert_eq!((ranges, second.collect), (vec![1..2, 2..3, 3..4], true));
         assert_eq!(after_pass(&s, 4, 1, 1.0, true, 0.0), BarrierAction::Optimize);
-        let third = pass_after_update(&s, 4, 1, 1.0, 0.0);
+        let third = pass_after_update(&s, 4, 1, 1.0, 0.0, true);
         assert_eq!(third.tiles.iter().map(|t| t.samples.clone()).collect::<Vec<_>>(), [4..12, 12..13]);
         assert!(matches!(after_pass(&s, 12, 1, 1.0, false, 0.0), BarrierAction::NextPass(_)));
         assert_eq!(after_pass(&s, 13, 1, 1.0, false, 0.0), BarrierAction::Finish);

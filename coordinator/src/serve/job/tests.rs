@@ -40,7 +40,7 @@ fn merge_all(m: &mut JobsModel, job: &str, merges: &mut Vec<u32>, now: u64) {
         }
         if let (Some(BarrierAction::Optimize), _) = m.merged(job, r.end, now) {
             // the service runs the optimiser here
-            m.optimized(job, false, 1.0, now).unwrap();
+            m.optimized(job, false, 1.0, true, now).unwrap();
         }
     }
 }
@@ -227,7 +227,7 @@ fn a_timed_emis_job_paces_the_pass_after_a_restart_by_its_last_pass() {
         if let Some(BarrierAction::Optimize) = step(&mut m, now) {
             // the update after 1 keeps path tracing; the one after 4 restarts into VCM
             let restart = m.jobs["a"].spp_merged() == 4;
-            m.optimized("a", restart, if restart { 1.0 } else { 0.0 }, now).unwrap();
+            m.optimized("a", restart, if restart { 1.0 } else { 0.0 }, true, now).unwrap();
         }
     }
     assert_eq!((now, m.jobs["a"].kept_from()), (40, 4));
@@ -245,7 +245,7 @@ fn a_timed_emis_job_paces_the_pass_after_a_restart_by_its_last_pass() {
 fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     let mut m = JobsModel::default();
     m.submit("a", spec(IntegratorName::EmisVcm, 6, 0), 0).unwrap();
-    assert_eq!(m.optimized("a", false, 1.0, 0), Err(TransitionError::NotOptimizing("a".into())));
+    assert_eq!(m.optimized("a", false, 1.0, true, 0), Err(TransitionError::NotOptimizing("a".into())));
     let job = &m.jobs["a"];
     assert_eq!((job.passes.len(), job.passes[0].kind, job.collects(0)), (1, PassKind::Pilot, true));
     let (l, _) = m.lease("w", 8, 0, TTL);
@@ -255,7 +255,7 @@ fn emis_job_runs_pilot_optimizing_final_with_a_pass_per_update() {
     assert_eq!(action, Some(BarrierAction::Optimize));
     assert_eq!(m.jobs["a"].state, JobState::Optimizing);
     assert!(m.lease("w", 8, 1, TTL).0.is_empty(), "nothing to render while optimising");
-    m.optimized("a", false, 1.0, 2).unwrap();
+    m.optimized("a", false, 1.0, true, 2).unwrap();
     let job = &m.jobs["a"];
     assert_eq!(job.state, JobState::Final);
     // a bidirectional strategy (ν = 1) records every iteration: iterations 1..4 in one tile
@@ -297,7 +297,7 @@ fn progress_never_falls_when_an_update_discards_a_path_tracing_start() {
             if let Some(BarrierAction::Optimize) = action {
                 barriers += 1;
                 // the second update ends the path-tracing start, as the service's EMIS state says
-                m.optimized("a", barriers == 2, 1.0, 3).unwrap();
+                m.optimized("a", barriers == 2, 1.0, true, 3).unwrap();
                 shown.push(super::view::JobView::of(&m.jobs["a"], 3).progress);
             }
         }

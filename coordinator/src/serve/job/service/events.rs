@@ -44,6 +44,7 @@ pub(super) fn emis_update(job: &str, report: &UpdateReport) {
         merging_pixels = report.merging_pixels,
         reduced_candidates = report.reduced,
         restarted = report.restarted,
+        settled = report.settled,
         update_ms = (report.denoise_ms + report.optimize_ms).round() as u64,
         "emis update"
     );

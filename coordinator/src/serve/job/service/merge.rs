@@ -83,8 +83,8 @@ impl JobService {
             // which combines them at the end (the checkpoint stores both)
             *film = Film::for_filter(film.width, film.height, &filter);
         }
-        let nu = emis.state.strategy.nu;
-        let changes = inner.model.optimized(job, restarted, nu, now_ms)?;
+        let (nu, collect) = (emis.state.strategy.nu, emis.state.collecting());
+        let changes = inner.model.optimized(job, restarted, nu, collect, now_ms)?;
         super::events::pass_planned(&inner.model, job);
         let upto = inner.model.jobs[job].merged;
         self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
