@@ -6,7 +6,8 @@
 //! mostly noise.
 //!
 //! The default runs no level: Ī is then the pilot image's channel mean and box, which the
-//! decisions agree with better (decision 0028).
+//! decisions agree with better (decision 0028). Where the filter runs, it runs on 2 × 2
+//! blocks ([`super::halve`]; decision 0042).
 //!
 //! Edge stopping between pixels p and q at step s: normals max(0, n_p·n_q)^σn; albedo
 //! exp(−|a_p − a_q|₁/σa); depth exp(−|z_p − z_q| / (σz·|∇z_p|·s·|offset| + ε)) as in SVGF, so
@@ -14,6 +15,7 @@
 //! other.
 
 use super::filter::Image;
+use super::halve::Halved;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -25,7 +27,8 @@ pub enum ImageEstimate {
     /// still use the guided filter ([`super::render::EmisConfig::start_denoise`]).
     #[default]
     Pilot,
-    /// The pilot image through the guided à-trous filter first (decision 7).
+    /// The pilot image through the guided à-trous filter first (decision 7), on 2 × 2 blocks
+    /// ([`DenoiseSettings::GUIDED_HALF`]).
     Guided,
 }
 
@@ -34,7 +37,7 @@ impl ImageEstimate {
     pub fn settings(self) -> DenoiseSettings {
         match self {
             ImageEstimate::Pilot => DenoiseSettings::default(),
-            ImageEstimate::Guided => DenoiseSettings::GUIDED,
+            ImageEstimate::Guided => DenoiseSettings::GUIDED_HALF,
         }
     }
 }
@@ -54,12 +57,25 @@ pub struct DenoiseSettings {
     pub depth_sigma: f32,
     /// Box passes on the channel mean afterwards (the reference's radius 3).
     pub final_box: usize,
+    /// Run the levels on 2 × 2 blocks ([`super::halve`]) and modulate by each pixel's own
+    /// albedo: a quarter of the pixels, with the first level's footprint in the blocks.
+    pub half_resolution: bool,
 }
 
 impl DenoiseSettings {
     /// The guided à-trous filter of decision 7, five levels.
-    pub const GUIDED: DenoiseSettings =
-        DenoiseSettings { levels: 5, normal_power: 64, albedo_sigma: 0.2, depth_sigma: 1.0, final_box: 3 };
+    pub const GUIDED: DenoiseSettings = DenoiseSettings {
+        levels: 5,
+        normal_power: 64,
+        albedo_sigma: 0.2,
+        depth_sigma: 1.0,
+        final_box: 3,
+        half_resolution: false,
+    };
+
+    /// The guided filter on 2 × 2 blocks: four levels there reach as far as five at full
+    /// resolution, at a fifth of the cost (docs/decisions/0042-guided-filter-at-half-resolution.md).
+    pub const GUIDED_HALF: DenoiseSettings = DenoiseSettings { levels: 4, half_resolution: true, ..Self::GUIDED };
 }
 
 impl Default for DenoiseSettings {
@@ -100,6 +116,14 @@ pub fn denoised_intensity(
 ) -> Image {
     if s.levels == 0 {
         let mean = color.iter().map(|[r, g, b]| (r + g + b) / 3.0).collect();
+        return Image::from_data(width, height, mean).box_blur(s.final_box);
+    }
+    if s.half_resolution {
+        let half = Halved::new(width, height, color, guides.albedo, guides.normal, guides.depth);
+        let half_guides = Guides { albedo: &half.albedo, normal: &half.normal, depth: &half.depth };
+        let mean = filtered(half.width, half.height, &half.color, &half_guides, s, |planes, _| {
+            half.upsampled_mean(width, guides, planes, s.normal_power)
+        });
         return Image::from_data(width, height, mean).box_blur(s.final_box);
     }
     let mean = filtered(width, height, color, guides, s, |planes, modulation| {

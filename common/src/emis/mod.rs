@@ -25,6 +25,7 @@ pub mod denoise;
 pub mod estimator;
 pub mod filter;
 pub mod guides;
+pub mod halve;
 pub mod measured;
 pub mod moments;
 pub mod optimize;

@@ -168,7 +168,7 @@ impl EmisConfig {
             measured_costs: false,
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
-            start_denoise: DenoiseSettings::GUIDED,
+            start_denoise: DenoiseSettings::GUIDED_HALF,
             pilot: PilotStart::Bidirectional,
             connection_scope: ConnectionScope::default(),
             settle_margin: Self::SETTLE_MARGIN,

@@ -9,7 +9,7 @@ use super::{SceneArgs, cpu_seconds};
 use crate::options::scene_name;
 use std::time::Instant;
 use tessera_common::emis::cost::PathStatistics;
-use tessera_common::emis::denoise::{DenoiseSettings, Guides, denoised_intensity};
+use tessera_common::emis::denoise::{Guides, ImageEstimate, denoised_intensity};
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{MergeScope, OptimizerInput, optimize};
@@ -59,7 +59,7 @@ struct Overhead {
 /// host's load changing between rounds, which separate fastest times are not).
 fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> Overhead {
     // the guided Ī, so that the first iterations record the guides (the default Ī does not)
-    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(method) };
+    let config = EmisConfig { denoise: ImageEstimate::Guided.settings(), ..EmisConfig::new(method) };
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
     let mut best = [f64::INFINITY; 3];
@@ -130,7 +130,7 @@ fn update_time(w: u32, h: u32, kind: UpdateKind) -> (f64, f64, usize, usize) {
         UpdateKind::Bidirectional | UpdateKind::BidirectionalGuided => CandidateSet::Full,
     };
     let denoise = match kind {
-        UpdateKind::BidirectionalGuided => &DenoiseSettings::GUIDED,
+        UpdateKind::BidirectionalGuided => &ImageEstimate::Guided.settings(),
         _ => config.denoise_of(set),
     };
     let candidates = config.candidates_of(set);
