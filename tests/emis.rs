@@ -152,30 +152,34 @@ fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
     assert_same_emis_outputs(&out, &local);
 }
 
-/// Path tracing kept to the end on the farm: after the update at 1 the 199 iterations left are
-/// cut into calls of a sixteenth of what is left (12, 11, ... then 8s), as `tessera render`
-/// cuts them, and the image is the same bit for bit.
+/// Path tracing kept to the end on the farm: it wins the updates at 1 and 4 clearly and
+/// settles at 4 (no update at 16, no more recordings); the 196 iterations left are cut into
+/// calls of a sixteenth of what is left (12, 12, ... then 8s), as `tessera render` cuts
+/// them, and the image is the same bit for bit.
 #[test]
 fn rest_submit_emis_keeping_path_tracing_renders_the_local_calls() {
     use tessera_common::film::exr::read_attribute;
     let dir = tempfile::tempdir().unwrap();
     let (c, _w) = farm(dir.path(), 2);
     let xml = std::fs::read(scene("glossy-interreflection")).unwrap();
-    let settings = json!({"integrator": "emis-vcm", "spp": 200, "seed": 5, "emis_updates": [1]});
+    let settings = json!({"integrator": "emis-vcm", "spp": 200, "seed": 5, "emis_updates": [1, 4, 16]});
     let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
     assert_eq!(status, 201, "{job}");
     let id = job["id"].as_str().unwrap();
     let done = wait_done(&c, id, None);
     let updates = done["strategy"]["updates"].as_array().expect("EMIS decisions in the status");
     assert!(updates.iter().all(|u| u["restarted"] == false), "path tracing kept: {updates:?}");
+    let settled: Vec<_> = updates.iter().map(|u| (u["iteration"].as_u64(), u["settled"] == true)).collect();
+    assert_eq!(settled, [(Some(1), false), (Some(4), true)], "settled at 4: {updates:?}");
     assert_eq!(done["strategy"]["nu"].as_f64(), Some(0.0), "{}", done["strategy"]);
-    let calls = tessera_common::emis::calls(1..200, |r| tessera_common::emis::final_call(r, 0.0, 256 * 256));
-    assert_eq!(calls[0], 1..13);
-    assert_eq!(done["tiles_total"].as_u64(), Some(1 + calls.len() as u64), "the pilot and the calls: {done}");
+    let calls = tessera_common::emis::calls(4..200, |r| tessera_common::emis::final_call(r, 0.0, 256 * 256));
+    assert_eq!(calls[0], 4..16);
+    // the pilot, the collecting calls 1..2, 2..3 (a recording) and 3..4, then the final calls
+    assert_eq!(done["tiles_total"].as_u64(), Some(4 + calls.len() as u64), "{done}");
     let out = dir.path().join("farm.exr");
     download(&format!("{}/result.exr", job_url(&c, id)), None, &out);
-    let local =
-        local_render_with(dir.path(), &scene("glossy-interreflection"), "emis-vcm", 200, 5, &["--emis-updates", "1"]);
+    let more = ["--emis-updates", "1,4,16"];
+    let local = local_render_with(dir.path(), &scene("glossy-interreflection"), "emis-vcm", 200, 5, &more);
     assert_same_image(&out, &local);
     assert_eq!(read_attribute(&out, "tessera/emis_nu").unwrap(), Some(0.0));
 }

@@ -44,8 +44,9 @@ pub struct UpdateReport {
     /// with it at the end by the weight later updates estimate.
     #[serde(default)]
     pub restarted: bool,
-    /// Path tracing won this update and the one before by [`EmisConfig::settle_margin`]:
-    /// no moments are collected and no update runs after this one.
+    /// Path tracing won this update and the one before by [`EmisConfig::settle_margin`], on
+    /// [`SETTLE_RECORDINGS`] recorded iterations or more: no moments are collected and no
+    /// update runs after this one.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub settled: bool,
     /// After a restart: the weight of one start iteration against one later iteration this
@@ -290,9 +291,8 @@ impl EmisState {
             denoise_ms,
             optimize_ms,
         };
-        // later recordings would cost more than the rare switch they could find
-        // path tracing won twice by the margin, and on two recorded iterations at least: a
-        // caustic can look like path tracing's after one (docs/decisions/0041)
+        // after two clear wins later recordings cost more than the rare switch they find; one
+        // recording is too few, a caustic can look like path tracing's (docs/decisions/0041)
         let wins = |r: &UpdateReport| r.reduced && !r.restarted && r.path_tracing_margin() >= self.config.settle_margin;
         report.settled = wins(&report) && self.reports.last().is_some_and(wins) && recorded >= SETTLE_RECORDINGS;
         tracing::info!(
@@ -487,8 +487,8 @@ mod tests {
 
     /// A path-tracing start settles on path tracing when it wins two updates in a row by the
     /// margin: not after a narrow win (every bidirectional candidate 1.05× path tracing's
-    /// moment × cost, over the iterations so far), nor after one clear win (1000×), and
-    /// never with an infinite margin.
+    /// moment × cost, over the iterations so far), nor after one clear win (1000×), nor on
+    /// one recorded iteration, and never with an infinite margin.
     #[test]
     fn path_tracing_settles_after_two_clear_wins_in_a_row() {
         let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
