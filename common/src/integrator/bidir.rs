@@ -310,7 +310,7 @@ impl<O: SampleObserver> Bidir<O> {
             // ---- next-event estimation ----
             let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
             if material.has_smooth_lobe() {
-                if let Some(w) = next_event(scene, verts, u_light, u_pos, &counts, &report) {
+                if let Some(w) = next_event(scene, verts, &material, u_light, u_pos, &counts, &report) {
                     total += w.value;
                 }
             }
@@ -330,7 +330,7 @@ impl<O: SampleObserver> Bidir<O> {
                     continue;
                 }
                 tried += 1;
-                if let Some(w) = connect(scene, verts, light, connect_scale, &counts, &report) {
+                if let Some(w) = connect(scene, verts, &material, light, connect_scale, &counts, &report) {
                     total += w.value;
                 }
             }
@@ -362,7 +362,8 @@ impl<O: SampleObserver> Bidir<O> {
                     && material.has_smooth_lobe()
                 {
                     let block = timed.then(|| (Instant::now(), clock.get()));
-                    let (value, found) = merge(scene, verts, cache, photons, radius, chi, &counts, max_edges, &report);
+                    let (value, found) =
+                        merge(scene, verts, &material, cache, photons, radius, chi, &counts, max_edges, &report);
                     total += value;
                     counters.merge_queries += 1;
                     counters.photons_found += found as u64;

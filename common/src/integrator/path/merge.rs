@@ -16,7 +16,7 @@ use super::mis::{self, SampleCounts, Technique};
 use super::photon_map::PhotonMap;
 use super::techniques::Report;
 use super::vertex::{PathVertex, VertexKind, density_at_vertex};
-use crate::bsdf::TransportMode;
+use crate::bsdf::{Material, TransportMode};
 use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::math::{PI, Rgb};
 use crate::scene::Scene;
@@ -86,13 +86,14 @@ pub fn path_radius(d1: f32, radius_max: f32) -> f32 {
     (d1 * (0.1f32).to_radians().tan()).min(radius_max)
 }
 
-/// Merges the camera subpath's last vertex with the photons within `radius`, which happens
-/// with probability `chi`: the sum of the MIS-weighted contributions, including the 1/χ, and
-/// the number of photons found within the radius.
+/// Merges the camera subpath's last vertex (its material resolved, `mz`) with the photons
+/// within `radius`, which happens with probability `chi`: the sum of the MIS-weighted
+/// contributions, including the 1/χ, and the number of photons found within the radius.
 #[allow(clippy::too_many_arguments)]
 pub fn merge<O: SampleObserver>(
     scene: &Scene,
     camera: &[PathVertex],
+    mz: &Material,
     cache: &LightCache,
     photons: &PhotonMap,
     radius: f32,
@@ -106,8 +107,9 @@ pub fn merge<O: SampleObserver>(
         return (Rgb::ZERO, 0);
     }
     let Some(z) = camera.last() else { return (Rgb::ZERO, 0) };
-    let VertexKind::Surface { material, at } = z.kind else { return (Rgb::ZERO, 0) };
-    let mz = scene.material_at(material, at, z.p);
+    if !matches!(z.kind, VertexKind::Surface { .. }) {
+        return (Rgb::ZERO, 0);
+    }
     let frame = z.frame();
     let z_wo = frame.to_local(z.wo);
     let t = camera.len();

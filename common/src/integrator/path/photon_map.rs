@@ -1,6 +1,7 @@
 //! The photon map of an iteration: a hashed uniform grid over the light-vertex cache
-//! (SmallVCM-style, cell size 2·r_max, 8-cell lookups). Built by counting sort in cache order,
-//! so photons are visited in a deterministic order whatever the thread count.
+//! (SmallVCM-style, cell size 2·r_max; a query visits the cells its bounding cube overlaps).
+//! Built by counting sort in cache order, so photons are visited in a deterministic order
+//! whatever the thread count.
 
 use crate::integrator::path::vertex::PathVertex;
 use glam::Vec3;
@@ -82,27 +83,35 @@ impl PhotonMap {
         if self.photons.is_empty() {
             return;
         }
-        let c = (p - self.origin) * self.inv_cell;
-        let f = c.floor();
-        // the 2 × 2 × 2 cells nearest to p cover the sphere of radius cell / 2
-        let lo = [
-            if c.x - f.x < 0.5 { f.x as i32 - 1 } else { f.x as i32 },
-            if c.y - f.y < 0.5 { f.y as i32 - 1 } else { f.y as i32 },
-            if c.z - f.z < 0.5 { f.z as i32 - 1 } else { f.z as i32 },
-        ];
-        let mut seen = [usize::MAX; 8];
-        let r2 = radius * radius;
-        for k in 0..8 {
-            let b = bucket_of(
-                [lo[0] + (k & 1) as i32, lo[1] + ((k >> 1) & 1) as i32, lo[2] + ((k >> 2) & 1) as i32],
-                self.mask,
-            );
-            // cells can collide in one bucket: visit each bucket once
-            if seen[..k].contains(&b) {
-                continue;
+        // the cells the cube around the sphere overlaps: one or two per axis, as a cell is at
+        // least twice the largest radius
+        let lo = ((p - radius - self.origin) * self.inv_cell).floor();
+        let hi = ((p + radius - self.origin) * self.inv_cell).floor();
+        let lo = [lo.x as i32, lo.y as i32, lo.z as i32];
+        let span = [(hi.x as i32 > lo[0]) as i32, (hi.y as i32 > lo[1]) as i32, (hi.z as i32 > lo[2]) as i32];
+        // every bucket first, then their ranges, then their photons: the loads of one step do
+        // not wait on each other (queries are bound by memory latency, not arithmetic)
+        let mut buckets = [0usize; 8];
+        let mut n = 0;
+        for z in 0..=span[2] {
+            for y in 0..=span[1] {
+                for x in 0..=span[0] {
+                    let b = bucket_of([lo[0] + x, lo[1] + y, lo[2] + z], self.mask);
+                    // cells can collide in one bucket: visit each bucket once
+                    if !buckets[..n].contains(&b) {
+                        buckets[n] = b;
+                        n += 1;
+                    }
+                }
             }
-            seen[k] = b;
-            let range = self.starts[b] as usize..self.starts[b + 1] as usize;
+        }
+        let mut ranges = [(0u32, 0u32); 8];
+        for (range, &b) in ranges.iter_mut().zip(&buckets[..n]) {
+            *range = (self.starts[b], self.starts[b + 1]);
+        }
+        let r2 = radius * radius;
+        for &(start, end) in &ranges[..n] {
+            let range = start as usize..end as usize;
             for (&i, q) in self.photons[range.clone()].iter().zip(&self.positions[range]) {
                 let d2 = (*q - p).length_squared();
                 if d2 <= r2 {
@@ -136,6 +145,31 @@ mod tests {
             let mut s = Sampler::for_pixel(2, q, 0);
             let p = s.next_2d().extend(s.next_1d()) * 2.2 - 1.1;
             let r = 0.02 + 0.08 * s.next_1d();
+            let mut found = vec![];
+            map.query(p, r, |i, _| found.push(i));
+            let mut expected: Vec<u32> =
+                all.iter().copied().filter(|&i| (vertices[i as usize].p - p).length() <= r).collect();
+            found.sort();
+            expected.sort();
+            assert_eq!(found, expected, "query {q}");
+        }
+    }
+
+    #[test]
+    fn colliding_cells_are_visited_once() {
+        // 24 photons hash into 64 buckets, so the cells a query overlaps often share one
+        let vertices: Vec<PathVertex> = (0..24)
+            .map(|i| {
+                let mut s = Sampler::for_pixel(3, i, 0);
+                vertex(s.next_2d().extend(s.next_1d()) * 6.0 - 3.0)
+            })
+            .collect();
+        let all: Vec<u32> = (0..vertices.len() as u32).collect();
+        let map = PhotonMap::build(&vertices, &all, 0.5);
+        for q in 0..2000 {
+            let mut s = Sampler::for_pixel(4, q, 0);
+            let p = s.next_2d().extend(s.next_1d()) * 7.0 - 3.5;
+            let r = 0.5 * s.next_1d();
             let mut found = vec![];
             map.query(p, r, |i, _| found.push(i));
             let mut expected: Vec<u32> =

@@ -158,18 +158,19 @@ pub fn emitter_hit<O: SampleObserver>(
     value
 }
 
-/// Next-event estimation from the camera subpath's last vertex with uniform numbers `u_light`
-/// and `u_pos`.
+/// Next-event estimation from the camera subpath's last vertex, whose resolved material is
+/// `material` (a textured one is resolved once per vertex, not once per technique), with
+/// uniform numbers `u_light` and `u_pos`.
 pub fn next_event<O: SampleObserver>(
     scene: &Scene,
     camera: &[PathVertex],
+    material: &Material,
     u_light: f32,
     u_pos: Vec2,
     counts: &SampleCounts,
     report: &Report<O>,
 ) -> Option<Weighted> {
     let z = camera.last()?;
-    let material = material_of(scene, z)?;
     let (li, pmf, _) = scene.light_sampler.sample(u_light)?;
     let light = &scene.lights[li];
     let ds = light.sample_direct(&scene.light_context(), z.p, u_pos)?;
@@ -232,18 +233,20 @@ pub fn next_event<O: SampleObserver>(
     Some(Weighted { value, weight })
 }
 
-/// Connects the camera subpath's last vertex to the light subpath `light` (whose last vertex
-/// is a surface vertex). `scale` is 1 / (effective connection count), c·N/|cache|.
+/// Connects the camera subpath's last vertex (its resolved material `mz`) to the light subpath
+/// `light` (whose last vertex is a surface vertex). `scale` is 1 / (effective connection
+/// count), c·N/|cache|.
 pub fn connect<O: SampleObserver>(
     scene: &Scene,
     camera: &[PathVertex],
+    mz: &Material,
     light: &[PathVertex],
     scale: f32,
     counts: &SampleCounts,
     report: &Report<O>,
 ) -> Option<Weighted> {
     let (z, y) = (camera.last()?, light.last()?);
-    let (mz, my) = (material_of(scene, z)?, material_of(scene, y)?);
+    let my = material_of(scene, y)?;
     let d = y.p - z.p;
     let dist2 = d.length_squared();
     if dist2 == 0.0 {
@@ -288,6 +291,11 @@ pub fn connect<O: SampleObserver>(
 /// Contribution of light-path vertex `v` (whose predecessor on the path is `prev`, if any)
 /// seen by the camera, and the raster position it lands on. Ignores MIS.
 pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
+    camera_contribution(scene, v, material_of(scene, v).as_deref())
+}
+
+/// [`connect_to_camera`] with the vertex's material already resolved (`None` off surfaces).
+fn camera_contribution(scene: &Scene, v: &PathVertex, material: Option<&Material>) -> Option<(Rgb, Vec2)> {
     let cam = &scene.camera;
     let cs = cam.sample_direct(v.p)?;
     let value = match v.kind {
@@ -299,13 +307,9 @@ pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
             light.emitted_towards(&scene.light_context(), at, v.p, v.n_geo, cs.wi) * v.beta.x
         }
         VertexKind::Camera => return None,
-        VertexKind::Surface { material, at } => {
+        VertexKind::Surface { .. } => {
             let frame = v.frame();
-            let f = scene.material_at(material, at, v.p).eval(
-                frame.to_local(v.wo),
-                frame.to_local(cs.wi),
-                TransportMode::Importance,
-            );
+            let f = material?.eval(frame.to_local(v.wo), frame.to_local(cs.wi), TransportMode::Importance);
             v.beta * f * (v.importance_correction(v.wo, cs.wi) * v.n_shading.dot(cs.wi).abs())
         }
     };
@@ -330,13 +334,14 @@ pub fn light_trace<O: SampleObserver>(
     sequence: u32,
 ) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
-    let (raw, raster) = connect_to_camera(scene, y)?;
+    let my = material_of(scene, y);
+    let (raw, raster) = camera_contribution(scene, y, my.as_deref())?;
     let cam = &scene.camera;
     let to_camera = (cam.origin - y.p).normalize_or_zero();
     let camera_vertex = camera_vertex(scene);
     let pixels = (cam.width * cam.height) as f32;
     let s = light.len();
-    let light_next_from_camera = match (s >= 2, material_of(scene, y)) {
+    let light_next_from_camera = match (s >= 2, my) {
         (true, Some(m)) => {
             let f = y.frame();
             let infinite = s == 2 && path_on_infinite_light(scene, light);
