@@ -131,20 +131,20 @@ mod tests {
         PathVertex::surface_at(p)
     }
 
-    #[test]
-    fn queries_find_exactly_the_photons_within_the_radius() {
-        let vertices: Vec<PathVertex> = (0..5000)
-            .map(|i| {
-                let mut s = Sampler::for_pixel(1, i, 0);
-                vertex(s.next_2d().extend(s.next_1d()) * 2.0 - 1.0)
-            })
-            .collect();
-        let all: Vec<u32> = (0..vertices.len() as u32).collect();
-        let map = PhotonMap::build(&vertices, &all, 0.1);
-        for q in 0..200 {
-            let mut s = Sampler::for_pixel(2, q, 0);
-            let p = s.next_2d().extend(s.next_1d()) * 2.2 - 1.1;
-            let r = 0.02 + 0.08 * s.next_1d();
+    /// Builds a map over `photons` points in the cube [−extent, extent]³ for radius `max`,
+    /// and checks `queries` queries of radius `min`…`max` (centres a little beyond the cube)
+    /// against brute force: every photon within the radius exactly once.
+    fn assert_queries_match_brute_force(photons: u32, extent: f32, max: f32, min: f32, queries: u32) {
+        let point = |seed: u64, i: u32, half: f32| {
+            let mut s = Sampler::for_pixel(seed, i, 0);
+            (s.next_2d().extend(s.next_1d()) * 2.0 - 1.0) * half
+        };
+        let vertices: Vec<PathVertex> = (0..photons).map(|i| vertex(point(1, i, extent))).collect();
+        let all: Vec<u32> = (0..photons).collect();
+        let map = PhotonMap::build(&vertices, &all, max);
+        for q in 0..queries {
+            let p = point(2, q, 1.1 * extent + max);
+            let r = min + (max - min) * Sampler::for_pixel(3, q, 0).next_1d();
             let mut found = vec![];
             map.query(p, r, |i, _| found.push(i));
             let mut expected: Vec<u32> =
@@ -156,27 +156,13 @@ mod tests {
     }
 
     #[test]
+    fn queries_find_exactly_the_photons_within_the_radius() {
+        assert_queries_match_brute_force(5000, 1.0, 0.1, 0.02, 200);
+    }
+
+    #[test]
     fn colliding_cells_are_visited_once() {
         // 24 photons hash into 64 buckets, so the cells a query overlaps often share one
-        let vertices: Vec<PathVertex> = (0..24)
-            .map(|i| {
-                let mut s = Sampler::for_pixel(3, i, 0);
-                vertex(s.next_2d().extend(s.next_1d()) * 6.0 - 3.0)
-            })
-            .collect();
-        let all: Vec<u32> = (0..vertices.len() as u32).collect();
-        let map = PhotonMap::build(&vertices, &all, 0.5);
-        for q in 0..2000 {
-            let mut s = Sampler::for_pixel(4, q, 0);
-            let p = s.next_2d().extend(s.next_1d()) * 7.0 - 3.5;
-            let r = 0.5 * s.next_1d();
-            let mut found = vec![];
-            map.query(p, r, |i, _| found.push(i));
-            let mut expected: Vec<u32> =
-                all.iter().copied().filter(|&i| (vertices[i as usize].p - p).length() <= r).collect();
-            found.sort();
-            expected.sort();
-            assert_eq!(found, expected, "query {q}");
-        }
+        assert_queries_match_brute_force(24, 3.0, 0.5, 0.0, 2000);
     }
 }
