@@ -32,7 +32,8 @@ impl PhotonMap {
     /// Builds the map over `vertices[i]` for every `i` in `candidates`, for queries of radius at
     /// most `max_radius`.
     pub fn build(vertices: &[PathVertex], candidates: &[u32], max_radius: f32) -> Self {
-        let cell = (2.0 * max_radius).max(1e-12);
+        // a hair over 2·r_max, so that rounding never stretches a query over three cells
+        let cell = (2.0 * max_radius * 1.001).max(1e-12);
         let origin = candidates.iter().fold(Vec3::splat(f32::MAX), |m, &i| m.min(vertices[i as usize].p));
         let buckets = (2 * candidates.len()).max(16).next_power_of_two();
         let mut map = PhotonMap {
@@ -83,8 +84,8 @@ impl PhotonMap {
         if self.photons.is_empty() {
             return;
         }
-        // the cells the cube around the sphere overlaps: one or two per axis, as a cell is at
-        // least twice the largest radius
+        // the cells the cube around the sphere overlaps: one or two per axis, as a cell is
+        // more than twice the largest radius
         let lo = ((p - radius - self.origin) * self.inv_cell).floor();
         let hi = ((p + radius - self.origin) * self.inv_cell).floor();
         let lo = [lo.x as i32, lo.y as i32, lo.z as i32];
