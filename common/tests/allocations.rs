@@ -97,16 +97,18 @@ fn connections_and_merges_do_not_allocate() {
     let report = Report { observer: &NoObserver, pixel: 0, clock: None };
     let mut energy = glam::Vec3::ZERO;
     let before = allocations();
+    // resolved once per vertex, as the integrator does, inside the counted region
+    let mz = scene.material_at(scene.shapes[hit2.shape as usize].material, hit2.surface(), hit2.p);
     for &i in &cache.selectable {
-        if let Some(w) = connect(&scene, &camera, cache.subpath(i as usize), 1.0, &counts, &report) {
+        if let Some(w) = connect(&scene, &camera, &mz, cache.subpath(i as usize), 1.0, &counts, &report) {
             energy += w.value;
         }
     }
     for k in 0..1000 {
-        if let Some(w) = next_event(&scene, &camera, k as f32 / 1000.0, Vec2::splat(0.37), &counts, &report) {
+        if let Some(w) = next_event(&scene, &camera, &mz, k as f32 / 1000.0, Vec2::splat(0.37), &counts, &report) {
             energy += w.value;
         }
-        energy += merge(&scene, &camera, &cache, &photons, radius, 1.0, &counts, 12, &report).0;
+        energy += merge(&scene, &camera, &mz, &cache, &photons, radius, 1.0, &counts, 12, &report).0;
     }
     let made = allocations() - before;
     // the counter does see this thread's allocations
