@@ -12,6 +12,7 @@ use super::light_path::next_event_density;
 use super::mis::{self, SampleCounts, Technique};
 use super::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
 use crate::bsdf::{Material, TransportMode};
+use crate::camera::CameraSample;
 use crate::geometry::{Ray, SurfaceRef, offset_ray_origin};
 use crate::integrator::observer::{SampleObserver, SampleRecord};
 use crate::light::Light;
@@ -291,13 +292,18 @@ pub fn connect<O: SampleObserver>(
 /// Contribution of light-path vertex `v` (whose predecessor on the path is `prev`, if any)
 /// seen by the camera, and the raster position it lands on. Ignores MIS.
 pub fn connect_to_camera(scene: &Scene, v: &PathVertex) -> Option<(Rgb, Vec2)> {
-    camera_contribution(scene, v, material_of(scene, v).as_deref())
+    let cs = scene.camera.sample_direct(v.p)?;
+    camera_contribution(scene, v, material_of(scene, v).as_deref(), cs)
 }
 
-/// [`connect_to_camera`] with the vertex's material already resolved (`None` off surfaces).
-fn camera_contribution(scene: &Scene, v: &PathVertex, material: Option<&Material>) -> Option<(Rgb, Vec2)> {
-    let cam = &scene.camera;
-    let cs = cam.sample_direct(v.p)?;
+/// [`connect_to_camera`] once the camera sample `cs` exists (a vertex out of view never gets
+/// its material resolved), with the vertex's material (`None` off surfaces).
+fn camera_contribution(
+    scene: &Scene,
+    v: &PathVertex,
+    material: Option<&Material>,
+    cs: CameraSample,
+) -> Option<(Rgb, Vec2)> {
     let value = match v.kind {
         VertexKind::Light { light, at } => {
             let light = &scene.lights[light as usize];
@@ -334,8 +340,9 @@ pub fn light_trace<O: SampleObserver>(
     sequence: u32,
 ) -> Option<(Weighted, Vec2)> {
     let y = light.last()?;
+    let cs = scene.camera.sample_direct(y.p)?;
     let my = material_of(scene, y);
-    let (raw, raster) = camera_contribution(scene, y, my.as_deref())?;
+    let (raw, raster) = camera_contribution(scene, y, my.as_deref(), cs)?;
     let cam = &scene.camera;
     let to_camera = (cam.origin - y.p).normalize_or_zero();
     let camera_vertex = camera_vertex(scene);
