@@ -377,6 +377,24 @@ fn print_floor(table: &[(String, Row)], seeds: &[u64]) {
     }
 }
 
+/// Every cell's relMSE for each seed alone, so that a mean's spread, and which seed a floor
+/// verdict rests on, can be read off.
+fn print_per_seed(table: &[(String, Row)], seeds: &[u64]) {
+    if seeds.len() < 2 {
+        return;
+    }
+    let names: Vec<&str> = table.first().map(|(_, r)| r.iter().map(|c| c.name.as_str()).collect()).unwrap_or_default();
+    println!("relMSE per seed {seeds:?}:\n");
+    println!("| scene | {} |", names.join(" | "));
+    println!("|---|{}", "---|".repeat(names.len()));
+    for (scene, rows) in table {
+        let cells: Vec<String> =
+            rows.iter().map(|c| c.relmse.iter().map(|e| format!("{e:.4}")).collect::<Vec<_>>().join(", ")).collect();
+        println!("| {scene} | {} |", cells.join(" | "));
+    }
+    println!();
+}
+
 /// How far pt's samples/s moved between its runs of a scene: the host's drift, which an
 /// equal-time cell absorbs as noise.
 fn print_drift(table: &[(String, Row)]) {
@@ -430,6 +448,7 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
             table.push((scene_name(path), rows));
         }
         println!();
+        print_per_seed(&table, &args.seeds);
         print_drift(&table);
         print_speedups(&table);
         print_floor(&table, &args.seeds);
