@@ -306,10 +306,24 @@ impl<O: SampleObserver> Bidir<O> {
                 }
                 break;
             }
-            let material = scene.material_at(shape.material, hit.surface(), hit.p);
-            // ---- next-event estimation ----
+            // drawn in the order they are used, but before the work that comes first: the first
+            // connection's two dependent loads then overlap with the material and next-event
+            // estimation (docs/decisions/0044)
             let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
-            if material.has_smooth_lobe() {
+            let connections = self.connections.draw(pixel, &mut sampler);
+            let u_first = (connections > 0).then(|| sampler.next_1d());
+            if let Some(u) = u_first {
+                cache.prefetch_pick(u);
+            }
+            let material = scene.material_at(shape.material, hit.surface(), hit.p);
+            // a vertex without a smooth lobe connects to nothing
+            let smooth = material.has_smooth_lobe();
+            let mut pick = u_first.filter(|_| smooth).and_then(|u| cache.pick(u));
+            if let Some(i) = pick {
+                cache.prefetch_subpath(i);
+            }
+            // ---- next-event estimation ----
+            if smooth {
                 if let Some(w) = next_event(scene, verts, &material, u_light, u_pos, &counts, &report) {
                     total += w.value;
                 }
@@ -317,15 +331,18 @@ impl<O: SampleObserver> Bidir<O> {
             // ---- connections to cached light vertices ----
             let block = timed.then(|| (Instant::now(), clock.get()));
             let mut tried = 0u64;
-            for _ in 0..self.connections.draw(pixel, &mut sampler) {
-                let u = sampler.next_1d();
-                if cache.selectable.is_empty() || !material.has_smooth_lobe() {
-                    continue;
+            for k in 0..connections {
+                let this = pick;
+                // the next pick is loaded while this one connects
+                if k + 1 < connections {
+                    let u = sampler.next_1d();
+                    pick = if smooth { cache.pick(u) } else { None };
+                    if let Some(i) = pick {
+                        cache.prefetch_subpath(i);
+                    }
                 }
-                let pick = cache.selectable
-                    [((u * cache.selectable.len() as f32) as usize).min(cache.selectable.len() - 1)]
-                    as usize;
-                let light = cache.subpath(pick);
+                let Some(this) = this else { continue };
+                let light = cache.subpath(this);
                 if depth + light.len() as u32 > max_edges {
                     continue;
                 }

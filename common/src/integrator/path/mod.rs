@@ -10,5 +10,6 @@ pub mod light_path;
 pub mod merge;
 pub mod mis;
 pub mod photon_map;
+pub mod prefetch;
 pub mod techniques;
 pub mod vertex;
