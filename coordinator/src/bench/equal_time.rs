@@ -389,7 +389,7 @@ fn print_per_seed(table: &[(String, Row)], seeds: &[u64]) {
     println!("|---|{}", "---|".repeat(names.len()));
     for (scene, rows) in table {
         let cells: Vec<String> =
-            rows.iter().map(|c| c.relmse.iter().map(|e| format!("{e:.4}")).collect::<Vec<_>>().join(", ")).collect();
+            rows.iter().map(|c| c.relmse.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>().join(", ")).collect();
         println!("| {scene} | {} |", cells.join(" | "));
     }
     println!();
