@@ -64,6 +64,7 @@ fn bench_mask(scene: &Scene, reference: &[[f64; 3]]) -> MergeMask {
     let candidates = config.candidates_of(CandidateSet::Full);
     let decision = optimize(&OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates: &candidates,
         moments: &data.moments,
         image: &intensity,

@@ -91,6 +91,7 @@ fn choose(
     filters.outliers = rule;
     let decision = optimize(&OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates: &candidates,
         moments,
         image,

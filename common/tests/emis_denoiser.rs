@@ -38,6 +38,7 @@ fn check(name: &str, estimate: ImageEstimate) {
     let decide = |image: &Image| -> Decision {
         optimize(&OptimizerInput {
             restart_share: 0.0,
+            incumbent: None,
             candidates: &candidates,
             moments: &moments,
             image,

@@ -12,7 +12,8 @@
 //! 2. Image level: per image-level candidate g = (ν, c) (and path tracing), the mean over
 //!    pixels of the relative moment M_j(g, merge_j) / (Ī_j² + 1e-4) with merge_j = χ_j > 0.1,
 //!    after zeroing values above each candidate's 99.9 % quantile, times the mean cost; the
-//!    argmin wins. Before step 0, [`OutlierStage::Shared`] (the default) takes out the outliers
+//!    argmin wins, unless it is cheaper than the [`Incumbent`] and not better by its margin.
+//!    Before step 0, [`OutlierStage::Shared`] (the default) takes out the outliers
 //!    of the part of each pixel's moment that all candidates share.
 //!
 //! With [`ConnectionScope::PerPixel`] the pixel level also keeps the winner's c, dilated
@@ -221,6 +222,30 @@ pub struct OptimizerInput<'a> {
     /// path-tracing start restarts): such a winner must beat path tracing by more than the
     /// work it throws away, its image-level score being divided by 1 − share. 0 otherwise.
     pub restart_share: f64,
+    /// The image-level strategy being rendered: a cheaper winner must beat it by a margin.
+    pub incumbent: Option<Incumbent>,
+}
+
+/// The image-level strategy the pilot is rendering, and how much better a cheaper candidate
+/// must score to replace it: moments of a short pilot understate the heavy tails of cheaper,
+/// noisier strategies most, which shows as small predicted gains of theirs
+/// (docs/decisions/0046-incumbent-margin.md). A dearer candidate needs no margin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Incumbent {
+    /// Light paths per pixel.
+    pub nu: f32,
+    /// Connections (`None`: per pixel).
+    pub connections: Option<u32>,
+    /// A cheaper challenger's score × (1 + margin) must be below the incumbent's.
+    pub margin: f64,
+}
+
+impl Incumbent {
+    /// The margin after `recorded` pilot iterations: `scale` / √recorded, as the standard
+    /// error of a mean over that many iterations.
+    pub fn margin_after(scale: f64, recorded: u32) -> f64 {
+        scale / (recorded.max(1) as f64).sqrt()
+    }
 }
 
 /// The optimiser's decision.
@@ -287,11 +312,21 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
         &thresholds,
     );
     let kept = 1.0 - input.restart_share.clamp(0.0, 1.0);
-    let best = (0..groups.len()).filter(|&g| scores[g].relative_moment.is_finite()).min_by(|&a, &b| {
-        let discount = |g: usize| if groups[g].nu > 0.0 { kept } else { 1.0 };
-        let score = |g: usize| scores[g].relative_moment * scores[g].cost / discount(g);
-        score(a).total_cmp(&score(b))
+    let discount = |g: usize| if groups[g].nu > 0.0 { kept } else { 1.0 };
+    let score = |g: usize| scores[g].relative_moment * scores[g].cost / discount(g);
+    let finite = |g: &usize| scores[*g].relative_moment.is_finite();
+    let best = (0..groups.len()).filter(finite).min_by(|&a, &b| score(a).total_cmp(&score(b)));
+    let incumbent = input.incumbent.and_then(|inc| {
+        let g = groups.iter().position(|g| g.merge.is_none() && g.nu == inc.nu && g.connections == inc.connections);
+        g.filter(finite).map(|g| (g, inc.margin))
     });
+    let best = match (best, incumbent) {
+        // only a cheaper challenger's moments are understated by the pilot's shortness
+        (Some(b), Some((i, margin))) if scores[b].cost < scores[i].cost && score(b) * (1.0 + margin) >= score(i) => {
+            Some(i)
+        }
+        _ => best,
+    };
     // nothing finite: path tracing (as every candidate, it cannot sample some pixel's paths)
     let chosen = best.or_else(|| groups.iter().position(|g| g.nu == 0.0));
     let (nu, connections) = chosen.map_or((0.0, Some(0)), |g| (groups[g].nu, groups[g].connections));

@@ -140,6 +140,10 @@ pub struct EmisConfig {
     /// candidate's moment × cost at least this many times its own, the second on
     /// [`super::SETTLE_RECORDINGS`] recorded iterations or more (infinity: never).
     pub settle_margin: f64,
+    /// A full-set update keeps the (ν, c) being rendered unless the lowest score is a dearer
+    /// candidate's or lower by more than this / √(recorded iterations) of it (0: always the
+    /// lowest score).
+    pub incumbent_margin: f64,
 }
 
 impl EmisConfig {
@@ -150,6 +154,9 @@ impl EmisConfig {
     /// iterations by 10 % or more, the later updates chose it too, and their recordings cost
     /// a few per cent of the render (docs/decisions/0041-path-tracing-settles.md).
     pub const SETTLE_MARGIN: f64 = 1.1;
+
+    /// The default [`EmisConfig::incumbent_margin`] (docs/decisions/0046-incumbent-margin.md).
+    pub const INCUMBENT_MARGIN: f64 = 0.25;
 
     /// The paper's configuration of `method`, with the method's own pilot
     /// ([`PilotStart::Bidirectional`], what the decision tests and benches study); a render's
@@ -172,6 +179,7 @@ impl EmisConfig {
             pilot: PilotStart::Bidirectional,
             connection_scope: ConnectionScope::default(),
             settle_margin: Self::SETTLE_MARGIN,
+            incumbent_margin: Self::INCUMBENT_MARGIN,
         }
     }
 

@@ -17,7 +17,7 @@ use super::filter::Image;
 use super::guides::GuideBuffer;
 use super::measured::measured_constants;
 use super::moments::MomentBuffer;
-use super::optimize::{Decision, ImageLevelScore, MergeScope, OptimizerInput, optimize};
+use super::optimize::{Decision, ImageLevelScore, Incumbent, MergeScope, OptimizerInput, optimize};
 use super::schedule::RestartTotal;
 use super::start::{KeptStart, relative_mean_square, start_weight};
 use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
@@ -53,6 +53,10 @@ pub struct UpdateReport {
     /// update estimated (0: the start is left out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_weight: Option<f64>,
+    /// Full set: the margin by which a cheaper (ν, c) had to beat the one being rendered
+    /// ([`EmisConfig::incumbent_margin`]); `candidates` show whether one did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub incumbent_margin: Option<f64>,
     /// Chosen light paths per pixel (0: path tracing).
     pub nu: f32,
     /// Chosen connections per camera vertex (0 with per-pixel connections).
@@ -240,6 +244,14 @@ impl EmisState {
             None
         };
         let constants = measured.unwrap_or(self.config.constants);
+        let incumbent = (!reduced && self.config.incumbent_margin > 0.0).then(|| Incumbent {
+            nu: self.strategy.nu,
+            connections: match self.strategy.connections {
+                Connections::Fixed(c) => Some(c),
+                Connections::PerPixel(_) => None,
+            },
+            margin: Incumbent::margin_after(self.config.incumbent_margin, self.moments.iterations),
+        });
         let decide = |restart_share: f64| {
             optimize(&OptimizerInput {
                 candidates: &self.candidates,
@@ -251,6 +263,7 @@ impl EmisState {
                 merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
                 connection_scope: self.config.connection_scope,
                 restart_share,
+                incumbent,
             })
         };
         // a restart discards the start unless an update of the full set follows to weigh it
@@ -280,6 +293,7 @@ impl EmisState {
             restarted,
             settled: false,
             start_weight,
+            incumbent_margin: incumbent.map(|i| i.margin),
             nu: decision.nu,
             connections: decision.connections,
             mean_connections: decision.connection_mask.as_ref().map(|m| m.mean()),

@@ -135,6 +135,7 @@ fn reference_decision(s: &Subject, iterations: u32, pool: &rayon::ThreadPool) ->
     let decision = pool.install(|| {
         optimize(&OptimizerInput {
             restart_share: 0.0,
+            incumbent: None,
             candidates: &candidates,
             moments: &data.moments,
             image: &intensity,

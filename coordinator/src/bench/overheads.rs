@@ -158,6 +158,7 @@ fn update_time(w: u32, h: u32, kind: UpdateKind) -> (f64, f64, usize, usize) {
     let decision = optimize(&OptimizerInput {
         // a restart after the first of 64 iterations, as a path-tracing start's first update
         restart_share: if reduced { 1.0 / 64.0 } else { 0.0 },
+        incumbent: None,
         candidates: &candidates,
         moments: &moments,
         image: &Image::from_data(w as usize, h as usize, image.data),

@@ -12,6 +12,7 @@ fn input<'a>(
 ) -> OptimizerInput<'a> {
     OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates,
         moments,
         image,
@@ -102,6 +103,7 @@ fn per_pixel_classes_sum_as_their_definition_bit_for_bit() {
     let classes: Vec<u8> = (0..w * h).map(|p| ((p / 7 + p % 5) % class_counts.len()) as u8).collect();
     let input = OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         statistics: stats,
         ..input(&candidates, &moments, &image, ConnectionScope::PerPixel)
     };

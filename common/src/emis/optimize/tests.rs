@@ -30,6 +30,7 @@ fn run(candidates: &[Candidate], moments: &MomentBuffer, image: &Image) -> Decis
 fn run_with(candidates: &[Candidate], moments: &MomentBuffer, image: &Image, filters: FilterSettings) -> Decision {
     optimize(&OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates,
         moments,
         image,
@@ -121,6 +122,45 @@ fn a_two_times_lower_moment_at_equal_cost_wins_and_scaling_changes_nothing() {
     assert!(d.merge_mask.data.iter().all(|&v| v == 0.0), "bdpt never merges");
 }
 
+/// A challenger 10 % better than every other candidate replaces the incumbent (ν 1, c 1) under
+/// any margin when it costs more, and only under a margin below 10 % when it costs less; a
+/// margin of 0 or no incumbent keeps the plain argmin.
+#[test]
+fn a_cheaper_challenger_must_beat_the_incumbent_by_its_margin() {
+    let candidates = CandidateConfig::bdpt().candidates();
+    let cost =
+        |c: &Candidate| pixel_cost(&CostConstants::default(), &PathStatistics::default(), c, 0.0, c.merge, 32 * 32);
+    let incumbent = Candidate { nu: 1.0, connections: 1, merge: false };
+    let cheaper = Candidate { nu: 0.5, connections: 1, merge: false };
+    let dearer = Candidate { nu: 2.0, connections: 2, merge: false };
+    assert!(cost(&cheaper) < cost(&incumbent) && cost(&incumbent) < cost(&dearer));
+    let image = Image::filled(32, 32, 0.7);
+    let decide = |challenger: Candidate, margin: Option<f64>| {
+        let m = |_: u32, c: &Candidate| if *c == challenger { 0.9 / cost(c) } else { 1.0 / cost(c) };
+        let moments = buffer(32, 32, &candidates, m);
+        let incumbent = margin.map(|margin| Incumbent { nu: 1.0, connections: Some(1), margin });
+        let d = optimize(&OptimizerInput {
+            restart_share: 0.0,
+            incumbent,
+            candidates: &candidates,
+            moments: &moments,
+            image: &image,
+            statistics: PathStatistics::default(),
+            constants: CostConstants::default(),
+            filters: FilterSettings::default(),
+            merge_scope: MergeScope::PerPixel,
+            connection_scope: ConnectionScope::Image,
+        });
+        (d.nu, d.connections)
+    };
+    for margin in [None, Some(0.0), Some(0.05)] {
+        assert_eq!(decide(cheaper, margin), (0.5, 1), "margin {margin:?}");
+    }
+    assert_eq!(decide(cheaper, Some(0.2)), (1.0, 1));
+    assert_eq!(decide(dearer, Some(0.2)), (2.0, 2));
+    assert!((Incumbent::margin_after(0.25, 4) - 0.125).abs() < 1e-12);
+}
+
 /// The path-tracing start's decisions: every reduced candidate is an image-level one, and
 /// the winner merges everywhere or nowhere, whatever the per-pixel picture.
 #[test]
@@ -147,6 +187,7 @@ fn global_merge_scope_scores_every_candidate_and_gives_a_constant_mask() {
         });
         let d = optimize(&OptimizerInput {
             restart_share: 0.0,
+            incumbent: None,
             candidates: &candidates,
             moments: &b,
             image: &img,
@@ -227,6 +268,7 @@ fn bdpt_candidates_pay_nothing_for_a_photon_map() {
     };
     let d = optimize(&OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates: &candidates,
         moments: &buffer(32, 32, &candidates, m),
         image: &Image::filled(32, 32, 0.7),
@@ -257,6 +299,7 @@ fn image_level_cost_prices_merging_as_binary_over_the_judged_pixels() {
     let image = Image::from_data(w, h, (0..w * h).map(|p| if p % w < w / 2 { 0.0 } else { 0.5 }).collect());
     let input = OptimizerInput {
         restart_share: 0.0,
+        incumbent: None,
         candidates: &candidates,
         moments: &moments,
         image: &image,
@@ -391,6 +434,7 @@ fn image_and_pixel_levels_equal_the_per_pixel_definitions_bit_for_bit() {
     for scope in [MergeScope::PerPixel, MergeScope::Global] {
         let input = OptimizerInput {
             restart_share: 0.0,
+            incumbent: None,
             candidates: &candidates,
             moments: &moments,
             image: &image,
