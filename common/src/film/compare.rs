@@ -44,31 +44,59 @@ pub const DROPPED_FRACTION: f64 = 0.001;
 
 /// relMSE with the top `drop` fraction of per-pixel errors removed (numpy's linear quantile).
 pub fn relmse(a: &[[f32; 3]], reference: &[[f32; 3]], drop: f64) -> f64 {
-    let err: Vec<f64> = a
-        .iter()
-        .zip(reference)
-        .map(|(x, r)| {
-            (0..3)
-                .map(|c| {
-                    let (x, r) = (x[c] as f64, r[c] as f64);
-                    (x - r) * (x - r) / (r * r + 1e-4)
-                })
-                .sum::<f64>()
-                / 3.0
+    mean_without_top(a.iter().zip(reference).map(|(x, r)| pixel_error(x, r)).collect(), drop)
+}
+
+/// [`relmse`] with the reference's own noise taken out: over the pixels `relmse` keeps, the
+/// mean of ((x − r)² − se²) / (r² + 1e-4), `se` the reference's per-pixel standard error. For a
+/// render independent of the reference E[(x − r)²] = E[(x − truth)²] + se², so this estimates
+/// the error against the truth, which a noisy reference pulls towards the same value for every
+/// render (docs/decisions/0047-reference-noise-in-equal-time.md). The reference's noise in
+/// the denominator is left in: a second-order effect (3·se²/r² of the result). It can come out
+/// negative.
+pub fn relmse_against_truth(a: &[[f32; 3]], reference: &[[f32; 3]], reference_se: &[[f32; 3]], drop: f64) -> f64 {
+    assert!(a.len() == reference.len() && a.len() == reference_se.len(), "invariant: images of equal size");
+    let err: Vec<f64> = a.iter().zip(reference).map(|(x, r)| pixel_error(x, r)).collect();
+    let cut = top_cut(&err, drop);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((e, r), se) in err.iter().zip(reference).zip(reference_se) {
+        if cut.is_none_or(|cut| *e <= cut) {
+            let floor = (0..3).map(|c| (se[c] as f64).powi(2) / ((r[c] as f64).powi(2) + 1e-4)).sum::<f64>() / 3.0;
+            sum += e - floor;
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
+}
+
+/// One pixel's relative squared error, the mean over channels of (x − r)² / (r² + 1e-4).
+fn pixel_error(x: &[f32; 3], r: &[f32; 3]) -> f64 {
+    (0..3)
+        .map(|c| {
+            let (x, r) = (x[c] as f64, r[c] as f64);
+            (x - r) * (x - r) / (r * r + 1e-4)
         })
-        .collect();
-    mean_without_top(err, drop)
+        .sum::<f64>()
+        / 3.0
+}
+
+/// The `1 − drop` quantile of `err` (numpy's linear quantile) above which errors are dropped,
+/// or `None` when nothing is dropped (no `drop`, or 1000 values or fewer).
+fn top_cut(err: &[f64], drop: f64) -> Option<f64> {
+    if drop <= 0.0 || err.len() <= 1000 {
+        return None;
+    }
+    let mut sorted = err.to_vec();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let pos = (1.0 - drop) * (sorted.len() - 1) as f64;
+    let (lo, frac) = (pos.floor() as usize, pos - pos.floor());
+    Some(sorted[lo] + (sorted[(lo + 1).min(sorted.len() - 1)] - sorted[lo]) * frac)
 }
 
 /// The mean of per-pixel errors above the `1 − drop` quantile removed (numpy's linear
 /// quantile), as [`relmse`] drops them; nothing is dropped from 1000 values or fewer.
 pub fn mean_without_top(mut err: Vec<f64>, drop: f64) -> f64 {
-    if drop > 0.0 && err.len() > 1000 {
-        let mut sorted = err.clone();
-        sorted.sort_by(|a, b| a.total_cmp(b));
-        let pos = (1.0 - drop) * (sorted.len() - 1) as f64;
-        let (lo, frac) = (pos.floor() as usize, pos - pos.floor());
-        let cut = sorted[lo] + (sorted[(lo + 1).min(sorted.len() - 1)] - sorted[lo]) * frac;
+    if let Some(cut) = top_cut(&err, drop) {
         err.retain(|&e| e <= cut);
     }
     err.iter().sum::<f64>() / err.len().max(1) as f64
@@ -155,6 +183,23 @@ mod tests {
         let c = compare(&a, &reference, Some(&b), 0.0);
         assert!((c.ratio.unwrap() - 1.0).abs() < 0.1, "{c:?}");
         assert!(c.bias_ok(0.0), "{c:?}");
+    }
+
+    #[test]
+    fn the_reference_noise_is_taken_out_of_the_error_against_the_truth() {
+        let truth: Vec<[f32; 3]> = (0..128 * 128).map(|i| [0.2 + (i % 7) as f32 * 0.1, 0.5, 0.3]).collect();
+        // a reference with half the render's noise: against it the render's relMSE is 1.25×
+        let reference = noisy(&truth, 7, 0.05, 0.0);
+        let se: Vec<[f32; 3]> = truth.iter().map(|t| t.map(|v| 0.05 * v)).collect();
+        let a = noisy(&truth, 1, 0.1, 0.0);
+        let (against_truth, raw) = (relmse(&a, &truth, 0.0), relmse(&a, &reference, 0.0));
+        let corrected = relmse_against_truth(&a, &reference, &se, 0.0);
+        assert!(raw > 1.2 * against_truth, "raw {raw}, truth {against_truth}");
+        assert!((corrected / against_truth - 1.0).abs() < 0.03, "corrected {corrected}, truth {against_truth}");
+        // with no reference noise it is relmse itself, the same pixels dropped
+        let zero = vec![[0.0f32; 3]; truth.len()];
+        let exact = relmse_against_truth(&a, &truth, &zero, DROPPED_FRACTION);
+        assert!((exact - relmse(&a, &truth, DROPPED_FRACTION)).abs() < 1e-12);
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! `tessera bench equal-time 20,60`: every scene rendered by every integrator of
 //! `--integrators` for the same wall time (the columns of a seed one after another, in a
 //! rotating order, `--repeats` rounds); relMSE against the scene's `reference.exr` (top
-//! 0.1 % of pixel errors dropped), scaled to the budget by the time each render took
-//! (relMSE × elapsed / budget: a render stops between iterations, and one that overran the
-//! budget would otherwise win by the overrun), speed-ups (relMSE_B / relMSE_A), the EMIS targets
+//! 0.1 % of pixel errors dropped) and, where the scene has `reference.stderr.exr`, against the
+//! truth (each pixel's reference variance subtracted, decision 0047), scaled to the budget by
+//! the time each render took (relMSE × elapsed / budget: a render stops between iterations,
+//! and one that overran the budget would otherwise win by the overrun), speed-ups (relMSE_B / relMSE_A), the EMIS targets
 //! (geometric mean of emis-vcm over vcm and of emis-bdpt over bdpt, emis-vcm against the
 //! better of pt and vcm) and, with `--chart`, an SVG bar chart per duration.
 
@@ -92,6 +93,10 @@ struct Cell {
     name: String,
     /// relMSE × elapsed / budget per seed of `--seeds`, the mean over `--repeats`.
     relmse: Vec<f64>,
+    /// The same against the truth, the reference's own noise taken out
+    /// ([`relmse_against_truth`](tessera_common::film::compare::relmse_against_truth)), where
+    /// the scene has a `reference.stderr.exr`.
+    truth: Option<Vec<f64>>,
     /// Seconds every run took.
     elapsed: Vec<f64>,
     /// Samples per second of every run.
@@ -191,6 +196,11 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
 fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::Result<Row> {
     let scene = Scene::load(path)?;
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
+    let stderr_path = path.with_file_name("reference.stderr.exr");
+    let reference_se = match stderr_path.exists() {
+        true => Some(tessera_common::film::exr::read_rgb(&stderr_path)?),
+        false => None,
+    };
     let mut renderers = Vec::new();
     let mut rows = Vec::new();
     for Column { kind, pilot, connections, variant, name } in columns(args) {
@@ -211,7 +221,14 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
             settings.emis_image = image;
         }
         renderers.push(make_renderer(&settings, &scene)?);
-        rows.push(Cell { name, relmse: vec![0.0; args.seeds.len()], elapsed: Vec::new(), samples_per_s: Vec::new() });
+        let truth = reference_se.as_ref().map(|_| vec![0.0; args.seeds.len()]);
+        rows.push(Cell {
+            name,
+            relmse: vec![0.0; args.seeds.len()],
+            truth,
+            elapsed: Vec::new(),
+            samples_per_s: Vec::new(),
+        });
     }
     let columns = rows.len();
     let mut turn = 0;
@@ -234,6 +251,15 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
                 // error × time is what equal time compares; relMSE falls as 1 / time
                 let elapsed = out.elapsed.as_secs_f64();
                 rows[c].relmse[i] += relmse * elapsed / seconds / args.repeats as f64;
+                if let (Some(truth), Some(se)) = (rows[c].truth.as_mut(), reference_se.as_ref()) {
+                    let against_truth = tessera_common::film::compare::relmse_against_truth(
+                        &image,
+                        &reference.pixels,
+                        &se.pixels,
+                        tessera_common::film::compare::DROPPED_FRACTION,
+                    );
+                    truth[i] += against_truth * elapsed / seconds / args.repeats as f64;
+                }
                 rows[c].elapsed.push(elapsed);
                 rows[c].samples_per_s.push(out.film.total_samples() as f64 / out.elapsed.as_secs_f64());
             }
@@ -411,6 +437,28 @@ fn print_drift(table: &[(String, Row)]) {
     }
 }
 
+/// The per-seed table and the verdicts again with each cell's error against the truth: the
+/// reference's own noise adds the same to every column and pulls ratios towards 1
+/// (docs/decisions/0047-reference-noise-in-equal-time.md). Only when every scene has its
+/// reference's standard errors.
+fn print_against_truth(table: &[(String, Row)], seeds: &[u64]) {
+    let truth: Option<Vec<(String, Row)>> = table
+        .iter()
+        .map(|(scene, row)| {
+            let cells = row.iter().map(|c| {
+                let relmse = c.truth.clone()?;
+                Some(Cell { name: c.name.clone(), relmse, truth: None, elapsed: Vec::new(), samples_per_s: Vec::new() })
+            });
+            Some((scene.clone(), cells.collect::<Option<Row>>()?))
+        })
+        .collect();
+    let Some(truth) = truth else { return };
+    println!("\nagainst the truth: the same, each pixel's se² / (ref² + 1e-4) of the reference subtracted\n");
+    print_per_seed(&truth, seeds);
+    print_speedups(&truth);
+    print_floor(&truth, seeds);
+}
+
 /// Draws the speed-ups over pt of one duration as `CHART-{seconds}s.svg`.
 fn write_chart(chart: &Path, seconds: f64, names: &[String], table: &[(String, Row)]) -> anyhow::Result<()> {
     let stem = chart.file_stem().and_then(|s| s.to_str()).unwrap_or("equal-time");
@@ -452,6 +500,7 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
         print_drift(&table);
         print_speedups(&table);
         print_floor(&table, &args.seeds);
+        print_against_truth(&table, &args.seeds);
         if let Some(chart) = &args.chart {
             write_chart(chart, seconds, &names, &table)?;
         }
