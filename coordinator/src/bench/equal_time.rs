@@ -4,9 +4,10 @@
 //! 0.1 % of pixel errors dropped) and, where the scene has `reference.stderr.exr`, against the
 //! truth (each pixel's reference variance subtracted, decision 0047), scaled to the budget by
 //! the time each render took (relMSE × elapsed / budget: a render stops between iterations,
-//! and one that overran the budget would otherwise win by the overrun), speed-ups (relMSE_B / relMSE_A), the EMIS targets
-//! (geometric mean of emis-vcm over vcm and of emis-bdpt over bdpt, emis-vcm against the
-//! better of pt and vcm) and, with `--chart`, an SVG bar chart per duration.
+//! and one that overran the budget would otherwise win by the overrun), speed-ups
+//! (relMSE_B / relMSE_A), the EMIS targets (geometric mean of emis-vcm over vcm and of
+//! emis-bdpt over bdpt, emis-vcm against the better of pt and vcm) and, with `--chart`, an SVG
+//! bar chart per duration.
 
 use super::chart::{Group, write_bar_chart};
 use super::{SceneArgs, geometric_mean};
@@ -197,10 +198,8 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
     let scene = Scene::load(path)?;
     let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?;
     let stderr_path = path.with_file_name("reference.stderr.exr");
-    let reference_se = match stderr_path.exists() {
-        true => Some(tessera_common::film::exr::read_rgb(&stderr_path)?),
-        false => None,
-    };
+    let reference_se =
+        if stderr_path.exists() { Some(tessera_common::film::exr::read_rgb(&stderr_path)?) } else { None };
     let mut renderers = Vec::new();
     let mut rows = Vec::new();
     for Column { kind, pilot, connections, variant, name } in columns(args) {
