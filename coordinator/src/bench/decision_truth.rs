@@ -68,9 +68,39 @@ pub struct DecisionTruthArgs {
     /// Threads of the timing renders.
     #[arg(long, default_value_t = 1)]
     pub timing_threads: usize,
+    /// The merge mask every bidirectional candidate renders with: the pilot's pixel-level
+    /// decision (what the tests judge), merging in every pixel (vanilla `vcm`'s χ = 1) or in
+    /// none (BDPT), to see what the mask itself gains.
+    #[arg(long, value_enum, default_value = "pilot")]
+    pub mask: MaskArg,
+    /// Only these image-level candidates, as `ν:c` pairs (`0:0` is path tracing); all of
+    /// them by default. A partial run is for diagnosis: the tests need every candidate.
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
     /// The JSON file to write.
     #[arg(long, short = 'o', default_value = "common/tests/data/emis-decision-truth.json")]
     pub output: PathBuf,
+}
+
+/// The merge mask of `--mask`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaskArg {
+    /// The pilot's pixel-level decision, dilated and blurred as the optimiser makes it.
+    Pilot,
+    /// χ = 1 in every pixel.
+    Everywhere,
+    /// χ = 0 in every pixel: BDPT.
+    Nowhere,
+}
+
+/// The (ν, c) pairs of `--only`.
+fn parse_only(only: &[String]) -> anyhow::Result<Vec<(f32, u32)>> {
+    only.iter()
+        .map(|pair| {
+            let (nu, c) = pair.split_once(':').with_context(|| format!("--only {pair}: expected ν:c"))?;
+            Ok((nu.parse().with_context(|| format!("--only {pair}: ν"))?, c.parse().with_context(|| format!("--only {pair}: c"))?))
+        })
+        .collect()
 }
 
 /// The first seed of the candidates' variance renders (the next `--seeds` − 1 follow it).
@@ -236,7 +266,19 @@ fn seconds_per_iteration(s: &Subject, strategy: &Strategy, iterations: u32, pool
 }
 
 fn measure_scene(s: &Subject, args: &DecisionTruthArgs, pool: &rayon::ThreadPool) -> anyhow::Result<SceneTruth> {
-    let (mask, groups) = reference_decision(s, args.pilot, pool);
+    let (mut mask, mut groups) = reference_decision(s, args.pilot, pool);
+    match args.mask {
+        MaskArg::Pilot => {}
+        MaskArg::Everywhere => mask.iter_mut().for_each(|v| *v = 1.0),
+        MaskArg::Nowhere => mask.iter_mut().for_each(|v| *v = 0.0),
+    }
+    let only = parse_only(&args.only)?;
+    if !only.is_empty() {
+        groups.retain(|&(nu, c, _)| only.contains(&(nu, c)));
+        if groups.len() != only.len() {
+            bail!("--only: {} of the {} pairs are not image-level candidates", only.len() - groups.len(), only.len());
+        }
+    }
     let timing = rayon::ThreadPoolBuilder::new().num_threads(args.timing_threads).build()?;
     let mean_merge_probability = mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len() as f64;
     let mask = Arc::new(mask);
