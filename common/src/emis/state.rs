@@ -271,13 +271,24 @@ impl EmisState {
         let weighing = self.config.updates.iter().copied().find(|&u| u > iteration);
         let kept = reduced && weighing.is_some_and(|u| u < restart_total.at_current_pace());
         let mut decision = decide(if reduced && !kept { share } else { 0.0 });
+        // whether an update of the full set follows a restart into the winner
+        let mut followed = kept;
         if kept && decision.nu > 0.0 && !reaches(&decision, restart_total, iteration, weighing) {
             // at the winner's pace the render would end before that update
             decision = decide(share);
+            followed = false;
         }
         let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
-        let mask = &decision.merge_mask.data;
         let restarted = reduced && decision.nu > 0.0;
+        // a restart that a full-set update follows pilots it as the method's own pilot does,
+        // merging everywhere: the global decision comes from path-tracing samples that rarely
+        // hold the paths merging is for, and the iterations up to that update stay in the image
+        // (docs/decisions/0048-restart-pilots-with-merging.md)
+        let pilot_merging = restarted && followed && self.config.method == EmisMethod::Vcm;
+        if pilot_merging {
+            decision.merge_mask = Image::filled(w, h, 1.0);
+        }
+        let mask = &decision.merge_mask.data;
         let recorded = self.moments.iterations;
         let start_weight = match (&mut self.start, decision.chosen) {
             (Some(start), Some(chosen)) if !reduced => {
@@ -447,6 +458,27 @@ mod tests {
         assert!(k > 0.0 && k < 1e-3 && report.start_weight == Some(k), "{k} {report:?}");
         assert_eq!((state.strategy.nu, &state.strategy.connections, state.kept_from), (0.5, &Connections::Fixed(2), 4));
         assert!(matches!(state.strategy.merge, Some(MergeMask::PerPixel(_))));
+    }
+
+    /// A restart into a candidate that merges nowhere renders with merging everywhere until
+    /// the full set's update that follows it (the report says so); at the last update, which
+    /// no other follows, it keeps the candidate's own global decision. emis-bdpt never merges.
+    #[test]
+    fn a_restart_pilots_the_next_update_with_merging_everywhere() {
+        let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+        let target = Candidate { nu: 1.0, connections: 1, merge: false };
+        let restart = |method: EmisMethod, updates: Vec<u32>| {
+            let config = EmisConfig { pilot: PilotStart::PathTracing, updates, ..EmisConfig::new(method) };
+            let mut state = EmisState::new(config, SIDE, SIDE);
+            state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
+            let report = state.update(&image, 4, RestartTotal::Samples(1000)).clone();
+            assert!(report.restarted, "{report:?}");
+            assert_eq!((state.strategy.nu, &state.strategy.connections), (1.0, &Connections::Fixed(1)));
+            (state.strategy.merge, report.mean_merge_probability)
+        };
+        assert_eq!(restart(EmisMethod::Vcm, vec![4, 16]), (Some(MergeMask::Constant(1.0)), 1.0));
+        assert_eq!(restart(EmisMethod::Vcm, vec![1, 4]), (Some(MergeMask::Constant(0.0)), 0.0));
+        assert_eq!(restart(EmisMethod::Bdpt, vec![4, 16]), (None, 0.0));
     }
 
     /// A path-tracing start switches only to a candidate that beats path tracing by more than
