@@ -98,7 +98,10 @@ fn parse_only(only: &[String]) -> anyhow::Result<Vec<(f32, u32)>> {
     only.iter()
         .map(|pair| {
             let (nu, c) = pair.split_once(':').with_context(|| format!("--only {pair}: expected ν:c"))?;
-            Ok((nu.parse().with_context(|| format!("--only {pair}: ν"))?, c.parse().with_context(|| format!("--only {pair}: c"))?))
+            Ok((
+                nu.parse().with_context(|| format!("--only {pair}: ν"))?,
+                c.parse().with_context(|| format!("--only {pair}: c"))?,
+            ))
         })
         .collect()
 }
