@@ -22,7 +22,7 @@
 
 use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver, timed_pixel};
 use super::path::connections::Connections;
-use super::path::light_cache::LightCache;
+use super::path::light_cache::{CacheMemory, LightCache};
 use super::path::light_path::{MAX_BIDIR_EDGES, light_path_count};
 use super::path::merge::{MergeConfig, merge, merge_radius_max, path_radius};
 use super::path::mis::{MergeCounts, SampleCounts};
@@ -56,6 +56,8 @@ pub struct Bidir<O: SampleObserver = NoObserver> {
     pub probe: bool,
     /// Receives every sample.
     pub observer: O,
+    /// The light caches of the last iteration, whose memory the next one traces into.
+    memory: CacheMemory,
 }
 
 /// What an iteration observed for EMIS measures that its strategy would not: without light
@@ -96,6 +98,7 @@ impl Bidir<NoObserver> {
             merge: None,
             probe: false,
             observer: NoObserver,
+            memory: CacheMemory::default(),
         }
     }
 
@@ -108,6 +111,7 @@ impl Bidir<NoObserver> {
             merge: Some(merge),
             probe: false,
             observer: NoObserver,
+            memory: CacheMemory::default(),
         }
     }
 
@@ -131,6 +135,7 @@ impl Bidir<NoObserver> {
             merge: self.merge,
             probe: self.probe,
             observer,
+            memory: self.memory,
         }
     }
 }
@@ -458,9 +463,12 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
         let (w, h) = (scene.camera.width, scene.camera.height);
         assert_eq!(tile.rect, crate::film::Rect::full(w, h), "invariant: bdpt renders full-frame tiles");
         let n = light_path_count(self.light_paths_per_pixel, w * h);
+        // the caches of the last iteration, whose memory the next one traces into (a call
+        // running beside another on this integrator starts with empty ones)
+        let (mut spare, mut spare_probe) = self.memory.take();
         for iteration in tile.samples.clone() {
             if tile.stop.requested() {
-                return;
+                break;
             }
             if self.settings.max_depth == 0 {
                 for (x, y) in (0..h).flat_map(|y| (0..w).map(move |x| (x, y))) {
@@ -472,16 +480,18 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 continue;
             }
             // light paths stop one edge short: every technique adds at least one camera edge
-            let trace = |paths: u32| {
+            let trace = |mut cache: LightCache, paths: u32| {
                 let max_edges = self.max_edges().saturating_sub(1);
-                LightCache::trace(scene, tile.seed, iteration, paths, max_edges, self.settings.rr_depth)
+                cache.retrace(scene, tile.seed, iteration, paths, max_edges, self.settings.rr_depth);
+                cache
             };
             let light_start = Instant::now();
-            let cache = trace(n);
+            let cache = trace(std::mem::take(&mut spare), n);
             let mut light_time = light_start.elapsed();
             let radius_max = merge_radius_max(scene);
-            let probe =
-                (self.probe && n == 0).then(|| trace(light_path_count(LightProbe::LIGHT_PATHS_PER_PIXEL, w * h)));
+            let probe = (self.probe && n == 0).then(|| {
+                trace(std::mem::take(&mut spare_probe), light_path_count(LightProbe::LIGHT_PATHS_PER_PIXEL, w * h))
+            });
             let build_start = Instant::now();
             // no map without light paths or without a pixel that merges: queries against an
             // empty map would only cost time, and would count as merges that found nothing
@@ -503,13 +513,16 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             };
             // photons are counted over the probe's light paths, or over the iteration's when no
             // pixel merges
-            let probe = match (&photons, &self.merge) {
+            let probe_map = match (&photons, &self.merge) {
                 (None, Some(_)) if self.probe && measured.paths > 0 => {
                     Some(PhotonMap::build(&measured.vertices, &measured.selectable, radius_max))
                 }
                 _ => None,
             };
-            let it = Iteration { cache, photons, probe, radius_max };
+            if let Some(probe) = probe {
+                spare_probe = probe;
+            }
+            let it = Iteration { cache, photons, probe: probe_map, radius_max };
             self.observer.on_iteration_start(&start);
             let splat_start = Instant::now();
             let splats = if n > 0 { self.splats(scene, &it, (w * h) as f32 / n as f32) } else { Vec::new() };
@@ -555,6 +568,8 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                     accum.add_splat(*raster, *value);
                 }
             }
+            spare = it.cache;
         }
+        self.memory.put(spare, spare_probe);
     }
 }

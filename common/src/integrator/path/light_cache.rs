@@ -8,8 +8,10 @@ use super::vertex::PathVertex;
 use crate::sampler::Sampler;
 use crate::scene::Scene;
 use rayon::prelude::*;
+use std::sync::Mutex;
 
 /// One iteration's light subpaths, stored back to back.
+#[derive(Default)]
 pub struct LightCache {
     /// All vertices; a vertex at depth d is preceded by its subpath's d earlier vertices.
     pub vertices: Vec<PathVertex>,
@@ -17,31 +19,42 @@ pub struct LightCache {
     pub selectable: Vec<u32>,
     /// Number of light paths.
     pub paths: u32,
+    /// Per chunk of light paths, the vertices traced in parallel before they are joined: kept
+    /// with their capacity, as `vertices` and `selectable` are, for [`LightCache::retrace`].
+    chunks: Vec<Vec<PathVertex>>,
 }
 
 impl LightCache {
     /// Traces `paths` light paths of iteration `iteration`, in parallel chunks concatenated in
     /// order, so the cache does not depend on the thread count.
     pub fn trace(scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32, rr_depth: u32) -> Self {
-        let chunks: Vec<Vec<PathVertex>> = (0..paths.div_ceil(LIGHT_PATH_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut out = Vec::new();
-                for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
-                    trace_light_path(
-                        scene,
-                        &mut Sampler::for_light_path(seed, index, iteration),
-                        max_edges,
-                        rr_depth,
-                        &mut out,
-                    );
-                }
-                out
-            })
-            .collect();
-        let vertices: Vec<PathVertex> = chunks.into_iter().flatten().collect();
-        let selectable = vertices.iter().enumerate().filter(|(_, v)| v.depth >= 1).map(|(i, _)| i as u32).collect();
-        LightCache { vertices, selectable, paths }
+        let mut cache = LightCache::default();
+        cache.retrace(scene, seed, iteration, paths, max_edges, rr_depth);
+        cache
+    }
+
+    /// As [`LightCache::trace`], into this cache's memory: a cache is tens of megabytes, and
+    /// memory allocated anew every iteration comes from the kernel as fresh pages, whose faults
+    /// cost a tenth of a `vcm` iteration (docs/decisions/0049-light-caches-reuse-memory.md).
+    pub fn retrace(&mut self, scene: &Scene, seed: u64, iteration: u32, paths: u32, max_edges: u32, rr_depth: u32) {
+        let count = paths.div_ceil(LIGHT_PATH_CHUNK) as usize;
+        self.chunks.resize_with(count.max(self.chunks.len()), Vec::new);
+        self.chunks[..count].par_iter_mut().enumerate().for_each(|(c, out)| {
+            out.clear();
+            let c = c as u32;
+            for index in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(paths) {
+                trace_light_path(scene, &mut Sampler::for_light_path(seed, index, iteration), max_edges, rr_depth, out);
+            }
+        });
+        self.vertices.clear();
+        self.vertices.reserve(self.chunks[..count].iter().map(Vec::len).sum());
+        for chunk in &self.chunks[..count] {
+            self.vertices.extend_from_slice(chunk);
+        }
+        self.selectable.clear();
+        let selectable = self.vertices.iter().enumerate().filter(|(_, v)| v.depth >= 1).map(|(i, _)| i as u32);
+        self.selectable.extend(selectable);
+        self.paths = paths;
     }
 
     /// The vertex a connection's uniform number `u` picks among the selectable ones (`None`
@@ -81,6 +94,36 @@ impl LightCache {
     }
 }
 
+/// The light-vertex caches (an iteration's and a light probe's) one `render_tile` call of an
+/// integrator leaves for its next: `render` calls it once per iteration, and a cache allocated
+/// anew each time comes from the kernel as fresh pages. A clone starts empty.
+#[derive(Default)]
+pub struct CacheMemory(Mutex<(LightCache, LightCache)>);
+
+impl CacheMemory {
+    /// The caches left by the last call (empty ones while another call holds them).
+    pub fn take(&self) -> (LightCache, LightCache) {
+        std::mem::take(&mut *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()))
+    }
+
+    /// Keeps `cache` and `probe` for the next call.
+    pub fn put(&self, cache: LightCache, probe: LightCache) {
+        *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = (cache, probe);
+    }
+}
+
+impl Clone for CacheMemory {
+    fn clone(&self) -> Self {
+        CacheMemory::default()
+    }
+}
+
+impl std::fmt::Debug for CacheMemory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CacheMemory")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,14 +136,34 @@ mod tests {
         let vertex = |depth| PathVertex { depth, ..PathVertex::surface_at(Vec3::ZERO) };
         let vertices: Vec<PathVertex> = [0, 1, 2, 0, 1, 2].into_iter().map(vertex).collect();
         let selectable = vertices.iter().enumerate().filter(|(_, v)| v.depth >= 1).map(|(i, _)| i as u32).collect();
-        let cache = LightCache { vertices, selectable, paths: 2 };
+        let cache = LightCache { vertices, selectable, paths: 2, chunks: Vec::new() };
         let picks: Vec<Option<usize>> =
             [0.0, 0.2499, 0.25, 0.6, 0.76, 1.0 - f32::EPSILON / 2.0].into_iter().map(|u| cache.pick(u)).collect();
         assert_eq!(picks, [Some(1), Some(1), Some(2), Some(4), Some(5), Some(5)]);
         assert_eq!(cache.subpath(5).len(), 3);
         cache.prefetch_subpath(0);
-        let empty = LightCache { vertices: Vec::new(), selectable: Vec::new(), paths: 0 };
+        let empty = LightCache::default();
         assert_eq!(empty.pick(0.5), None);
         empty.prefetch_pick(0.5);
+    }
+
+    /// A cache traced into the memory of a larger one, and then of a smaller one, holds what a
+    /// fresh cache of that iteration holds, vertex for vertex.
+    #[test]
+    fn a_retraced_cache_equals_a_fresh_one() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
+        let scene = Scene::load(&path).expect("scene loads");
+        let fresh = |iteration, paths| LightCache::trace(&scene, 7, iteration, paths, 8, 5);
+        let key = |c: &LightCache| {
+            let v: Vec<_> =
+                c.vertices.iter().map(|v| (v.p.to_array(), v.beta, v.pdf_fwd, v.pdf_rev, v.depth)).collect();
+            (v, c.selectable.clone(), c.paths)
+        };
+        let mut reused = fresh(0, 3000);
+        for (iteration, paths) in [(1, 700), (2, 2000), (3, 0)] {
+            reused.retrace(&scene, 7, iteration, paths, 8, 5);
+            assert_eq!(key(&reused), key(&fresh(iteration, paths)), "iteration {iteration}");
+        }
+        assert!(reused.vertices.is_empty() && reused.selectable.is_empty());
     }
 }
