@@ -58,6 +58,8 @@ pub fn render_batch(
     tiles: &[TileWork],
 ) -> Vec<TileOutput> {
     use rayon::prelude::*;
+    // the batch's calls trace their light caches into one memory
+    let memory = std::sync::Arc::default();
     pool.install(|| match (renderer, emis) {
         (Renderer::Emis(config, settings), Some(work)) => tiles
             .iter()
@@ -72,6 +74,7 @@ pub fn render_batch(
                     t.samples.clone(),
                     work.collect,
                     &t.stop,
+                    &memory,
                 );
                 let pilot = pilot.map(|p| p.encode()).unwrap_or_default();
                 TileOutput { accum, seconds: finished(t, start), pilot }

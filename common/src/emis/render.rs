@@ -47,12 +47,14 @@ use super::schedule::{
 };
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
+use crate::integrator::path::light_cache::CacheMemory;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, Stop, TileRequest};
 use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Side of the square tiles in which path tracing renders the iterations it wins. Why small
@@ -300,10 +302,12 @@ pub fn render_iterations(
     iterations: Range<u32>,
     collect: Option<CandidateSet>,
 ) -> (TileAccum, Option<PilotData>) {
-    render_iterations_until(scene, settings, config, strategy, seed, iterations, collect, &Stop::default())
+    let memory = Arc::default();
+    render_iterations_until(scene, settings, config, strategy, seed, iterations, collect, &Stop::default(), &memory)
 }
 
-/// [`render_iterations`], given up when `stop` is requested (the result is then incomplete).
+/// [`render_iterations`], given up when `stop` is requested (the result is then incomplete),
+/// tracing light caches into `memory`, which a render's successive calls share.
 #[allow(clippy::too_many_arguments)]
 pub fn render_iterations_until(
     scene: &Scene,
@@ -314,6 +318,7 @@ pub fn render_iterations_until(
     iterations: Range<u32>,
     collect: Option<CandidateSet>,
     stop: &Stop,
+    memory: &Arc<CacheMemory>,
 ) -> (TileAccum, Option<PilotData>) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let rect = Rect::full(w, h);
@@ -341,7 +346,7 @@ pub fn render_iterations_until(
         }
         return (accum, None);
     }
-    let integrator = strategy.integrator(settings, config.correlation_aware);
+    let integrator = strategy.integrator(settings, config.correlation_aware).with_memory(memory.clone());
     let Some(set) = collect else {
         integrator.render_tile(scene, &request, &mut accum);
         return (accum, None);
@@ -385,6 +390,7 @@ pub fn render_emis(
     let pixels = w as u64 * h as u64;
     let mut state = EmisState::new(config.clone(), w, h);
     let mut film = Film::new(&scene.film);
+    let (stop, memory) = (Stop::default(), Arc::<CacheMemory>::default());
     let start = Instant::now();
     let mut done = 0u32;
     // seconds per iteration of the last call: a strategy change (a restart from path tracing
@@ -440,7 +446,9 @@ pub fn render_emis(
         .min(left);
         let call_start = Instant::now();
         let (accum, pilot) = pool.install(|| {
-            render_iterations(scene, settings, config, &state.strategy, opts.seed, done..done + count, collect)
+            let iterations = done..done + count;
+            let strategy = &state.strategy;
+            render_iterations_until(scene, settings, config, strategy, opts.seed, iterations, collect, &stop, &memory)
         });
         film.merge_tile(&accum);
         if let Some(p) = pilot {

@@ -39,6 +39,7 @@ use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::cell::Cell;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The bidirectional path tracer, with optional merging, reporting samples to `O`.
@@ -56,8 +57,9 @@ pub struct Bidir<O: SampleObserver = NoObserver> {
     pub probe: bool,
     /// Receives every sample.
     pub observer: O,
-    /// The light caches of the last iteration, whose memory the next one traces into.
-    memory: CacheMemory,
+    /// The light caches of the last iteration, whose memory the next one traces into (shared
+    /// with other integrators of the same render through [`Bidir::with_memory`]).
+    memory: Arc<CacheMemory>,
 }
 
 /// What an iteration observed for EMIS measures that its strategy would not: without light
@@ -98,7 +100,7 @@ impl Bidir<NoObserver> {
             merge: None,
             probe: false,
             observer: NoObserver,
-            memory: CacheMemory::default(),
+            memory: Arc::default(),
         }
     }
 
@@ -111,13 +113,19 @@ impl Bidir<NoObserver> {
             merge: Some(merge),
             probe: false,
             observer: NoObserver,
-            memory: CacheMemory::default(),
+            memory: Arc::default(),
         }
     }
 
     /// The same integrator with `connections` per camera vertex (per pixel, say).
     pub fn with_connections(self, connections: Connections) -> Self {
         Bidir { connections, ..self }
+    }
+
+    /// The same integrator tracing its light caches into `memory`, which the integrators of
+    /// one render's successive calls share.
+    pub fn with_memory(self, memory: Arc<CacheMemory>) -> Self {
+        Bidir { memory, ..self }
     }
 
     /// The same integrator measuring with a [`LightProbe`] what its iterations neither trace

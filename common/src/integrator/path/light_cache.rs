@@ -47,7 +47,7 @@ impl LightCache {
             }
         });
         self.vertices.clear();
-        self.vertices.reserve(self.chunks[..count].iter().map(Vec::len).sum());
+        self.vertices.reserve_exact(self.chunks[..count].iter().map(Vec::len).sum());
         for chunk in &self.chunks[..count] {
             self.vertices.extend_from_slice(chunk);
         }
@@ -95,8 +95,10 @@ impl LightCache {
 }
 
 /// The light-vertex caches (an iteration's and a light probe's) one `render_tile` call of an
-/// integrator leaves for its next: `render` calls it once per iteration, and a cache allocated
-/// anew each time comes from the kernel as fresh pages. A clone starts empty.
+/// integrator leaves for the next, which may be another integrator's (an EMIS render builds one
+/// per call): `render` calls it once per iteration, and a cache allocated anew each time comes
+/// from the kernel as fresh pages. It holds the largest iteration's cache and per-chunk
+/// vectors until it is dropped, at the end of a render or a worker's batch.
 #[derive(Default)]
 pub struct CacheMemory(Mutex<(LightCache, LightCache)>);
 
@@ -109,12 +111,6 @@ impl CacheMemory {
     /// Keeps `cache` and `probe` for the next call.
     pub fn put(&self, cache: LightCache, probe: LightCache) {
         *self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = (cache, probe);
-    }
-}
-
-impl Clone for CacheMemory {
-    fn clone(&self) -> Self {
-        CacheMemory::default()
     }
 }
 
