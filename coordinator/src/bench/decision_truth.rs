@@ -78,9 +78,12 @@ pub struct DecisionTruthArgs {
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
     /// The JSON file to write.
-    #[arg(long, short = 'o', default_value = "common/tests/data/emis-decision-truth.json")]
+    #[arg(long, short = 'o', default_value = DEFAULT_OUTPUT)]
     pub output: PathBuf,
 }
+
+/// The truth the decision-quality tests read.
+const DEFAULT_OUTPUT: &str = "common/tests/data/emis-decision-truth.json";
 
 /// The merge mask of `--mask`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -268,14 +271,18 @@ fn seconds_per_iteration(s: &Subject, strategy: &Strategy, iterations: u32, pool
     (cpu_seconds() - started) / iterations as f64
 }
 
-fn measure_scene(s: &Subject, args: &DecisionTruthArgs, pool: &rayon::ThreadPool) -> anyhow::Result<SceneTruth> {
+fn measure_scene(
+    s: &Subject,
+    args: &DecisionTruthArgs,
+    only: &[(f32, u32)],
+    pool: &rayon::ThreadPool,
+) -> anyhow::Result<SceneTruth> {
     let (mut mask, mut groups) = reference_decision(s, args.pilot, pool);
     match args.mask {
         MaskArg::Pilot => {}
         MaskArg::Everywhere => mask.iter_mut().for_each(|v| *v = 1.0),
         MaskArg::Nowhere => mask.iter_mut().for_each(|v| *v = 0.0),
     }
-    let only = parse_only(&args.only)?;
     if !only.is_empty() {
         groups.retain(|&(nu, c, _)| only.contains(&(nu, c)));
         if groups.len() != only.len() {
@@ -333,6 +340,17 @@ pub fn run(args: &DecisionTruthArgs) -> anyhow::Result<()> {
     if args.iterations < 2 || args.seeds == 0 {
         bail!("--iterations must be at least 2 and --seeds at least 1, for a variance per seed");
     }
+    let mut only: Vec<(f32, u32)> = Vec::new();
+    for pair in parse_only(&args.only)? {
+        if !only.contains(&pair) {
+            only.push(pair);
+        }
+    }
+    // a diagnostic run would otherwise replace the truth the decision tests read
+    let diagnostic = args.mask != MaskArg::Pilot || !only.is_empty();
+    if diagnostic && args.output == Path::new(DEFAULT_OUTPUT) {
+        bail!("--mask {:?} and --only write a partial truth: name another file with -o", args.mask);
+    }
     let mut truth = DecisionTruth {
         width: args.size,
         height: args.size,
@@ -349,7 +367,7 @@ pub fn run(args: &DecisionTruthArgs) -> anyhow::Result<()> {
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for path in args.scenes.scenes()? {
         let subject = Subject::load(&path, args.size)?;
-        let scene = measure_scene(&subject, args, &pool)?;
+        let scene = measure_scene(&subject, args, &only, &pool)?;
         if let Some(best) = scene.best() {
             println!(
                 "{}: best ν {} c {}, mask mean χ {:.3}",
