@@ -96,17 +96,20 @@ pub enum MaskArg {
     Nowhere,
 }
 
-/// The (ν, c) pairs of `--only`.
+/// The (ν, c) pairs of `--only`, each once.
 fn parse_only(only: &[String]) -> anyhow::Result<Vec<(f32, u32)>> {
-    only.iter()
-        .map(|pair| {
-            let (nu, c) = pair.split_once(':').with_context(|| format!("--only {pair}: expected ν:c"))?;
-            Ok((
-                nu.parse().with_context(|| format!("--only {pair}: ν"))?,
-                c.parse().with_context(|| format!("--only {pair}: c"))?,
-            ))
-        })
-        .collect()
+    let mut pairs: Vec<(f32, u32)> = Vec::new();
+    for pair in only {
+        let (nu, c) = pair.split_once(':').with_context(|| format!("--only {pair}: expected ν:c"))?;
+        let parsed = (
+            nu.parse().with_context(|| format!("--only {pair}: ν"))?,
+            c.parse().with_context(|| format!("--only {pair}: c"))?,
+        );
+        if !pairs.contains(&parsed) {
+            pairs.push(parsed);
+        }
+    }
+    Ok(pairs)
 }
 
 /// The first seed of the candidates' variance renders (the next `--seeds` − 1 follow it).
@@ -340,16 +343,11 @@ pub fn run(args: &DecisionTruthArgs) -> anyhow::Result<()> {
     if args.iterations < 2 || args.seeds == 0 {
         bail!("--iterations must be at least 2 and --seeds at least 1, for a variance per seed");
     }
-    let mut only: Vec<(f32, u32)> = Vec::new();
-    for pair in parse_only(&args.only)? {
-        if !only.contains(&pair) {
-            only.push(pair);
-        }
-    }
+    let only = parse_only(&args.only)?;
     // a diagnostic run would otherwise replace the truth the decision tests read
     let diagnostic = args.mask != MaskArg::Pilot || !only.is_empty();
     if diagnostic && args.output == Path::new(DEFAULT_OUTPUT) {
-        bail!("--mask {:?} and --only write a partial truth: name another file with -o", args.mask);
+        bail!("a run with --mask other than pilot or with --only is not the tests' truth: name another file with -o");
     }
     let mut truth = DecisionTruth {
         width: args.size,
