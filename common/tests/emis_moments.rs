@@ -293,7 +293,37 @@ fn collecting_iterations_time_their_work() {
     ] {
         assert!(v.is_finite() && (1e-3..1e3).contains(&v), "{name} {v} camera vertices: {k:?}");
     }
+    // path tracing is probed only when costs are measured
+    assert_eq!((t.path_tracing_vertices, t.path_tracing_ns), (0, 0), "{t:?}");
+    assert_eq!(k.path_tracing, CostConstants::calibrated().path_tracing);
     // a call that does not collect times nothing
     let (_, none) = render_iterations(&scene, settings, &config, &pilot, 2, 0..1, None);
     assert!(none.is_none());
+}
+
+/// With costs measured per job, the job's first collecting call (and only it) also times the
+/// `pt` integrator on iteration 0, without changing the image, and the probe gives path
+/// tracing's constant, of plausible size.
+#[test]
+fn the_first_call_probes_path_tracing_when_costs_are_measured() {
+    use tessera_common::emis::cost::CostConstants;
+    use tessera_common::emis::measured::measured_constants;
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
+    let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
+    let settings = PathSettings::from_scene(&scene, None);
+    let mut config = EmisConfig::new(EmisMethod::Vcm);
+    let start = Strategy::path_tracing_start(EmisMethod::Vcm);
+    let (plain, _) = render_iterations(&scene, settings, &config, &start, 2, 0..1, Some(CandidateSet::Reduced));
+    config.measured_costs = true;
+    let (image, data) = render_iterations(&scene, settings, &config, &start, 2, 0..1, Some(CandidateSet::Reduced));
+    assert_eq!(image.sum, plain.sum, "the probe's image is discarded");
+    let s = data.expect("a collecting call").statistics;
+    let t = s.times;
+    assert_eq!(t.path_tracing_vertices, s.camera_vertices, "{t:?}");
+    assert!(t.path_tracing_ns > 0, "{t:?}");
+    let k = measured_constants(&t, &CostConstants::calibrated()).expect("enough timed vertices");
+    assert!(k.path_tracing > 0.1 && k.path_tracing < 1.5, "{k:?}");
+    // later calls do not probe again
+    let (_, later) = render_iterations(&scene, settings, &config, &start, 2, 2..3, Some(CandidateSet::Reduced));
+    assert_eq!(later.expect("a collecting call").statistics.times.path_tracing_ns, 0);
 }

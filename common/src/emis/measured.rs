@@ -12,9 +12,11 @@
 //!   b is the per-photon shading cost, a the query's, per ln(map size) as the heuristic has it;
 //! - photon-map build: time per photon per ln(map size).
 //!
-//! A term with too few timed events keeps the fallback's value for this job's statistics, and
-//! path tracing keeps the fallback's ratio (a bidirectional pilot never runs the `pt`
-//! integrator).
+//! - path tracing: the `pt` integrator's time per camera vertex in the probe the job's first
+//!   pilot call renders beside it (the vertices counted by the bidirectional engine in the
+//!   same iteration).
+//!
+//! A term with too few timed events keeps the fallback's value for this job's statistics.
 
 use super::cost::CostConstants;
 use crate::integrator::observer::WorkTimes;
@@ -37,6 +39,9 @@ pub fn measured_constants(times: &WorkTimes, fallback: &CostConstants) -> Option
     }
     if let Some(v) = per(times.connection_ns, times.connections) {
         (k.connection, k.connection_walk) = (v, 0.0);
+    }
+    if let Some(v) = per(times.path_tracing_ns, times.path_tracing_vertices) {
+        k.path_tracing = v;
     }
     // the map holds the selectable photons of an iteration
     let map = if times.iterations > 0 { times.photons_built as f64 / times.iterations as f64 } else { 0.0 };
@@ -104,6 +109,8 @@ mod tests {
             merge_ns: merge.iter().sum(),
             merge_ns_photons: queries.iter().zip(&merge).map(|(&p, &t)| (p * t) as f64).sum(),
             observer_ns: 12345,
+            path_tracing_vertices: 2000,
+            path_tracing_ns: 2000 * 70,
         };
         let fallback = CostConstants::calibrated();
         let k = measured_constants(&t, &fallback).unwrap();
@@ -113,7 +120,10 @@ mod tests {
         assert!(close(k.photon_shading, 0.07), "{k:?}");
         assert!(close(k.query, 0.4 / (map as f64).ln()), "{k:?}");
         assert!((k.build - 2.0).abs() < 1e-3, "{k:?}");
-        assert_eq!(k.path_tracing, fallback.path_tracing, "path tracing keeps the fallback's ratio");
+        assert!(close(k.path_tracing, 0.7), "{k:?}");
+        let unprobed = WorkTimes { path_tracing_vertices: 0, path_tracing_ns: 0, ..t };
+        let k = measured_constants(&unprobed, &fallback).unwrap();
+        assert_eq!(k.path_tracing, fallback.path_tracing, "without a probe path tracing keeps the fallback's ratio");
     }
 
     /// Too few timed events keep the fallback's terms; too few camera vertices, nothing.

@@ -328,19 +328,7 @@ pub fn render_iterations_until(
     if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), in small square tiles in parallel, placed in order, so deterministic
-        let pt = PathTracer { settings };
-        let tiles: Vec<TileAccum> = {
-            use rayon::prelude::*;
-            Rect::tiles(w, h, PT_TILE)
-                .into_par_iter()
-                .map(|rect| {
-                    let mut tile = TileAccum::new(rect, &scene.film);
-                    let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
-                    pt.render_tile(scene, &request, &mut tile);
-                    tile
-                })
-                .collect()
-        };
+        let (tiles, _) = path_trace(scene, settings, seed, &iterations, stop);
         for tile in &tiles {
             accum.add(tile);
         }
@@ -361,9 +349,42 @@ pub fn render_iterations_until(
     let guides = GuideCollector::new(w, h, guided);
     // under path tracing a light probe measures what the cost model needs of light paths
     integrator.with_probe().with_observer((&estimator, &guides)).render_tile(scene, &request, &mut accum);
-    let (mut moments, statistics) = estimator.into_snapshot();
+    let (mut moments, mut statistics) = estimator.into_snapshot();
+    if config.measured_costs && iterations.start == 0 && statistics.iterations > 0 {
+        // the job's first call times path tracing too, which no pilot renders otherwise: the
+        // `pt` integrator on iteration 0 once more, its image discarded
+        let (_, ns) = path_trace(scene, settings, seed, &(0..1), stop);
+        statistics.times.path_tracing_ns += ns;
+        statistics.times.path_tracing_vertices += statistics.camera_vertices / statistics.iterations;
+    }
     moments.round_for_wire();
     (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
+}
+
+/// `iterations` rendered by the `pt` integrator in [`PT_TILE`] squares in parallel, in
+/// order, and the tiles' times summed (nanoseconds of one thread).
+fn path_trace(
+    scene: &Scene,
+    settings: PathSettings,
+    seed: u64,
+    iterations: &Range<u32>,
+    stop: &Stop,
+) -> (Vec<TileAccum>, u64) {
+    use rayon::prelude::*;
+    let pt = PathTracer { settings };
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let tiles: Vec<(TileAccum, u64)> = Rect::tiles(w, h, PT_TILE)
+        .into_par_iter()
+        .map(|rect| {
+            let start = Instant::now();
+            let mut tile = TileAccum::new(rect, &scene.film);
+            let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
+            pt.render_tile(scene, &request, &mut tile);
+            (tile, start.elapsed().as_nanos() as u64)
+        })
+        .collect();
+    let ns = tiles.iter().map(|t| t.1).sum();
+    (tiles.into_iter().map(|t| t.0).collect(), ns)
 }
 
 /// A finished `emis-*` render.

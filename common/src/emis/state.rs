@@ -348,7 +348,11 @@ impl EmisState {
             self.candidate_set = CandidateSet::Full;
             self.candidates = self.config.candidates_of(CandidateSet::Full);
             self.moments = MomentBuffer::new(w as u32, h as u32, self.candidates.len());
+            // path tracing's probe is not run again: its time stays for the later updates
+            let probe = self.statistics.times;
             self.statistics = StatisticsSums::default();
+            self.statistics.times.path_tracing_vertices = probe.path_tracing_vertices;
+            self.statistics.times.path_tracing_ns = probe.path_tracing_ns;
             self.kept_from = iteration;
             self.start = Some(KeptStart { image: image.to_vec(), iterations: iteration, weight: None });
         }

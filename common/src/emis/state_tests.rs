@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::emis::cost::CostTerms;
+use crate::integrator::observer::WorkTimes;
 
 const SIDE: u32 = 16;
 
@@ -28,7 +29,10 @@ fn a_path_tracing_start_restarts_when_a_bidirectional_candidate_wins() {
     assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
     assert_eq!(state.strategy, Strategy::path_tracing_start(EmisMethod::Vcm));
     let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
-    let pt_wins = pilot(&state, |c| if c.is_path_tracing() { 1.0 } else { 1e3 });
+    let mut pt_wins = pilot(&state, |c| if c.is_path_tracing() { 1.0 } else { 1e3 });
+    // path tracing's probe (costs measured per job), which only the first call runs
+    let probe = WorkTimes { path_tracing_vertices: 100, path_tracing_ns: 500, ..Default::default() };
+    pt_wins.statistics.times = probe;
     state.absorb(&pt_wins).unwrap();
     let report = state.update(&image, 1, RestartTotal::Samples(64)).clone();
     assert!(report.reduced && !report.restarted, "{report:?}");
@@ -48,7 +52,7 @@ fn a_path_tracing_start_restarts_when_a_bidirectional_candidate_wins() {
     assert_eq!((state.candidate_set, state.candidates.len(), state.kept_from), (CandidateSet::Full, 51, 4));
     assert_eq!((state.moments.iterations, state.moments.sums.len()), (0, 51 * (SIDE * SIDE) as usize));
     assert!(state.moments.sums.iter().all(|&s| s == 0.0));
-    assert_eq!(state.statistics, StatisticsSums::default());
+    assert_eq!(state.statistics, StatisticsSums { times: probe, ..Default::default() }, "all but the probe restart");
     assert!(state.collecting(), "the update after 16 follows, on the full set");
     let start = state.start.clone().expect("the start is kept");
     assert_eq!((start.image, start.iterations, start.weight), (image.clone(), 4, None));

@@ -21,13 +21,21 @@ use std::sync::Arc;
 const PILOT_MAGIC_F32: &[u8; 4] = b"TPD1";
 /// Pilot data with bfloat16 moment sums and without work times (earlier uploads, still read).
 const PILOT_MAGIC_BF16: &[u8; 4] = b"TPD2";
+/// Pilot data with f32 moment sums and work times before path tracing's probe (earlier
+/// checkpoints, still read).
+const PILOT_MAGIC_F32_TIMED_V1: &[u8; 4] = b"TPD3";
+/// The same with bfloat16 moment sums (earlier uploads, still read).
+const PILOT_MAGIC_BF16_TIMED_V1: &[u8; 4] = b"TPD4";
 /// Pilot data with f32 moment sums and work times: the coordinator's checkpoints.
-const PILOT_MAGIC_F32_TIMED: &[u8; 4] = b"TPD3";
+const PILOT_MAGIC_F32_TIMED: &[u8; 4] = b"TPD5";
 /// Pilot data with bfloat16 moment sums and work times: uploads, whose sums
 /// [`MomentBuffer::round_for_wire`] rounded, so that the encoding loses nothing.
-const PILOT_MAGIC_BF16_TIMED: &[u8; 4] = b"TPD4";
+const PILOT_MAGIC_BF16_TIMED: &[u8; 4] = b"TPD6";
+/// Work-time integers before path tracing's probe, and now.
+const TIMES_U64_V1: usize = 13;
+const TIMES_U64: usize = 15;
 /// Bytes of the work times.
-const TIMES_BYTES: usize = 15 * 8;
+const TIMES_BYTES: usize = (TIMES_U64 + 2) * 8;
 const STATE_MAGIC: &[u8; 4] = b"TES1";
 
 /// Little-endian writer.
@@ -166,6 +174,8 @@ fn write_times(w: &mut Writer, t: &WorkTimes) {
         t.photons,
         t.merge_ns,
         t.observer_ns,
+        t.path_tracing_vertices,
+        t.path_tracing_ns,
     ] {
         w.u64(v);
     }
@@ -173,9 +183,11 @@ fn write_times(w: &mut Writer, t: &WorkTimes) {
     w.f64(t.merge_ns_photons);
 }
 
-fn read_times(r: &mut Reader) -> Result<WorkTimes, String> {
-    let mut u = [0u64; 13];
-    for v in &mut u {
+/// Reads work times of `count` integers ([`TIMES_U64_V1`] or [`TIMES_U64`]); those an
+/// earlier format lacks are 0.
+fn read_times(r: &mut Reader, count: usize) -> Result<WorkTimes, String> {
+    let mut u = [0u64; TIMES_U64];
+    for v in &mut u[..count] {
         *v = r.u64("the work times")?;
     }
     let (photons_squared, merge_ns_photons) = (r.f64("the work times")?, r.f64("the work times")?);
@@ -200,6 +212,8 @@ fn read_times(r: &mut Reader) -> Result<WorkTimes, String> {
         photons,
         merge_ns,
         observer_ns,
+        path_tracing_vertices,
+        path_tracing_ns,
     ] = u;
     Ok(WorkTimes {
         iterations,
@@ -217,15 +231,20 @@ fn read_times(r: &mut Reader) -> Result<WorkTimes, String> {
         merge_ns,
         merge_ns_photons,
         observer_ns,
+        path_tracing_vertices,
+        path_tracing_ns,
     })
 }
 
 fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
+    // the work-time integers the format holds
     let (precision, timed) = match r.take(4, "the header")? {
-        m if m == PILOT_MAGIC_F32 => (SumPrecision::F32, false),
-        m if m == PILOT_MAGIC_BF16 => (SumPrecision::Bf16, false),
-        m if m == PILOT_MAGIC_F32_TIMED => (SumPrecision::F32, true),
-        m if m == PILOT_MAGIC_BF16_TIMED => (SumPrecision::Bf16, true),
+        m if m == PILOT_MAGIC_F32 => (SumPrecision::F32, 0),
+        m if m == PILOT_MAGIC_BF16 => (SumPrecision::Bf16, 0),
+        m if m == PILOT_MAGIC_F32_TIMED_V1 => (SumPrecision::F32, TIMES_U64_V1),
+        m if m == PILOT_MAGIC_BF16_TIMED_V1 => (SumPrecision::Bf16, TIMES_U64_V1),
+        m if m == PILOT_MAGIC_F32_TIMED => (SumPrecision::F32, TIMES_U64),
+        m if m == PILOT_MAGIC_BF16_TIMED => (SumPrecision::Bf16, TIMES_U64),
         _ => return Err("pilot data has an unknown format".into()),
     };
     let (w, h, c) = (r.u32("the width")?, r.u32("the height")?, r.u32("the candidate count")? as usize);
@@ -251,8 +270,8 @@ fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Res
         photons_per_path: r.f64("the statistics")?,
         times: WorkTimes::default(),
     };
-    if timed {
-        statistics.times = read_times(r)?;
+    if timed > 0 {
+        statistics.times = read_times(r, timed)?;
     }
     if !(statistics.photons_per_path >= 0.0 && statistics.photons_per_path.is_finite()) {
         return Err(format!("photons per path {} is out of range", statistics.photons_per_path));

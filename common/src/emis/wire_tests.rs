@@ -37,9 +37,19 @@ fn pilot(width: u32, height: u32, candidates: usize) -> PilotData {
             merge_ns: 31,
             merge_ns_photons: 37.25,
             observer_ns: 41,
+            path_tracing_vertices: 43,
+            path_tracing_ns: 47,
         },
     };
     PilotData { moments, statistics, guides }
+}
+
+/// The same upload in the format before path tracing's probe (`TPD4`): two integers fewer.
+fn without_probe(bytes: &[u8], candidates_sums: usize) -> Vec<u8> {
+    let at = 20 + 2 * candidates_sums + 48 + TIMES_U64_V1 * 8;
+    let mut old = [&bytes[..at], &bytes[at + 16..]].concat();
+    old[..4].copy_from_slice(PILOT_MAGIC_BF16_TIMED_V1);
+    old
 }
 
 /// The same upload in the format before work times (`TPD2`).
@@ -64,6 +74,11 @@ fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
     let old = PilotData::decode(&without_times(&bytes, p.moments.sums.len()), 3, 2, 5).unwrap();
     assert_eq!(old.statistics.times, WorkTimes::default());
     assert_eq!((old.moments, old.guides), (p.moments.clone(), p.guides.clone()));
+    // one from before path tracing's probe: every time but the probe's
+    let v1 = PilotData::decode(&without_probe(&bytes, p.moments.sums.len()), 3, 2, 5).unwrap();
+    let unprobed = WorkTimes { path_tracing_vertices: 0, path_tracing_ns: 0, ..p.statistics.times };
+    assert_eq!(v1.statistics.times, unprobed);
+    assert_eq!((&v1.moments, &v1.guides), (&p.moments, &p.guides));
     // unrounded sums are rounded by the encoding: the decoded data is not the original
     assert_ne!(PilotData::decode(&exact.encode(), 3, 2, 5).unwrap(), exact);
     // a checkpoint keeps sums exactly (they are sums of rounded calls, not rounded)

@@ -122,6 +122,14 @@ pub struct WorkTimes {
     pub merge_ns_photons: f64,
     /// The observer's own time within the timed work (left out of every figure above).
     pub observer_ns: u64,
+    /// Camera vertices of the iterations the `pt` integrator rendered as a probe (costs
+    /// measured per job: path tracing's cost per camera vertex), as the bidirectional engine
+    /// counted them in the same iterations.
+    #[serde(default)]
+    pub path_tracing_vertices: u64,
+    /// The probe's time: its tiles' times summed over the threads.
+    #[serde(default)]
+    pub path_tracing_ns: u64,
 }
 
 impl std::ops::AddAssign for WorkTimes {
@@ -143,6 +151,8 @@ impl std::ops::AddAssign for WorkTimes {
         add(&mut self.merge_ns, o.merge_ns);
         self.merge_ns_photons += o.merge_ns_photons;
         add(&mut self.observer_ns, o.observer_ns);
+        add(&mut self.path_tracing_vertices, o.path_tracing_vertices);
+        add(&mut self.path_tracing_ns, o.path_tracing_ns);
     }
 }
 
