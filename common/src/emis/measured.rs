@@ -10,8 +10,7 @@
 //! - connection: time per connection tried (walk folded in likewise);
 //! - merge: time per query fitted as a + b·photons by least squares over the timed queries:
 //!   b is the per-photon shading cost, a the query's, per ln(map size) as the heuristic has it;
-//! - photon-map build: time per photon per ln(map size).
-//!
+//! - photon-map build: time per photon per ln(map size);
 //! - path tracing: the `pt` integrator's time per camera vertex in the probe the job's first
 //!   pilot call renders beside it (the vertices counted by the bidirectional engine in the
 //!   same iteration).
