@@ -1,7 +1,7 @@
-//! EMIS jobs on the farm, each equal to `tessera render` bit for bit: the bidirectional pilot
+//! EMIS jobs on the farm. Four equal `tessera render` bit for bit: the bidirectional pilot
 //! with its per-pixel merge mask, a path-tracing start that a restart sets aside, one that keeps
 //! path tracing to the end, and per-pixel connection counts; the decisions, strategy PNG and
-//! report survive a coordinator restart.
+//! report survive a coordinator restart. A fifth measures costs per job on the workers.
 
 use super::{download, job_url, wait_done};
 use serde_json::json;
@@ -184,4 +184,37 @@ fn rest_submit_emis_keeping_path_tracing_renders_the_local_calls() {
     let local = local_render_with(dir.path(), &scene("glossy-interreflection"), "emis-vcm", 200, 5, &more);
     assert_same_image(&out, &local);
     assert_eq!(read_attribute(&out, "tessera/emis_nu").unwrap(), Some(0.0));
+}
+
+/// Costs measured per job on the farm: the bidirectional pilot's first call, rendered by a
+/// worker, times its light vertices, connections and path tracing beside it, and the
+/// coordinator's first update fits the constants from those times. The report shows constants
+/// measured there, not the calibrated ones (the image is not compared with a local render:
+/// timed decisions depend on the machine). A path-tracing start would measure path tracing
+/// only: its probe's light paths are neither splatted nor timed.
+#[test]
+fn rest_submit_emis_with_measured_costs_reports_the_workers_constants() {
+    use tessera_common::emis::cost::CostConstants;
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _w) = farm(dir.path(), 2);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let settings = json!({"integrator": "emis-vcm", "spp": 6, "seed": 2, "cost_model": "measured",
+        "emis_pilot": "bidirectional"});
+    let (status, job) = rest::submit(&c.url, None, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    wait_done(&c, id, None);
+    let (status, report) = rest::get_json(&format!("{}/emis.json", job_url(&c, id)), None);
+    assert_eq!(status, 200, "{report}");
+    let first = &report["updates"][0];
+    assert_eq!(first["iteration"].as_u64(), Some(1), "{report}");
+    let k = &first["measured_constants"];
+    let calibrated = CostConstants::calibrated();
+    assert_eq!(k["camera_vertex"].as_f64(), Some(1.0), "measured in camera vertices: {k}");
+    let pt = k["path_tracing"].as_f64().expect("path tracing timed by the worker");
+    assert!(pt > 0.05 && pt < 5.0 && pt != calibrated.path_tracing, "path tracing {pt}: {k}");
+    let light = k["light_vertex"].as_f64().expect("light vertices timed by the worker");
+    assert!(light > 0.0 && light != calibrated.light_vertex, "light vertex {light}: {k}");
+    let connection = k["connection"].as_f64().expect("connections timed by the worker");
+    assert!(connection > 0.0 && connection != calibrated.connection, "connection {connection}: {k}");
 }
