@@ -440,9 +440,7 @@ pub fn render_emis(
         }
         // moments are only worth collecting while another update can still come and pay
         let timed = matches!(opts.budget, Budget::Time(_));
-        if state
-            .next_update()
-            .is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from, last_rate), state.strategy.nu, timed))
+        if state.next_update().is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from, last_rate), timed))
         {
             state.stop_collecting();
         }
