@@ -128,6 +128,15 @@ impl RestartTotal {
             RestartTotal::Time(n) => done as f64 + n.saturating_sub(done) as f64 / dearer.max(1e-9),
         }
     }
+
+    /// Whether the update after `update` iterations would pay ([`update_pays`]) in a render of
+    /// `total` iterations (of [`RestartTotal::at_cost_ratio`], say) under this budget: the
+    /// rule the render loop and a farm's plan apply when they decide to collect for it.
+    pub fn pays(self, update: u32, total: f64) -> bool {
+        // only whole iterations run
+        let whole = total.clamp(0.0, u32::MAX as f64) as u32;
+        update_pays(update, whole, matches!(self, RestartTotal::Time(_)))
+    }
 }
 
 /// Whether moments are worth collecting for the update after `update` iterations of a render

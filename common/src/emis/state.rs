@@ -223,9 +223,10 @@ impl EmisState {
     /// When the report says `restarted`, the caller must start a new film: the iterations
     /// before `iteration` now live in [`EmisState::start`]. `restart_total` is how many
     /// iterations the render would run in all if this update restarted it: when no update
-    /// would follow before its end to weigh the start (under a time budget, at the winner's
-    /// pace), a path-tracing start switches only to a candidate that beats path tracing by
-    /// more than the share of them the restart discards.
+    /// would follow and pay before its end to weigh the start (under a time budget, at the
+    /// winner's pace), a path-tracing start switches only to a candidate that beats path
+    /// tracing by more than the share of them the restart discards, and renders that
+    /// candidate's own merge decision.
     pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: RestartTotal) -> &UpdateReport {
         let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
@@ -269,13 +270,14 @@ impl EmisState {
         // a restart discards the start unless an update of the full set follows to weigh it
         let share = iteration as f64 / restart_total.at_current_pace().max(1) as f64;
         let weighing = self.config.updates.iter().copied().find(|&u| u > iteration);
-        let kept = reduced && weighing.is_some_and(|u| u < restart_total.at_current_pace());
+        let kept = reduced && weighing.is_some_and(|u| restart_total.pays(u, restart_total.at_current_pace() as f64));
         let mut decision = decide(if reduced && !kept { share } else { 0.0 });
         // whether an update of the full set follows a restart into the winner
         let mut followed = kept;
         let merging = self.config.method == EmisMethod::Vcm;
         if kept && decision.nu > 0.0 && !reaches(&decision, restart_total, iteration, weighing, merging) {
-            // at the winner's pace the render would end before that update
+            // at the winner's pace the render would end before that update, or too soon
+            // after it for it to pay
             decision = decide(share);
             followed = false;
         }
@@ -358,7 +360,10 @@ impl EmisState {
         }
         self.relative_moment = Some(decision.relative_moment);
         self.updates_done += 1;
-        if self.updates_done >= self.config.updates.len() || report.settled {
+        // a restart that no paying update follows renders its winner to the end: recording
+        // the first call after it, before the render loop sees the new pace, buys nothing
+        let unfollowed = restarted && !followed;
+        if self.updates_done >= self.config.updates.len() || report.settled || unfollowed {
             self.collecting = false;
         }
         self.reports.push(report);
@@ -386,10 +391,13 @@ impl EmisState {
     }
 }
 
-/// Whether a render restarted into `decision`'s winner after `iteration` would still reach
-/// the update at `weighing` (before `restart_total`, scaled by the winner's cost per iteration
-/// over path tracing's under a time budget). With `merging` the winner is priced as rendered
-/// until that update: its ν and c merging everywhere (decision 0048).
+/// Whether a render restarted into `decision`'s winner after `iteration` would still run the
+/// update at `weighing`: reach it before `restart_total` (scaled by the winner's cost per
+/// iteration over path tracing's under a time budget) and, as the render loop demands before
+/// it collects for it, find it pays ([`RestartTotal::pays`]); an update reached but skipped
+/// would leave the pilot's strategy to the end and the start unweighed (decision 0056). With
+/// `merging` the winner is priced as rendered until that update: its ν and c merging
+/// everywhere (decision 0048).
 fn reaches(
     decision: &Decision,
     restart_total: RestartTotal,
@@ -410,7 +418,7 @@ fn reaches(
         (Some(pt), Some(winner)) => winner / pt,
         _ => 1.0,
     };
-    restart_total.at_cost_ratio(iteration, dearer) > update as f64
+    restart_total.pays(update, restart_total.at_cost_ratio(iteration, dearer))
 }
 
 #[cfg(test)]

@@ -87,6 +87,41 @@ fn a_restart_pilots_the_next_update_with_merging_everywhere() {
     assert_eq!(restart(EmisMethod::Bdpt, vec![4, 16]), (None, 0.0));
 }
 
+/// A timed restart whose next update the render would reach but not pay for (fewer
+/// iterations after it than before, at the winner's pace: kitchen at 20 s) is one that no
+/// update follows. Its winner's own merge decision is rendered to the end, not the merging
+/// pilot meant for that update, and nothing more is recorded.
+#[test]
+fn a_restart_whose_next_update_would_not_pay_renders_its_winner() {
+    let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+    let target = Candidate { nu: 1.0, connections: 1, merge: false };
+    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    // the winner as `reaches` prices it, merging everywhere, against path tracing
+    let sums = StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
+    let merged = Candidate { merge: true, ..target };
+    let terms = CostTerms::of_candidates(
+        &config.constants,
+        &sums.statistics(SIDE * SIDE),
+        &[Candidate::PATH_TRACING, merged],
+        SIDE * SIDE,
+    );
+    let dearer = terms[1].at(1.0) / terms[0].at(0.0);
+    assert!(dearer > 1.5, "{dearer}");
+    let restart = |pt_pace: u32| {
+        let mut state = EmisState::new(config.clone(), SIDE, SIDE);
+        state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
+        let report = state.update(&image, 1, RestartTotal::Time(pt_pace)).clone();
+        assert!(report.restarted, "{report:?}");
+        (state.strategy.merge.clone(), state.collecting(), report.mean_merge_probability)
+    };
+    // about 6 iterations at the winner's pace: the update after 4 comes, but would not pay
+    let short = 1 + (5.0 * dearer).round() as u32;
+    assert_eq!(restart(short), (Some(MergeMask::Constant(0.0)), false, 0.0));
+    // about 12: it pays, so the restart pilots it merging everywhere and records
+    let long = 1 + (11.0 * dearer).round() as u32;
+    assert_eq!(restart(long), (Some(MergeMask::Constant(1.0)), true, 1.0));
+}
+
 /// A path-tracing start switches only to a candidate that beats path tracing by more than
 /// the share of the render a restart discards: 1.5× better is worth discarding 1 of 64
 /// iterations, not 16 of 20. A restart that an update of the full set follows (after 4 of
