@@ -10,6 +10,7 @@ pub mod compare;
 pub mod exr;
 pub mod filter;
 pub mod png;
+mod rows;
 
 use crate::math::Rgb;
 use filter::Filter;
@@ -246,29 +247,7 @@ impl TileAccum {
     #[inline]
     pub fn add_sample(&mut self, x: u32, y: u32, raster: Vec2, value: Rgb) {
         let v = self.finite(value);
-        let i = self.index(x, y);
-        self.count[i] += 1;
-        let Some(weight) = &mut self.weight else {
-            add3(&mut self.sum[i], v);
-            return;
-        };
-        let (cols, rows) = self.filter.footprint(raster.x, raster.y, self.bounds.x1, self.bounds.y1);
-        let cols = cols.start.max(self.bounds.x0)..cols.end;
-        let mut wx = [0.0f32; filter::MAX_TAPS];
-        for (k, px) in cols.clone().enumerate() {
-            wx[k] = self.filter.eval(px as f32 + 0.5 - raster.x);
-        }
-        let (bw, bx, by) = (self.bounds.width(), self.bounds.x0, self.bounds.y0);
-        for py in rows.start.max(by)..rows.end {
-            let wy = self.filter.eval(py as f32 + 0.5 - raster.y);
-            let row = ((py - by) * bw) as usize;
-            for (k, px) in cols.clone().enumerate() {
-                let w = wy * wx[k];
-                let j = row + (px - bx) as usize;
-                add3(&mut self.sum[j], v * w);
-                weight[j] += w as f64;
-            }
-        }
+        self.rows_mut().sample(x, y, raster, v);
     }
 
     /// Adds a light-tracing splat at continuous raster position `raster`: through the filter,
@@ -277,26 +256,7 @@ impl TileAccum {
     #[inline]
     pub fn add_splat(&mut self, raster: Vec2, value: Rgb) {
         let v = self.finite(value);
-        let Some(splat) = &mut self.splat else {
-            // the box filter: splats share the camera sums
-            let (x, y) = (raster.x as u32, raster.y as u32);
-            let i = self.index(x.min(self.bounds.x1 - 1), y.min(self.bounds.y1 - 1));
-            add3(&mut self.sum[i], v);
-            return;
-        };
-        // splats are kept apart only in full-frame sums, so bounds start at (0, 0)
-        let (cols, rows) = self.filter.footprint(raster.x, raster.y, self.bounds.x1, self.bounds.y1);
-        let mut wx = [0.0f32; filter::MAX_TAPS];
-        for (k, px) in cols.clone().enumerate() {
-            wx[k] = self.filter.eval(px as f32 + 0.5 - raster.x) / self.norm_x[px as usize];
-        }
-        let bw = self.bounds.width();
-        for py in rows {
-            let wy = self.filter.eval(py as f32 + 0.5 - raster.y) / self.norm_y[py as usize];
-            for (k, px) in cols.clone().enumerate() {
-                add3(&mut splat[(py * bw + px) as usize], v * (wy * wx[k]));
-            }
-        }
+        self.rows_mut().splat(raster, v);
     }
 
     /// Counts `n` more samples (iterations) in every pixel of `rect`: light tracing, whose

@@ -553,10 +553,7 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 })
                 .collect();
             let mut counters = PathCounters::default();
-            for (y, (row, row_counters)) in rows.iter().enumerate() {
-                for (x, (value, raster)) in row.iter().enumerate() {
-                    accum.add_sample(x as u32, y as u32, *raster, *value);
-                }
+            for (_, row_counters) in &rows {
                 counters += *row_counters;
             }
             if self.observer.wants_times() {
@@ -571,8 +568,17 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
                 }
             }
             self.observer.on_iteration_end(&start, &counters);
-            for chunk in &splats {
-                for (raster, value) in chunk {
+            // a stopped render's rows may be empty: they hold no samples
+            let full: Vec<&[(Rgb, Vec2)]> = rows.iter().map(|(row, _)| row.as_slice()).collect();
+            if full.iter().all(|r| r.len() == w as usize) {
+                accum.add_frame(&full, &splats);
+            } else {
+                for (y, row) in full.iter().enumerate() {
+                    for (x, (value, raster)) in row.iter().enumerate() {
+                        accum.add_sample(x as u32, y as u32, *raster, *value);
+                    }
+                }
+                for (raster, value) in splats.iter().flatten() {
                     accum.add_splat(*raster, *value);
                 }
             }
