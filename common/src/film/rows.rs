@@ -194,18 +194,25 @@ impl TileAccum {
     /// Adds one full pass over `rect`: `rows[k][i]` is the camera sample (value, raster
     /// position) generated in pixel `(rect.x0 + i, rect.y0 + k)`, then `splats` in sequence
     /// (chunk by chunk). The sums equal those of `add_sample` over the rows in order and then
-    /// `add_splat` over the splats, bit for bit, but bands of rows fill in parallel.
+    /// `add_splat` over the splats, bit for bit, but bands of rows fill in parallel. Splats
+    /// belong to full-frame sums only (their bounds start at (0, 0)), as with `add_splat`.
     pub fn add_frame(&mut self, rows: &[&[(Rgb, Vec2)]], splats: &[Vec<(Vec2, Rgb)>]) {
         let rect = self.rect;
         assert_eq!(rows.len(), (rect.y1 - rect.y0) as usize, "invariant: one row of samples per row of rect");
         assert!(rows.iter().all(|r| r.len() == rect.width() as usize), "invariant: full rows of samples");
+        assert!(
+            splats.iter().all(|s| s.is_empty()) || (self.bounds.x0, self.bounds.y0) == (0, 0),
+            "invariant: splats go to full-frame sums"
+        );
         if self.bounds.area() == 0 {
+            self.non_finite += splats.iter().flatten().filter(|(_, v)| !v.is_finite()).count() as u64;
             return;
         }
         let h = BAND_ROWS.max(4 * self.filter.border());
         let y0 = self.bounds.y0;
         let bands = (self.bounds.y1 - y0).div_ceil(h) as usize;
-        // a sample generated in row y reaches rows within the border of it
+        // a sample generated in row y reaches rows within the border of it; one row more
+        // covers a raster on the pixel's far edge and the epsilon `border` leaves out
         let reach = self.filter.border() + 1;
         let binned = self.bin_splats(splats, h, bands);
         let non_finite: u64 = self
