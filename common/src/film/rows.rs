@@ -191,15 +191,16 @@ impl TileAccum {
             .collect()
     }
 
-    /// Adds one full pass over `rect`: `rows[k][i]` is the camera sample (value, raster
-    /// position) generated in pixel `(rect.x0 + i, rect.y0 + k)`, then `splats` in sequence
+    /// Adds one pass over `rect`: `rows[k][i]` is the camera sample (value, raster position)
+    /// generated in pixel `(rect.x0 + i, rect.y0 + k)` (a stopped pass's rows may be short or
+    /// empty), then `splats` in sequence
     /// (chunk by chunk). The sums equal those of `add_sample` over the rows in order and then
     /// `add_splat` over the splats, bit for bit, but bands of rows fill in parallel. Splats
     /// belong to full-frame sums only (their bounds start at (0, 0)), as with `add_splat`.
     pub fn add_frame(&mut self, rows: &[&[(Rgb, Vec2)]], splats: &[Vec<(Vec2, Rgb)>]) {
         let rect = self.rect;
         assert_eq!(rows.len(), (rect.y1 - rect.y0) as usize, "invariant: one row of samples per row of rect");
-        assert!(rows.iter().all(|r| r.len() == rect.width() as usize), "invariant: full rows of samples");
+        assert!(rows.iter().all(|r| r.len() <= rect.width() as usize), "invariant: rows within rect");
         assert!(
             splats.iter().all(|s| s.is_empty()) || (self.bounds.x0, self.bounds.y0) == (0, 0),
             "invariant: splats go to full-frame sums"

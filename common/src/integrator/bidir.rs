@@ -569,19 +569,8 @@ impl<O: SampleObserver> Integrator for Bidir<O> {
             }
             self.observer.on_iteration_end(&start, &counters);
             // a stopped render's rows may be empty: they hold no samples
-            let full: Vec<&[(Rgb, Vec2)]> = rows.iter().map(|(row, _)| row.as_slice()).collect();
-            if full.iter().all(|r| r.len() == w as usize) {
-                accum.add_frame(&full, &splats);
-            } else {
-                for (y, row) in full.iter().enumerate() {
-                    for (x, (value, raster)) in row.iter().enumerate() {
-                        accum.add_sample(x as u32, y as u32, *raster, *value);
-                    }
-                }
-                for (raster, value) in splats.iter().flatten() {
-                    accum.add_splat(*raster, *value);
-                }
-            }
+            let rows: Vec<&[(Rgb, Vec2)]> = rows.iter().map(|(row, _)| row.as_slice()).collect();
+            accum.add_frame(&rows, &splats);
             spare = it.cache;
         }
         self.memory.put(spare, spare_probe);
