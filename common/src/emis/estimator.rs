@@ -99,6 +99,11 @@ struct Queued {
     w2: f32,
 }
 
+/// One thread's queue of light-tracing samples, alone on its cache lines: neighbouring locks
+/// would bounce one line between the threads on every splat.
+#[repr(align(128))]
+struct Shard(Mutex<Vec<Queued>>);
+
 /// Collects moments and statistics of pilot iterations; see the module documentation.
 pub struct MomentEstimator {
     candidates: Ratios,
@@ -112,7 +117,7 @@ pub struct MomentEstimator {
     sums: Vec<AtomicU32>,
     /// Light-tracing samples of the iteration, one queue per pool thread: a single queue's
     /// lock, taken once per splat, would serialise the threads.
-    queued: Vec<Mutex<Vec<Queued>>>,
+    queued: Vec<Shard>,
     statistics: Mutex<StatisticsSums>,
 }
 
@@ -140,8 +145,9 @@ impl MomentEstimator {
             settings,
             merging: candidates.iter().any(|c| c.merge),
             proxy_connect: AtomicU32::new((PROXY_CONNECTIONS / 5.0).to_bits()),
-            sums: (0..n).map(|_| AtomicU32::new(0)).collect(),
-            queued: (0..rayon::current_num_threads().max(1)).map(|_| Mutex::new(Vec::new())).collect(),
+            // megabytes: zeroed (and their pages faulted in) by all threads
+            sums: (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect(),
+            queued: (0..rayon::current_num_threads().max(1)).map(|_| Shard(Mutex::new(Vec::new()))).collect(),
             statistics: Mutex::new(StatisticsSums::default()),
         }
     }
@@ -192,14 +198,14 @@ impl MomentEstimator {
             return;
         }
         let scale = s_m * s_m * w2 / t_m;
-        let r = &self.candidates;
-        for (((o, &n_lt), &n_con), &n_vm) in out.iter_mut().zip(&r.lt).zip(&r.con).zip(&r.vm).take(r.len) {
-            let common = pt + n_lt * lt + n_con * con;
-            let s_n = common + n_vm * vm;
-            let t_n = common + n_vm * vm_c;
-            // S(n) = 0: the candidate cannot sample the path, its moment is infinite
-            *o = if s_n > 0.0 { scale * t_n / (s_n * s_n) } else { f32::INFINITY };
+        // eight lanes where the CPU has them; the same operations, so the same sums, on any CPU
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has the AVX2 instructions, checked just above
+            unsafe { candidates_avx2(&self.candidates, [pt, lt, con, vm, vm_c], scale, out) };
+            return;
         }
+        candidates_any(&self.candidates, [pt, lt, con, vm, vm_c], scale, out);
     }
 
     #[inline]
@@ -240,6 +246,28 @@ impl MomentEstimator {
     }
 }
 
+/// δ·w2 of every candidate slot (those past the candidates' count are never read), for proxy
+/// weights `w` and `scale` = S(m)²·w2/T(m): all [`MAX_CANDIDATES`] slots, so that the loop has
+/// a fixed trip count and vectorises whole.
+#[inline(always)]
+fn candidates_any(r: &Ratios, w: [f32; 5], scale: f32, out: &mut [f32; MAX_CANDIDATES]) {
+    let [pt, lt, con, vm, vm_c] = w;
+    for (((o, &n_lt), &n_con), &n_vm) in out.iter_mut().zip(&r.lt).zip(&r.con).zip(&r.vm) {
+        let common = pt + n_lt * lt + n_con * con;
+        let s_n = common + n_vm * vm;
+        let t_n = common + n_vm * vm_c;
+        // S(n) = 0: the candidate cannot sample the path, its moment is infinite
+        *o = if s_n > 0.0 { scale * t_n / (s_n * s_n) } else { f32::INFINITY };
+    }
+}
+
+/// [`candidates_any`] compiled with the AVX2 instructions.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn candidates_avx2(r: &Ratios, w: [f32; 5], scale: f32, out: &mut [f32; MAX_CANDIDATES]) {
+    candidates_any(r, w, scale, out)
+}
+
 /// The channel mean of a contribution, squared; for merges per [`MergeKernel`].
 #[inline]
 fn squared_value(record: &SampleRecord, kernel: MergeKernel) -> f32 {
@@ -253,7 +281,7 @@ fn squared_value(record: &SampleRecord, kernel: MergeKernel) -> f32 {
 impl SampleObserver for MomentEstimator {
     fn on_sample(&self, record: &SampleRecord) {
         let proxy = self.proxy_counts(record.counts);
-        let w: ProxyWeights = proxy_weights(record.pdfs, &proxy);
+        let w: ProxyWeights = proxy_weights(record.pdfs, record.ratios, &proxy);
         let weights = [w.pt as f32, w.lt as f32, w.con as f32, w.vm as f32, w.vm_correlated as f32];
         let pilot = self.pilot_ratios(record.counts, &proxy);
         let w2 = squared_value(record, self.settings.merge_kernel);
@@ -263,7 +291,7 @@ impl SampleObserver for MomentEstimator {
         if record.technique == Technique::LightTrace {
             let q = Queued { pixel: record.pixel, sequence: record.sequence, weights, pilot, w2 };
             let shard = rayon::current_thread_index().unwrap_or(0) % self.queued.len();
-            self.queued[shard].lock().expect("invariant: queue lock is never poisoned").push(q);
+            self.queued[shard].0.lock().expect("invariant: queue lock is never poisoned").push(q);
             return;
         }
         let mut out = [0.0f32; MAX_CANDIDATES];
@@ -292,7 +320,7 @@ impl SampleObserver for MomentEstimator {
         let mut queued: Vec<Queued> = self
             .queued
             .iter()
-            .flat_map(|shard| std::mem::take(&mut *shard.lock().expect("invariant: queue lock is never poisoned")))
+            .flat_map(|shard| std::mem::take(&mut *shard.0.lock().expect("invariant: queue lock is never poisoned")))
             .collect();
         // (pixel, sequence) is unique per sample: the order, and so the sums, do not depend on
         // which thread queued what

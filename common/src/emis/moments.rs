@@ -56,9 +56,8 @@ impl MomentBuffer {
     /// worker, so that a farm's merged moments equal a local render's bit for bit while an
     /// upload carries 2 bytes per candidate instead of 4 (docs/decisions/0019-compact-pilot-data.md).
     pub fn round_for_wire(&mut self) {
-        for s in &mut self.sums {
-            *s = super::wire::from_bf16_bits(super::wire::bf16_bits(*s));
-        }
+        use rayon::prelude::*;
+        self.sums.par_iter_mut().for_each(|s| *s = super::wire::from_bf16_bits(super::wire::bf16_bits(*s)));
     }
 
     /// Whether [`MomentBuffer::merge`] would take `other`: the same size and candidates.

@@ -4,7 +4,7 @@
 //! technique densities the MIS code exposes, so the MIS weights know nothing of EMIS.
 
 use crate::integrator::path::mis::{
-    MAX_VERTICES, PathPdfs, SampleCounts, Technique, correlation_factors, technique_densities_with, technique_index,
+    MAX_VERTICES, PathPdfs, PathRatios, SampleCounts, Technique, technique_densities_with, technique_index,
 };
 
 /// The proxy strategy's balance weights of one path, aggregated by technique group.
@@ -26,22 +26,18 @@ pub struct ProxyWeights {
 /// group: hits and next-event estimation together, light tracing, all connections, all merges,
 /// and the merges' weights times their correlation-aware factors. The groups sum to 1; a path no
 /// technique of the proxy can sample counts as path tracing's (the reference's convention).
-pub fn proxy_weights(p: &PathPdfs, proxy: &SampleCounts) -> ProxyWeights {
-    // each merge's correlation-aware factor enters its density and, once more, the
-    // correlated sum
-    let mut factors = [1.0f32; MAX_VERTICES];
-    if let Some(m) = proxy.merge.filter(|m| m.correlation_aware) {
-        correlation_factors(p, &m, &mut factors);
-    }
+pub fn proxy_weights(p: &PathPdfs, r: &PathRatios, proxy: &SampleCounts) -> ProxyWeights {
     let mut d = [0.0f32; 2 * MAX_VERTICES];
-    let n = technique_densities_with(p, proxy, &factors, &mut d);
+    let n = technique_densities_with(p, r, proxy, &mut d);
     let lt_index = technique_index(p, Technique::LightTrace);
     let sum = |range: std::ops::Range<usize>| d[range].iter().map(|&v| v as f64).sum::<f64>();
     let (pt, con, lt) = (sum(0..2), sum(2..lt_index), d[lt_index] as f64);
     let (mut vm, mut vm_correlated) = (0.0f64, 0.0f64);
-    for (i, &density) in d[lt_index + 1..n].iter().enumerate() {
-        vm += density as f64;
-        vm_correlated += factors[i + 1] as f64 * density as f64;
+    if let Some(m) = &proxy.merge {
+        for (i, &density) in d[lt_index + 1..n].iter().enumerate() {
+            vm += density as f64;
+            vm_correlated += r.factor(i + 1, m) as f64 * density as f64;
+        }
     }
     let total = pt + con + lt + vm;
     if !(total > 0.0 && total.is_finite()) {
@@ -88,7 +84,7 @@ mod tests {
             for len in 3..=10 {
                 for seed in 0..100 {
                     let p = random_path(seed, len, false);
-                    let w = proxy_weights(&p, &proxy);
+                    let w = proxy_weights(&p, &PathRatios::new(&p, proxy.merge.as_ref()), &proxy);
                     let sum = w.pt + w.lt + w.con + w.vm;
                     assert!((sum - 1.0).abs() < 1e-5, "sum {sum}");
                     assert!(w.vm_correlated <= w.vm + 1e-12);
@@ -128,5 +124,44 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The estimator re-weights a sample with the ratios its own MIS weight was computed from,
+    /// under the sample's counts: the proxy's weights must not depend on those counts (the
+    /// correlation-aware factor's 1/N floor differs between ν·P and P light paths).
+    #[test]
+    fn proxy_weights_do_not_depend_on_the_counts_the_ratios_came_with() {
+        let pixels = 128.0f32 * 96.0;
+        let merge = |light_paths: f32| MergeCounts {
+            area: 5e-4,
+            count: light_paths * 0.3,
+            correlation_aware: true,
+            correlation_area: 4e-2,
+            light_paths,
+        };
+        let proxy = SampleCounts {
+            hit: 1.0,
+            next_event: 1.0,
+            connect: 1.3,
+            light_trace: pixels,
+            merge: Some(MergeCounts { count: pixels, ..merge(pixels) }),
+        };
+        let mut floored = 0;
+        for nu in [0.01f32, 0.25, 4.0] {
+            let sample = merge(nu * pixels);
+            for len in 4..=12 {
+                for seed in 0..100 {
+                    let p = random_path(seed, len, seed % 4 == 0);
+                    let own = proxy_weights(&p, &PathRatios::new(&p, Some(&sample)), &proxy);
+                    let fresh = proxy_weights(&p, &PathRatios::new(&p, proxy.merge.as_ref()), &proxy);
+                    assert_eq!(own, fresh, "ν {nu} len {len} seed {seed}");
+                    let r = PathRatios::new(&p, Some(&sample));
+                    floored +=
+                        (1..len - 2).filter(|&i| r.factor(i, &sample) != r.factor(i, &proxy.merge.unwrap())).count();
+                }
+            }
+        }
+        // the paths exercise the floors, else the test could not tell
+        assert!(floored > 0);
     }
 }

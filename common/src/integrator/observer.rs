@@ -6,7 +6,7 @@
 //! generic over the observer; with [`NoObserver`] every call inlines to nothing, so unobserved
 //! rendering pays nothing.
 
-use super::path::mis::{PathPdfs, SampleCounts, Technique};
+use super::path::mis::{PathPdfs, PathRatios, SampleCounts, Technique};
 use crate::math::Rgb;
 use glam::Vec3;
 
@@ -29,6 +29,8 @@ pub struct SampleRecord<'a> {
     pub sequence: u32,
     /// The full path's densities from both ends.
     pub pdfs: &'a PathPdfs,
+    /// The path's ratios its MIS weight was computed from.
+    pub ratios: &'a PathRatios,
     /// The sample counts of the strategy that produced the sample.
     pub counts: &'a SampleCounts,
 }

@@ -141,7 +141,8 @@ pub fn merge<O: SampleObserver>(
             light_end_sampled: true,
         };
         let pdfs = gather(&light[..s], camera, &join, infinite);
-        let weight = mis::weight(&pdfs, counts, Technique::Merge(s));
+        let ratios = mis::PathRatios::new(&pdfs, counts.merge.as_ref());
+        let weight = mis::weight_with(&pdfs, &ratios, counts, Technique::Merge(s));
         if weight == 0.0 {
             return;
         }
@@ -158,6 +159,7 @@ pub fn merge<O: SampleObserver>(
                 kernel,
                 sequence: 0,
                 pdfs: &pdfs,
+                ratios: &ratios,
                 counts,
             });
         }

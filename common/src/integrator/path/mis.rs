@@ -157,22 +157,52 @@ pub fn correlation_factor(p: &PathPdfs, i: usize, m: &MergeCounts) -> f32 {
     ((p_cam / (p_cam + p_light - p_cam * p_light)) as f32).max(1.0 / m.light_paths)
 }
 
-/// [`correlation_factor`] of every merge vertex i = 1..k−2 at `out[i]` (1 elsewhere), in O(k)
-/// for the whole path instead of O(k) per vertex: the camera side's probabilities are suffix
-/// products, the light side's prefix products. Equal to the per-vertex function up to rounding.
-pub fn correlation_factors(p: &PathPdfs, m: &MergeCounts, out: &mut [f32; MAX_VERTICES]) {
+/// What every technique's density of a path needs beyond the sample counts, computed once per
+/// sample and shared by its MIS weight and any observer re-weighting it with other counts
+/// (the EMIS proxy): the prefix ratios p_s / p_0 and the merges' correlation-aware factors
+/// before their 1/N floor.
+#[derive(Clone, Debug)]
+pub struct PathRatios {
+    /// `ratio[s]` = p_s / p_0 with the emission density at vertex 0.
+    ratio: [f32; MAX_VERTICES + 1],
+    /// Merge at vertex i: c_i before the floor (1 where merges are not correlation-aware).
+    correlation: [f32; MAX_VERTICES],
+}
+
+impl PathRatios {
+    /// The ratios of path `p`; `merge` gives the correlation-aware factor's area, if merges
+    /// are in play (their counts do not matter here).
+    #[inline]
+    pub fn new(p: &PathPdfs, merge: Option<&MergeCounts>) -> Self {
+        let mut r = PathRatios { ratio: [0.0; MAX_VERTICES + 1], correlation: [1.0; MAX_VERTICES] };
+        prefix_ratios(p, &mut r.ratio);
+        if let Some(m) = merge.filter(|m| m.correlation_aware) {
+            raw_correlation_factors(p, m.correlation_area, &mut r.correlation);
+        }
+        r
+    }
+
+    /// The correlation-aware factor of a merge at vertex `i` under `m`: c_i clamped below at
+    /// 1/N, or 1.
+    #[inline]
+    pub fn factor(&self, i: usize, m: &MergeCounts) -> f32 {
+        if m.correlation_aware && m.light_paths > 0.0 { self.correlation[i].max(1.0 / m.light_paths) } else { 1.0 }
+    }
+}
+
+/// c_i of every merge vertex before the 1/N floor, in O(k): suffix products of the camera
+/// side, a running product of the light side. Vertices neither side reaches keep 1.
+fn raw_correlation_factors(p: &PathPdfs, area: f32, out: &mut [f32; MAX_VERTICES]) {
     let k = p.len - 1;
-    out.fill(1.0);
-    if k < 3 || m.light_paths <= 0.0 {
+    if k < 3 {
         return;
     }
-    let a = m.correlation_area as f64;
+    let a = area as f64;
     // camera[i] = Π_{j=i}^{k−1} min(from_camera[j]·a, 1)
     let mut camera = [1.0f64; MAX_VERTICES + 1];
     for j in (1..k).rev() {
         camera[j] = (p.from_camera[j] as f64 * a).min(1.0) * camera[j + 1];
     }
-    let floor = 1.0 / m.light_paths;
     let mut light = (p.from_light[0] as f64 * p.from_light[1] as f64 * a * a).min(1.0);
     for i in 1..k - 1 {
         if i >= 2 {
@@ -180,8 +210,17 @@ pub fn correlation_factors(p: &PathPdfs, m: &MergeCounts, out: &mut [f32; MAX_VE
         }
         let cam = camera[i];
         if !(cam == 0.0 && light == 0.0) {
-            out[i] = ((cam / (cam + light - cam * light)) as f32).max(floor);
+            out[i] = (cam / (cam + light - cam * light)) as f32;
         }
+    }
+}
+
+/// The correlation-aware factors c_i of every merge vertex of `p` under `m` (1 where undefined).
+pub fn correlation_factors(p: &PathPdfs, m: &MergeCounts, out: &mut [f32; MAX_VERTICES]) {
+    let m = MergeCounts { correlation_aware: true, ..*m };
+    let r = PathRatios::new(p, Some(&m));
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = r.factor(i, &m);
     }
 }
 
@@ -189,24 +228,19 @@ pub fn correlation_factors(p: &PathPdfs, m: &MergeCounts, out: &mut [f32; MAX_VE
 /// connections s = 2..k−1, light tracing (index max(k, 2)), merges i = 1..k−2 (zero where a
 /// technique cannot sample the path or is not used). Returns the number of entries written.
 pub fn technique_densities(p: &PathPdfs, counts: &SampleCounts, out: &mut [f32; 2 * MAX_VERTICES]) -> usize {
-    let mut factors = [1.0f32; MAX_VERTICES];
-    if let Some(m) = counts.merge.filter(|m| m.correlation_aware) {
-        correlation_factors(p, &m, &mut factors);
-    }
-    technique_densities_with(p, counts, &factors, out)
+    technique_densities_with(p, &PathRatios::new(p, counts.merge.as_ref()), counts, out)
 }
 
-/// [`technique_densities`] with the merges' correlation-aware factors given (from
-/// [`correlation_factors`], or 1 without the correlation-aware factor).
+/// [`technique_densities`] from the path's ratios, computed once ([`PathRatios::new`] with a
+/// merge of the same areas, if `counts` merge).
 pub fn technique_densities_with(
     p: &PathPdfs,
+    r: &PathRatios,
     counts: &SampleCounts,
-    factors: &[f32; MAX_VERTICES],
     out: &mut [f32; 2 * MAX_VERTICES],
 ) -> usize {
     let k = p.len - 1;
-    let mut ratio = [0.0f32; MAX_VERTICES + 1];
-    prefix_ratios(p, &mut ratio);
+    let ratio = &r.ratio;
     let mut n = 0;
     // s = 0: the camera path hits the light
     out[n] = if p.emitter_hittable && can_connect(p, 0) { counts.hit } else { 0.0 };
@@ -230,7 +264,8 @@ pub fn technique_densities_with(
     n += 1;
     if let Some(m) = &counts.merge {
         for i in 1..k.saturating_sub(1) {
-            out[n] = if p.delta[i] { 0.0 } else { m.count * factors[i] * ratio[i] * remap0(p.from_light[i]) * m.area };
+            out[n] =
+                if p.delta[i] { 0.0 } else { m.count * r.factor(i, m) * ratio[i] * remap0(p.from_light[i]) * m.area };
             n += 1;
         }
     }
@@ -257,8 +292,14 @@ pub fn technique_index(p: &PathPdfs, t: Technique) -> usize {
 
 /// The balance-heuristic weight of technique `t` for the path described by `p`.
 pub fn weight(p: &PathPdfs, counts: &SampleCounts, t: Technique) -> f32 {
+    weight_with(p, &PathRatios::new(p, counts.merge.as_ref()), counts, t)
+}
+
+/// [`weight`] from the path's ratios, computed once ([`PathRatios::new`]).
+#[inline]
+pub fn weight_with(p: &PathPdfs, r: &PathRatios, counts: &SampleCounts, t: Technique) -> f32 {
     let mut d = [0.0f32; 2 * MAX_VERTICES];
-    let n = technique_densities(p, counts, &mut d);
+    let n = technique_densities_with(p, r, counts, &mut d);
     let own = d[technique_index(p, t)];
     let total: f32 = d[..n].iter().sum();
     if own > 0.0 && total.is_finite() && total > 0.0 { (own / total).min(1.0) } else { 0.0 }

@@ -57,12 +57,22 @@ impl<O: SampleObserver> Report<'_, O> {
         pixel: u32,
         value: Rgb,
         weight: f32,
-        pdfs: &super::mis::PathPdfs,
+        (pdfs, ratios): (&mis::PathPdfs, &mis::PathRatios),
         counts: &SampleCounts,
         sequence: u32,
     ) {
         if value != Rgb::ZERO {
-            self.observe(&SampleRecord { technique, pixel, value, weight, kernel: 1.0, sequence, pdfs, counts });
+            self.observe(&SampleRecord {
+                technique,
+                pixel,
+                value,
+                weight,
+                kernel: 1.0,
+                sequence,
+                pdfs,
+                ratios,
+                counts,
+            });
         }
     }
 }
@@ -153,9 +163,10 @@ pub fn emitter_hit<O: SampleObserver>(
         if prev.kind == VertexKind::Camera { 0.0 } else { next_event_density(scene, &light_vertex, prev) };
     let join = Join { camera_end_from_light: pos, camera_next_from_light: next, next_event0, ..Join::default() };
     let pdfs = gather(&[], camera, &join, is_infinite(scene, li));
-    let weight = mis::weight(&pdfs, counts, Technique::EmitterHit);
+    let ratios = mis::PathRatios::new(&pdfs, counts.merge.as_ref());
+    let weight = mis::weight_with(&pdfs, &ratios, counts, Technique::EmitterHit);
     let value = camera[t - 1].beta * emitted * weight;
-    report.emit(Technique::EmitterHit, report.pixel, value, weight, &pdfs, counts, 0);
+    report.emit(Technique::EmitterHit, report.pixel, value, weight, (&pdfs, &ratios), counts, 0);
     value
 }
 
@@ -228,9 +239,10 @@ pub fn next_event<O: SampleObserver>(
         light_end_sampled: false,
     };
     let pdfs = gather(std::slice::from_ref(&light_vertex), camera, &join, infinite);
-    let weight = mis::weight(&pdfs, counts, Technique::NextEvent);
+    let ratios = mis::PathRatios::new(&pdfs, counts.merge.as_ref());
+    let weight = mis::weight_with(&pdfs, &ratios, counts, Technique::NextEvent);
     let value = z.beta * f * ds.radiance * (wi.z.abs() * weight / (pmf * ds.pdf));
-    report.emit(Technique::NextEvent, report.pixel, value, weight, &pdfs, counts, 0);
+    report.emit(Technique::NextEvent, report.pixel, value, weight, (&pdfs, &ratios), counts, 0);
     Some(Weighted { value, weight })
 }
 
@@ -283,9 +295,10 @@ pub fn connect<O: SampleObserver>(
         light_end_sampled: false,
     };
     let pdfs = gather(light, camera, &join, path_on_infinite_light(scene, light));
-    let weight = mis::weight(&pdfs, counts, Technique::Connect(s));
+    let ratios = mis::PathRatios::new(&pdfs, counts.merge.as_ref());
+    let weight = mis::weight_with(&pdfs, &ratios, counts, Technique::Connect(s));
     let value = z.beta * f_cam * f_light * y.beta * (g * weight * scale);
-    report.emit(Technique::Connect(s), report.pixel, value, weight, &pdfs, counts, 0);
+    report.emit(Technique::Connect(s), report.pixel, value, weight, (&pdfs, &ratios), counts, 0);
     Some(Weighted { value, weight })
 }
 
@@ -365,10 +378,19 @@ pub fn light_trace<O: SampleObserver>(
         light_end_sampled: false,
     };
     let pdfs = gather(light, std::slice::from_ref(&camera_vertex), &join, path_on_infinite_light(scene, light));
-    let weight = mis::weight(&pdfs, counts, Technique::LightTrace);
+    let ratios = mis::PathRatios::new(&pdfs, counts.merge.as_ref());
+    let weight = mis::weight_with(&pdfs, &ratios, counts, Technique::LightTrace);
     let value = raw * (weight * scale);
     let pixel = raster.y as u32 * cam.width + raster.x as u32;
-    Report { observer, pixel, clock: None }.emit(Technique::LightTrace, pixel, value, weight, &pdfs, counts, sequence);
+    Report { observer, pixel, clock: None }.emit(
+        Technique::LightTrace,
+        pixel,
+        value,
+        weight,
+        (&pdfs, &ratios),
+        counts,
+        sequence,
+    );
     Some((Weighted { value, weight }, raster))
 }
 
