@@ -193,10 +193,10 @@ impl TileAccum {
 
     /// Adds one pass over `rect`: `rows[k][i]` is the camera sample (value, raster position)
     /// generated in pixel `(rect.x0 + i, rect.y0 + k)` (a stopped pass's rows may be short or
-    /// empty), then `splats` in sequence
-    /// (chunk by chunk). The sums equal those of `add_sample` over the rows in order and then
-    /// `add_splat` over the splats, bit for bit, but bands of rows fill in parallel. Splats
-    /// belong to full-frame sums only (their bounds start at (0, 0)), as with `add_splat`.
+    /// empty), then `splats` in sequence (chunk by chunk). The sums equal those of
+    /// `add_sample` over the rows in order and then `add_splat` over the splats, bit for bit,
+    /// but bands of rows fill in parallel. Splats belong to full-frame sums only (their bounds
+    /// start at (0, 0)), as with `add_splat`.
     pub fn add_frame(&mut self, rows: &[&[(Rgb, Vec2)]], splats: &[Vec<(Vec2, Rgb)>]) {
         let rect = self.rect;
         assert_eq!(rows.len(), (rect.y1 - rect.y0) as usize, "invariant: one row of samples per row of rect");
