@@ -436,6 +436,36 @@ fn print_drift(table: &[(String, Row)]) {
     }
 }
 
+/// Every run's samples/s with its place in the scene's run order, so that a drift of the host
+/// can be told from a seed's noise: a cell that ran early and fast flatters its seed.
+fn print_run_speeds(table: &[(String, Row)], seeds: &[u64]) {
+    let Some((_, first)) = table.first() else { return };
+    let columns = first.len();
+    if seeds.len() < 2 && first.iter().all(|c| c.samples_per_s.len() < 2) {
+        return;
+    }
+    let names: Vec<&str> = first.iter().map(|c| c.name.as_str()).collect();
+    println!("samples/s of every run (seed, place in the scene's run order):\n");
+    println!("| scene | {} |", names.join(" | "));
+    println!("|---|{}", "---|".repeat(names.len()));
+    for (scene, rows) in table {
+        let cells: Vec<String> = rows
+            .iter()
+            .enumerate()
+            .map(|(c, cell)| {
+                let runs = cell.samples_per_s.iter().enumerate().map(|(k, s)| {
+                    // run k of a column is seed k % seeds, in turn k; turn t starts at column t
+                    let place = k * columns + (c + columns - k % columns) % columns + 1;
+                    format!("{s:.3e} (s{}, #{place})", seeds[k % seeds.len()])
+                });
+                runs.collect::<Vec<_>>().join(", ")
+            })
+            .collect();
+        println!("| {scene} | {} |", cells.join(" | "));
+    }
+    println!();
+}
+
 /// The per-seed table and the verdicts again with each cell's error against the truth: the
 /// reference's own noise adds the same to every column and pulls ratios towards 1
 /// (docs/decisions/0047-reference-noise-in-equal-time.md). Only when every scene has its
@@ -497,6 +527,7 @@ pub fn run(args: &EqualTimeArgs) -> anyhow::Result<()> {
         println!();
         print_per_seed(&table, &args.seeds);
         print_drift(&table);
+        print_run_speeds(&table, &args.seeds);
         print_speedups(&table);
         print_floor(&table, &args.seeds);
         print_against_truth(&table, &args.seeds);
