@@ -102,6 +102,8 @@ struct Cell {
     elapsed: Vec<f64>,
     /// Samples per second of every run.
     samples_per_s: Vec<f64>,
+    /// Every run's place in its scene's run order (1 = first).
+    places: Vec<usize>,
 }
 
 impl Cell {
@@ -227,6 +229,7 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
             truth,
             elapsed: Vec::new(),
             samples_per_s: Vec::new(),
+            places: Vec::new(),
         });
     }
     let columns = rows.len();
@@ -261,6 +264,8 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
                 }
                 rows[c].elapsed.push(elapsed);
                 rows[c].samples_per_s.push(out.film.total_samples() as f64 / out.elapsed.as_secs_f64());
+                let place = rows.iter().map(|r| r.places.len()).sum::<usize>() + 1;
+                rows[c].places.push(place);
             }
             turn += 1;
         }
@@ -440,8 +445,7 @@ fn print_drift(table: &[(String, Row)]) {
 /// can be told from a seed's noise: a cell that ran early and fast flatters its seed.
 fn print_run_speeds(table: &[(String, Row)], seeds: &[u64]) {
     let Some((_, first)) = table.first() else { return };
-    let columns = first.len();
-    if seeds.len() < 2 && first.iter().all(|c| c.samples_per_s.len() < 2) {
+    if first.iter().all(|c| c.samples_per_s.len() < 2) {
         return;
     }
     let names: Vec<&str> = first.iter().map(|c| c.name.as_str()).collect();
@@ -451,13 +455,14 @@ fn print_run_speeds(table: &[(String, Row)], seeds: &[u64]) {
     for (scene, rows) in table {
         let cells: Vec<String> = rows
             .iter()
-            .enumerate()
-            .map(|(c, cell)| {
-                let runs = cell.samples_per_s.iter().enumerate().map(|(k, s)| {
-                    // run k of a column is seed k % seeds, in turn k; turn t starts at column t
-                    let place = k * columns + (c + columns - k % columns) % columns + 1;
-                    format!("{s:.3e} (s{}, #{place})", seeds[k % seeds.len()])
-                });
+            .map(|cell| {
+                // runs go repeat by repeat, seed by seed
+                let runs = cell
+                    .samples_per_s
+                    .iter()
+                    .zip(&cell.places)
+                    .enumerate()
+                    .map(|(k, (s, place))| format!("{s:.3e} (s{}, #{place})", seeds[k % seeds.len()]));
                 runs.collect::<Vec<_>>().join(", ")
             })
             .collect();
@@ -476,7 +481,14 @@ fn print_against_truth(table: &[(String, Row)], seeds: &[u64]) {
         .map(|(scene, row)| {
             let cells = row.iter().map(|c| {
                 let relmse = c.truth.clone()?;
-                Some(Cell { name: c.name.clone(), relmse, truth: None, elapsed: Vec::new(), samples_per_s: Vec::new() })
+                Some(Cell {
+                    name: c.name.clone(),
+                    relmse,
+                    truth: None,
+                    elapsed: Vec::new(),
+                    samples_per_s: Vec::new(),
+                    places: Vec::new(),
+                })
             });
             Some((scene.clone(), cells.collect::<Option<Row>>()?))
         })
