@@ -43,7 +43,8 @@ use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
 use super::schedule::{
-    RestartTotal, collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
+    RestartTotal, collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration,
+    traced_together, update_pays,
 };
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
@@ -328,10 +329,7 @@ pub fn render_iterations_until(
     if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), in small square tiles in parallel, placed in order, so deterministic
-        let (tiles, _) = path_trace(scene, settings, seed, &iterations, stop);
-        for tile in &tiles {
-            accum.add(tile);
-        }
+        path_trace(scene, settings, seed, std::slice::from_ref(&iterations), stop, |a| accum = a);
         return (accum, None);
     }
     let integrator = strategy.integrator(settings, config.correlation_aware).with_memory(memory.clone());
@@ -353,7 +351,7 @@ pub fn render_iterations_until(
     if config.measured_costs && iterations.start == 0 && statistics.iterations > 0 {
         // the job's first call times path tracing too, which no pilot renders otherwise: the
         // `pt` integrator on iteration 0 once more, its image discarded
-        let (_, ns) = path_trace(scene, settings, seed, &(0..1), stop);
+        let ns = path_trace(scene, settings, seed, &[0..1], stop, drop);
         statistics.times.path_tracing_ns += ns;
         statistics.times.path_tracing_vertices += statistics.camera_vertices / statistics.iterations;
     }
@@ -361,30 +359,41 @@ pub fn render_iterations_until(
     (accum, Some(PilotData { moments, statistics, guides: guides.into_buffer() }))
 }
 
-/// `iterations` rendered by the `pt` integrator in [`PT_TILE`] squares in parallel, in
-/// order, and the tiles' times summed (nanoseconds of one thread).
+/// The consecutive iteration ranges `runs` rendered by the `pt` integrator in [`PT_TILE`]
+/// squares in parallel, a pixel's iterations of all runs in a row. Each run is summed into
+/// its own full-frame accumulator, tiles added in order as if it were rendered alone, and
+/// handed to `sink` in run order. Returns the tiles' times summed (nanoseconds of one thread).
 fn path_trace(
     scene: &Scene,
     settings: PathSettings,
     seed: u64,
-    iterations: &Range<u32>,
+    runs: &[Range<u32>],
     stop: &Stop,
-) -> (Vec<TileAccum>, u64) {
+    mut sink: impl FnMut(TileAccum),
+) -> u64 {
     use rayon::prelude::*;
     let pt = PathTracer { settings };
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let tiles: Vec<(TileAccum, u64)> = Rect::tiles(w, h, PT_TILE)
+    let tiles: Vec<(Vec<TileAccum>, u64)> = Rect::tiles(w, h, PT_TILE)
         .into_par_iter()
         .map(|rect| {
             let start = Instant::now();
-            let mut tile = TileAccum::new(rect, &scene.film);
-            let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
-            pt.render_tile(scene, &request, &mut tile);
-            (tile, start.elapsed().as_nanos() as u64)
+            let mut accums: Vec<TileAccum> = runs.iter().map(|_| TileAccum::new(rect, &scene.film)).collect();
+            pt.render_runs(scene, rect, seed, runs, stop, &mut accums);
+            (accums, start.elapsed().as_nanos() as u64)
         })
         .collect();
     let ns = tiles.iter().map(|t| t.1).sum();
-    (tiles.into_iter().map(|t| t.0).collect(), ns)
+    // each run's tiles are dropped as they are summed
+    let mut tiles: Vec<_> = tiles.into_iter().map(|t| t.0.into_iter()).collect();
+    for _ in runs {
+        let mut accum = TileAccum::new(Rect::full(w, h), &scene.film);
+        for tile in &mut tiles {
+            accum.add(&tile.next().expect("invariant: one accumulator per run"));
+        }
+        sink(accum);
+    }
+    ns
 }
 
 /// A finished `emis-*` render.
@@ -397,8 +406,8 @@ pub struct EmisOutput {
 
 /// Renders `scene` locally with `emis-*` on the caller's pool (`opts.threads`): collecting
 /// iterations in the calls of [`collecting_call`], updates at the configured barriers, then
-/// the rest in the calls of [`final_call`]. `progress(done, total)` counts
-/// pixel-iterations.
+/// the rest in the calls of [`final_call`] (path tracing's several at a time, see
+/// [`traced_together`]). `progress(done, total)` counts pixel-iterations.
 pub fn render_emis(
     scene: &Scene,
     settings: PathSettings,
@@ -464,15 +473,27 @@ pub fn render_emis(
         }
         .min(left);
         let call_start = Instant::now();
-        let (accum, pilot) = pool.install(|| {
-            let iterations = done..done + count;
-            let strategy = &state.strategy;
-            render_iterations_until(scene, settings, config, strategy, opts.seed, iterations, collect, &stop, &memory)
-        });
-        film.merge_tile(&accum);
-        if let Some(p) = pilot {
-            state.absorb(&p).expect("invariant: a local pilot has the state's shape");
-        }
+        let count = if collect.is_none() && state.strategy.nu == 0.0 {
+            // path tracing has settled: trace a pixel's iterations of several calls in a row,
+            // each call still summed alone and added in order, as a farm adds them
+            let tenth = expected_total(done, state.kept_from, last_rate).saturating_sub(state.kept_from) / 10;
+            let group = traced_together(done..done + left, pixels, tenth);
+            pool.install(|| path_trace(scene, settings, opts.seed, &group, &stop, |a| film.merge_tile(&a)));
+            group.last().map_or(0, |call| call.end - done)
+        } else {
+            let (accum, pilot) = pool.install(|| {
+                let iterations = done..done + count;
+                let strategy = &state.strategy;
+                render_iterations_until(
+                    scene, settings, config, strategy, opts.seed, iterations, collect, &stop, &memory,
+                )
+            });
+            film.merge_tile(&accum);
+            if let Some(p) = pilot {
+                state.absorb(&p).expect("invariant: a local pilot has the state's shape");
+            }
+            count
+        };
         done += count;
         last_rate = call_start.elapsed().as_secs_f64() / count as f64;
         let total = expected_total(done, state.kept_from, last_rate);
@@ -491,4 +512,47 @@ pub fn render_emis(
         }
     }
     Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Calls traced together sum to the same bits as each call traced alone: with a Gaussian
+    /// filter, whose tiles overlap, and on one thread and two.
+    #[test]
+    fn runs_traced_together_sum_like_runs_traced_alone() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
+        let mut scene = Scene::load(&path).expect("scene loads");
+        use crate::film::FilmSpec;
+        use crate::film::filter::{Filter, FilterKind};
+        scene.film = FilmSpec::new(scene.camera.width, scene.camera.height, Filter::new(FilterKind::DEFAULT));
+        let settings = PathSettings::from_scene(&scene, None);
+        let runs = [3..5, 5..6, 6..9];
+        let stop = Stop::default();
+        let alone: Vec<TileAccum> = runs
+            .iter()
+            .flat_map(|run| {
+                let mut out = Vec::new();
+                path_trace(&scene, settings, 9, std::slice::from_ref(run), &stop, |a| out.push(a));
+                out
+            })
+            .collect();
+        for threads in [1, 2] {
+            let pool = crate::render::thread_pool(threads).unwrap();
+            let mut together = Vec::new();
+            pool.install(|| path_trace(&scene, settings, 9, &runs, &stop, |a| together.push(a)));
+            assert_eq!(together.len(), runs.len());
+            for (a, b) in alone.iter().zip(&together) {
+                assert_eq!((a.bounds, &a.count), (b.bounds, &b.count));
+                assert!(a.sum.iter().flatten().any(|&v| v > 0.0), "the runs saw light");
+                let bits = |t: &TileAccum| t.sum.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(a), bits(b), "{threads} threads");
+                let weights =
+                    |t: &TileAccum| t.weight.as_ref().map(|w| w.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+                assert_eq!(weights(a), weights(b));
+                assert!(a.weight.is_some(), "the Gaussian filter keeps weights");
+            }
+        }
+    }
 }

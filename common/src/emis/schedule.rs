@@ -41,6 +41,30 @@ pub fn final_call(iterations: Range<u32>, nu: f32, pixels: u64) -> Range<u32> {
     iterations.start..iterations.end.min(iterations.start + count)
 }
 
+/// The pixel-accumulators (pixels × calls) a group of [`traced_together`] may hold at once:
+/// each call of a group keeps its own full-frame sums until the group ends, about 36 bytes a
+/// pixel, so some 150 MB.
+const TRACED_TOGETHER_PIXELS: u64 = 1 << 22;
+
+/// The first calls of [`final_call`]'s cut of the path-tracing `iterations` that a local
+/// render traces together, a pixel's iterations of all of them in a row: at least one call,
+/// then as many as fit in `target` iterations and [`TRACED_TOGETHER_PIXELS`]. Calls that
+/// short give a pixel few samples in a row, which ran some 6 % slower than `pt`'s passes
+/// (docs/decisions/0064-path-tracing-calls-traced-together.md); grouping them keeps the cut,
+/// so a farm's tiles still sum the same numbers.
+pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<Range<u32>> {
+    let most = (TRACED_TOGETHER_PIXELS / pixels.max(1)).max(1) as usize;
+    let start = iterations.start;
+    let mut group = Vec::new();
+    for call in calls(iterations, |r| final_call(r, 0.0, pixels)) {
+        if !group.is_empty() && (call.end - start > target || group.len() == most) {
+            break;
+        }
+        group.push(call);
+    }
+    group
+}
+
 /// Whether a collecting call over `iterations` records moments when the current strategy
 /// has `nu` light paths per pixel. While path tracing is the strategy, only iteration 0 (the
 /// pilot of a path-tracing start), a quarter of the iterations before [`SPARSE_FROM`] (those
@@ -194,6 +218,20 @@ mod tests {
             // sixteen or more farm tiles in every pass long enough for them
             assert!(calls.len() >= 16.min(range.len().div_ceil(8)), "{calls:?}");
         }
+    }
+
+    #[test]
+    fn calls_traced_together_are_the_cut_s_first_calls_within_the_target() {
+        let small = 256 * 256;
+        let cut = calls(4..1200, |r| final_call(r, 0.0, small));
+        let group = traced_together(4..1200, small, 200);
+        assert_eq!(group, cut[..group.len()], "a prefix of the cut");
+        assert!(group.len() >= 2 && group.last().unwrap().end - 4 <= 200, "{group:?}");
+        assert!(cut[group.len()].end - 4 > 200, "as many as fit: {group:?}");
+        // one call even when it alone passes the target; the memory bound at 1080p
+        assert_eq!(traced_together(4..1200, small, 3), [cut[0].clone()]);
+        assert_eq!(traced_together(0..4000, 1920 * 1080, 400), [0..8, 8..16]);
+        assert_eq!(traced_together(10..12, small, 100), [10..12]);
     }
 
     #[test]

@@ -12,9 +12,9 @@
 //! after a delta bounce counts fully. Use it for anything that light reaches easily;
 //! caustics and light through small openings converge slowly (bidirectional methods help).
 
-use super::{Integrator, PathSettings, TileRequest};
+use super::{Integrator, PathSettings, Stop, TileRequest};
 use crate::bsdf::TransportMode;
-use crate::film::TileAccum;
+use crate::film::{Rect, TileAccum};
 use crate::geometry::{Ray, SurfaceInteraction};
 use crate::light::Light;
 use crate::math::{Rgb, max_component};
@@ -22,6 +22,7 @@ use crate::sampler::Sampler;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
+use std::ops::Range;
 
 /// The path tracer.
 #[derive(Clone, Debug)]
@@ -219,26 +220,47 @@ impl Integrator for PathTracer {
     }
 
     fn render_tile(&self, scene: &Scene, tile: &TileRequest, accum: &mut TileAccum) {
-        let r = tile.rect;
+        let runs = std::slice::from_ref(&tile.samples);
+        self.render_runs(scene, tile.rect, tile.seed, runs, &tile.stop, std::slice::from_mut(accum));
+    }
+}
+
+impl PathTracer {
+    /// Renders `rect` for the sample ranges `runs`, run `k` into `accums[k]`: each
+    /// accumulator receives the samples [`Integrator::render_tile`] would give it for its run
+    /// alone, in the same order, so its sums are bit for bit the same. A pixel's samples of
+    /// all runs are traced in a row, which reuses the caches its rays warmed.
+    pub fn render_runs(
+        &self,
+        scene: &Scene,
+        rect: Rect,
+        seed: u64,
+        runs: &[Range<u32>],
+        stop: &Stop,
+        accums: &mut [TileAccum],
+    ) {
+        assert_eq!(runs.len(), accums.len(), "invariant: one accumulator per run");
         let width = scene.camera.width;
         let untextured = scene.is_untextured();
-        for y in r.y0..r.y1 {
-            for x in r.x0..r.x1 {
+        for y in rect.y0..rect.y1 {
+            for x in rect.x0..rect.x1 {
                 // per pixel: at thousands of samples per pixel a row takes seconds
-                if tile.stop.requested() {
+                if stop.requested() {
                     return;
                 }
                 let pixel = y * width + x;
-                for s in tile.samples.clone() {
-                    let mut sampler = Sampler::for_pixel(tile.seed, pixel, s);
-                    let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-                    let ray = scene.camera.generate_ray(raster);
-                    let l = if untextured {
-                        self.li_in::<false>(scene, ray, &mut sampler)
-                    } else {
-                        self.li_in::<true>(scene, ray, &mut sampler)
-                    };
-                    accum.add_sample(x, y, raster, l);
+                for (run, accum) in runs.iter().zip(accums.iter_mut()) {
+                    for s in run.clone() {
+                        let mut sampler = Sampler::for_pixel(seed, pixel, s);
+                        let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                        let ray = scene.camera.generate_ray(raster);
+                        let l = if untextured {
+                            self.li_in::<false>(scene, ray, &mut sampler)
+                        } else {
+                            self.li_in::<true>(scene, ray, &mut sampler)
+                        };
+                        accum.add_sample(x, y, raster, l);
+                    }
                 }
             }
         }
