@@ -522,10 +522,10 @@ mod tests {
     /// filter, whose tiles overlap, and on one thread and two.
     #[test]
     fn runs_traced_together_sum_like_runs_traced_alone() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
-        let mut scene = Scene::load(&path).expect("scene loads");
         use crate::film::FilmSpec;
         use crate::film::filter::{Filter, FilterKind};
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.xml");
+        let mut scene = Scene::load(&path).expect("scene loads");
         scene.film = FilmSpec::new(scene.camera.width, scene.camera.height, Filter::new(FilterKind::DEFAULT));
         let settings = PathSettings::from_scene(&scene, None);
         let runs = [3..5, 5..6, 6..9];

@@ -48,8 +48,8 @@ const TRACED_TOGETHER_PIXELS: u64 = 1 << 22;
 
 /// The first calls of [`final_call`]'s cut of the path-tracing `iterations` that a local
 /// render traces together, a pixel's iterations of all of them in a row: at least one call,
-/// then as many as fit in `target` iterations and [`TRACED_TOGETHER_PIXELS`]. Calls that
-/// short give a pixel few samples in a row, which ran some 6 % slower than `pt`'s passes
+/// then as many as fit in `target` iterations and [`TRACED_TOGETHER_PIXELS`]. Short calls
+/// traced alone give a pixel few samples in a row, which runs slower than `pt`'s passes
 /// (docs/decisions/0064-path-tracing-calls-traced-together.md); grouping them keeps the cut,
 /// so a farm's tiles still sum the same numbers.
 pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<Range<u32>> {
