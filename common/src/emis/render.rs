@@ -323,15 +323,16 @@ pub fn render_iterations_until(
 ) -> (TileAccum, Option<PilotData>) {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let rect = Rect::full(w, h);
-    let mut accum = TileAccum::new(rect, &scene.film);
-    let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
     let collect = collect.filter(|_| collects_moments(strategy.nu, &iterations));
     if collect.is_none() && strategy.nu == 0.0 {
         // path tracing won: render it with `pt` (the same integral, the fastest estimator of
         // it), in small square tiles in parallel, placed in order, so deterministic
-        path_trace(scene, settings, seed, std::slice::from_ref(&iterations), stop, |a| accum = a);
-        return (accum, None);
+        let mut accum = None;
+        path_trace(scene, settings, seed, std::slice::from_ref(&iterations), stop, |a| accum = Some(a));
+        return (accum.expect("invariant: one run gives one accumulator"), None);
     }
+    let mut accum = TileAccum::new(rect, &scene.film);
+    let request = TileRequest::new(rect, iterations.clone(), seed).stoppable(stop.clone());
     let integrator = strategy.integrator(settings, config.correlation_aware).with_memory(memory.clone());
     let Some(set) = collect else {
         integrator.render_tile(scene, &request, &mut accum);
