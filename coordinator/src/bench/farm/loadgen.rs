@@ -464,12 +464,22 @@ fn print_feeding(reports: &[IngestReport; 2], t: &TileTimes) {
         feed(pt.tiles_per_s, pt_tile_seconds(t, t.pt_spp)),
         feed(vcm.tiles_per_s, t.vcm_iteration_s)
     );
-    let target = if pt.tiles_per_cpu_s >= 1000.0 { "met" } else { "MISSED" };
+    // a small frame's few tiles measure the start-up, not the steady ingest the target is about
+    let target = if pt.tiles < TARGET_MIN_TILES {
+        format!("not judged on {} tiles (judge it on a large frame: --pt-frame 7680x4320)", pt.tiles)
+    } else if pt.tiles_per_cpu_s >= 1000.0 {
+        "met".to_string()
+    } else {
+        "MISSED".to_string()
+    };
     println!(
         "target >= 1000 64x64 tiles/s on one core: {target} ({:.0} tiles per coordinator CPU-second)",
         pt.tiles_per_cpu_s
     );
 }
+
+/// Fewest pt tiles the ingest target is judged on (an 8K frame has 8160; decision 0068).
+const TARGET_MIN_TILES: u64 = 1000;
 
 /// Seconds one thread needs for a 64×64 pt tile at `spp`.
 fn pt_tile_seconds(t: &TileTimes, spp: u32) -> f64 {
