@@ -122,7 +122,7 @@ fn first_iterations_against_the_next() {
 /// means of 8 groups of 8 and of 4 groups of 16, and the plain mean over 256 iterations, the
 /// nearest this test gets to the expectation.
 #[test]
-#[ignore = "a diagnosis (decision 0070): prints, about two minutes"]
+#[ignore = "a diagnosis (decision 0070): prints, about fifteen seconds"]
 fn median_of_means_against_the_mean() {
     let scene = scene();
     let reference = common::reference_intensity(SCENE, SIZE);
