@@ -101,6 +101,7 @@ pub fn render(
                     Some(s) => ((remaining / s).floor() as u32).min(((t.as_secs_f64() * 0.1 / s) as u32).max(1)),
                 }
                 .min(max_pass)
+                .min(crate::settings::MAX_SPP.saturating_sub(spp_done))
             }
         };
         if pass == 0 {

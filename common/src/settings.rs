@@ -26,6 +26,9 @@ use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
 
+mod limits;
+pub use limits::{DEFAULT_MAX_TILE_BYTES, MAX_SPP, WorkLimits};
+
 /// The rendering algorithms a job can ask for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

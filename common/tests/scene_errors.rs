@@ -22,7 +22,7 @@ fn expect_error(files: &[(&str, &str)], file: &str, line: u32, needle: &str) {
         Err(e) => e,
     };
     let msg = err.to_string();
-    assert_eq!(err.location.file, dir.path().join(file), "{msg}");
+    assert_eq!(*err.location.file, dir.path().join(file), "{msg}");
     assert_eq!(err.location.line, line, "{msg}");
     assert!(msg.contains(needle), "{msg:?} should mention {needle:?}");
     assert!(msg.contains(&format!("{file}:{line}")), "message names file and line: {msg}");
@@ -155,7 +155,7 @@ fn expect_error_at(files: &[(&str, &str)], file: &str, line: u32, column: u32, n
     let err = result.err().unwrap_or_else(|| panic!("expected an error mentioning {needle:?}"));
     let msg = err.to_string();
     assert_eq!(
-        (err.location.file.clone(), err.location.line, err.location.column),
+        (err.location.file.to_path_buf(), err.location.line, err.location.column),
         (dir.path().join(file), line, column),
         "{msg}"
     );

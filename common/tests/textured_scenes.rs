@@ -6,7 +6,7 @@ mod common;
 use std::collections::HashMap;
 use tessera_common::bsdf::Bxdf;
 use tessera_common::light::Light;
-use tessera_common::scene::{LoadOptions, Scene, SceneError};
+use tessera_common::scene::{LoadOptions, Scene, SceneError, SceneLimits};
 use tessera_common::texture::TextureLimits;
 
 const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/>
@@ -33,7 +33,8 @@ fn load_with(
     }
     let xml = format!("<scene version=\"3.0.0\">\n{SENSOR}\n{body}\n</scene>\n");
     std::fs::write(dir.path().join("scene.xml"), xml).expect("write");
-    let options = LoadOptions { defines: HashMap::new(), texture_limits: limits, confine_to: None };
+    let limits = SceneLimits { textures: limits, ..SceneLimits::default() };
+    let options = LoadOptions { defines: HashMap::new(), limits, confine_to: None };
     (Scene::load_options(&dir.path().join("scene.xml"), &options), dir)
 }
 
@@ -47,7 +48,7 @@ fn expect_error(body: &str, files: &[(&str, &[u8])], line: u32, needle: &str) ->
     let (result, dir) = load(body, files);
     let err = result.err().unwrap_or_else(|| panic!("expected an error mentioning {needle:?}"));
     let msg = err.to_string();
-    assert_eq!((err.location.file.clone(), err.location.line), (dir.path().join("scene.xml"), line), "{msg}");
+    assert_eq!((err.location.file.to_path_buf(), err.location.line), (dir.path().join("scene.xml"), line), "{msg}");
     assert!(msg.contains(needle), "{msg:?} should mention {needle:?}");
     msg
 }

@@ -61,6 +61,11 @@ impl CandidateConfig {
         CandidateConfig { nu: vec![0.5, 1.0], connections: vec![0, 1], merging: self.merging }
     }
 
+    /// The most light paths per pixel a candidate traces.
+    pub fn max_nu(&self) -> f64 {
+        self.nu.iter().fold(0.0f64, |m, &nu| m.max(nu as f64))
+    }
+
     /// The Cartesian product ν × c × {merge off, on}, then pure path tracing (exactly once).
     pub fn candidates(&self) -> Vec<Candidate> {
         let merges: &[bool] = if self.merging { &[false, true] } else { &[false] };

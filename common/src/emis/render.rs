@@ -443,7 +443,11 @@ pub fn render_emis(
     loop {
         let more = match opts.budget {
             Budget::Samples(n) => done < state.kept_from + n,
-            Budget::Time(t) => done == 0 || start.elapsed().as_secs_f64() + rate(done, last_rate) <= t.as_secs_f64(),
+            Budget::Time(t) => {
+                done == 0
+                    || (done < crate::settings::MAX_SPP
+                        && start.elapsed().as_secs_f64() + rate(done, last_rate) <= t.as_secs_f64())
+            }
         };
         if !more {
             break;
@@ -463,7 +467,7 @@ pub fn render_emis(
                 // strategy's pace: after a restart, a call of eight VCM iterations planned at
                 // pt's pace could overrun the budget
                 let fit = ((t.as_secs_f64() - start.elapsed().as_secs_f64()) / rate(done, last_rate)).floor();
-                if updated { 1 } else { fit.max(1.0) as u32 }
+                if updated { 1 } else { (fit.max(1.0) as u32).min(crate::settings::MAX_SPP - done) }
             }
         };
         updated = false;

@@ -5,15 +5,16 @@
 
 use super::build_bsdf::build_material;
 use super::build_emitter::build_emitter;
+use super::build_mesh::MeshFiles;
 use super::build_settings::{build_integrator, build_sampler};
 use super::build_texture::Textures;
 use super::error::{Location, SceneError};
-use super::load::{compute_smooth_normals, obj::load_obj, ply::load_ply, serialized::load_serialized};
+use super::load::compute_smooth_normals;
 use super::refused::check_supported;
 use super::resolver::FileResolver;
 use super::shape::{Mesh, Shape, ShapeGeometry};
 use super::xml::{Element, SceneTree};
-use super::{IntegratorSettings, Parts, Scene};
+use super::{IntegratorSettings, Parts, Scene, SceneLimits};
 use crate::bsdf::textured::MaterialTextures;
 use crate::bsdf::{Bxdf, Diffuse, Material};
 use crate::camera::PerspectiveCamera;
@@ -21,7 +22,6 @@ use crate::film::FilmSpec;
 use crate::film::filter::{Filter, FilterKind, MAX_RADIUS};
 use crate::light::Light;
 use crate::math::{PI, Rgb};
-use crate::texture::TextureLimits;
 use glam::Vec3;
 use std::collections::HashMap;
 use std::path::Path;
@@ -29,6 +29,7 @@ use std::path::Path;
 struct Builder<'a> {
     resolver: &'a FileResolver,
     textures: Textures<'a>,
+    mesh_files: MeshFiles,
     shapes: Vec<Shape>,
     meshes: Vec<Mesh>,
     materials: Vec<Material>,
@@ -62,14 +63,15 @@ const IGNORED_SCENE_PARAMETERS: &[&str] = &[
     "kd_exact_primitive_threshold",
 ];
 
-pub(super) fn build(tree: &SceneTree, path: &Path, limits: TextureLimits) -> Result<Scene, SceneError> {
+pub(super) fn build(tree: &SceneTree, path: &Path, limits: SceneLimits) -> Result<Scene, SceneError> {
     check_supported(&tree.elements)?;
     if let Some(p) = tree.properties.iter().find(|p| !IGNORED_SCENE_PARAMETERS.contains(&p.name.as_str())) {
         return Err(SceneError::at(&p.location, format!("unknown parameter \"{}\" of the scene", p.name)));
     }
     let mut b = Builder {
         resolver: &tree.resolver,
-        textures: Textures::new(&tree.resolver, limits),
+        textures: Textures::new(&tree.resolver, limits.textures),
+        mesh_files: MeshFiles::new(limits.max_triangles),
         shapes: vec![],
         meshes: vec![],
         materials: vec![],
@@ -409,6 +411,7 @@ impl Builder<'_> {
         let geometry = match e.plugin.as_str() {
             "rectangle" | "cube" => {
                 let mut mesh = if e.plugin == "rectangle" { Mesh::rectangle() } else { Mesh::cube() };
+                self.mesh_files.count(mesh.triangles.len(), &e.location)?;
                 mesh.transform(&to_world);
                 self.add_mesh(mesh)
             }
@@ -420,11 +423,11 @@ impl Builder<'_> {
                     .resolver
                     .resolve_checked(Path::new(file))
                     .map_err(|why| SceneError::at(e.location_of("filename"), format!("\"{file}\" {why}")))?;
-                let mut mesh = match e.plugin.as_str() {
-                    "obj" => load_obj(&path)?,
-                    "ply" => load_ply(&path)?,
-                    _ => load_serialized(&path, shape_index(e)?)?,
-                };
+                let index = if e.plugin == "serialized" { shape_index(e)? } else { 0 };
+                let shared = self.mesh_files.load(&path, &e.plugin, index)?;
+                // counted before this shape's own copy is made
+                self.mesh_files.count(shared.triangles.len(), &e.location)?;
+                let mut mesh = Mesh::clone(&shared);
                 let face_normals = e.boolean_or("face_normals", false)?;
                 // Mitsuba flips an OBJ's v by default, a PLY's only on request; serialized never
                 let flip_default = e.plugin == "obj";

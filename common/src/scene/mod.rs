@@ -9,6 +9,7 @@ pub mod accel;
 mod build;
 mod build_bsdf;
 mod build_emitter;
+mod build_mesh;
 mod build_settings;
 mod build_texture;
 pub mod error;
@@ -50,13 +51,38 @@ pub struct IntegratorSettings {
     pub hide_emitters: bool,
 }
 
+/// How much memory a scene may make its loader take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneLimits {
+    /// What its images may take once decoded.
+    pub textures: TextureLimits,
+    /// The most triangles its shapes may hold together (every shape naming a mesh file holds
+    /// its own copy, about 150 bytes a triangle with the BVH).
+    pub max_triangles: u64,
+}
+
+/// [`SceneLimits::max_triangles`] unless configured: about 1.5 GB of meshes and BVH.
+pub const DEFAULT_MAX_TRIANGLES: u64 = 10_000_000;
+
+impl SceneLimits {
+    /// The defaults.
+    pub const DEFAULT: SceneLimits =
+        SceneLimits { textures: TextureLimits::DEFAULT, max_triangles: DEFAULT_MAX_TRIANGLES };
+}
+
+impl Default for SceneLimits {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
 /// How to load a scene.
 #[derive(Clone, Debug, Default)]
 pub struct LoadOptions {
     /// `$name` values overriding the file's `<default>`s (Mitsuba's `-D name=value`).
     pub defines: HashMap<String, String>,
-    /// The memory one image may take once decoded.
-    pub texture_limits: TextureLimits,
+    /// The memory its images and meshes may take.
+    pub limits: SceneLimits,
     /// The folder every file the scene names must lie in (a farm job's bundle); `None` lets a
     /// local scene name any file.
     pub confine_to: Option<PathBuf>,
@@ -137,19 +163,31 @@ impl Scene {
         Self::load_options(path, &LoadOptions { defines: defines.clone(), ..LoadOptions::default() })
     }
 
-    /// Loads a scene with `$name` parameters and a texture memory budget.
+    /// Loads a scene with `$name` parameters and limits. Loaded confined to a folder (a
+    /// job's bundle), its errors name files relative to that folder.
     pub fn load_options(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read scene: {e}")))?;
-        let tree = xml::parse_confined(&text, path, &options.defines, options.confine_to.as_deref())?;
-        build::build(&tree, path, options.texture_limits)
+        let load = || {
+            let cannot = |e: std::io::Error| SceneError::file(path, format!("cannot read scene: {e}"));
+            let len = std::fs::metadata(path).map_err(cannot)?.len();
+            if len > xml::MAX_XML_BYTES as u64 {
+                return Err(SceneError::file(path, format!("the scene file is over {} MiB", xml::MAX_XML_BYTES >> 20)));
+            }
+            let text = std::fs::read_to_string(path).map_err(cannot)?;
+            let tree = xml::parse_confined(&text, path, &options.defines, options.confine_to.as_deref())?;
+            build::build(&tree, path, options.limits)
+        };
+        // a job's scene names its own files, never the folder it is kept in
+        match &options.confine_to {
+            Some(root) => load().map_err(|e| e.within(root)),
+            None => load(),
+        }
     }
 
     /// Builds a scene from XML text; `path` names it in messages and anchors relative paths
     /// (includes, `<path>`, filenames).
     pub fn from_xml(text: &str, path: &Path, defines: &HashMap<String, String>) -> Result<Scene, SceneError> {
         let tree = xml::parse(text, path, defines)?;
-        build::build(&tree, path, TextureLimits::default())
+        build::build(&tree, path, SceneLimits::default())
     }
 
     /// The same scene rendered at `width × height` pixels: the camera's view and the film's

@@ -133,7 +133,8 @@ impl Bitmap {
     /// The image's size is read from its header first and a file whose decoded pixels would
     /// exceed `limits.max_decoded_bytes` is refused before decoding.
     pub fn load(path: &Path, options: BitmapOptions, limits: &TextureLimits) -> Result<Bitmap, TextureError> {
-        let image = decode::read(path, limits)?;
+        // the reservation holds the decode's memory until the texels are made
+        let (image, _reservation) = decode::read(path, limits)?;
         let decode_srgb = image.srgb && !options.raw;
         let texels = match image.samples {
             Samples::U8(data) => Texels::U8 { data: data.into(), srgb: decode_srgb },

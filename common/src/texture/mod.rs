@@ -34,6 +34,7 @@ mod uv;
 
 pub use bitmap::{Bitmap, BitmapOptions, FilterType, Storage, WrapMode};
 pub use checkerboard::Checkerboard;
+pub use decode::budget as decode_budget;
 pub use error::{SUPPORTED_FORMATS, TextureError};
 pub use mesh_attribute::{AttributePer, MeshAttribute, MeshAttributeTexture, MeshPoint, Usage};
 pub use uv::UvTransform;
@@ -53,13 +54,15 @@ pub struct TextureLimits {
 }
 
 impl Default for TextureLimits {
-    /// 1 GiB per image, 4 GiB per scene.
     fn default() -> Self {
-        TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 }
+        Self::DEFAULT
     }
 }
 
 impl TextureLimits {
+    /// 1 GiB per image, 4 GiB per scene.
+    pub const DEFAULT: TextureLimits = TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 };
+
     /// A budget of `bytes` for the whole scene, which any one image may use up.
     pub fn total(bytes: u64) -> Self {
         TextureLimits { max_decoded_bytes: bytes, max_total_bytes: bytes }

@@ -1,9 +1,10 @@
-//! Mesh file loaders (Wavefront OBJ through `tobj`, PLY through `ply-rs-bw`, Mitsuba's
+//! Mesh file loaders (Wavefront OBJ through `tobj`, PLY, Mitsuba's
 //! `serialized` format) and the smooth
 //! vertex normals Mitsuba computes when a file has none.
 
 pub mod obj;
 pub mod ply;
+mod ply_format;
 pub mod serialized;
 
 use super::shape::Mesh;

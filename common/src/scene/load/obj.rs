@@ -11,8 +11,14 @@ use std::path::Path;
 /// without them the mesh is flat (the caller decides whether to compute smooth normals).
 /// Texture coordinates from `vt` are kept as stored.
 pub fn load_obj(path: &Path) -> Result<Mesh, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
-    validate(&text, path)?;
+    let bytes = std::fs::read(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
+    load_obj_bytes(path, &bytes)
+}
+
+/// Loads OBJ data; `path` names it in messages.
+pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<Mesh, SceneError> {
+    let text = std::str::from_utf8(bytes).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
+    validate(text, path)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,

@@ -1,4 +1,4 @@
-//! PLY meshes (ASCII and binary) through `ply-rs-bw`: `vertex` elements with x, y, z and
+//! PLY meshes (ASCII and binary, read by `ply_format.rs`): `vertex` elements with x, y, z and
 //! optional nx, ny, nz and texture coordinates (u, v / texture_u, texture_v / s, t); `face`
 //! elements with a `vertex_indices` (or `vertex_index`) list, triangulated as fans.
 //!
@@ -8,139 +8,78 @@
 //! fields) → `{vertex,face}_prefix` (`_prefix_color` for r/g/b). Values are read as numbers,
 //! integers unscaled, as Mitsuba 3.9.1 stores them.
 
+use super::ply_format::{self, Column, ElementData};
 use crate::scene::error::{Location, SceneError};
 use crate::scene::shape::Mesh;
 use crate::texture::MeshAttribute;
 use glam::Vec3;
-use ply_rs_bw::parser::Parser;
-use ply_rs_bw::ply::{DefaultElement, Property};
 use std::path::Path;
-
-fn scalar(p: &Property) -> Option<f64> {
-    Some(match *p {
-        Property::Char(v) => v as f64,
-        Property::UChar(v) => v as f64,
-        Property::Short(v) => v as f64,
-        Property::UShort(v) => v as f64,
-        Property::Int(v) => v as f64,
-        Property::UInt(v) => v as f64,
-        Property::Float(v) => v as f64,
-        Property::Double(v) => v as f64,
-        _ => return None,
-    })
-}
-
-fn list(p: &Property) -> Option<Vec<i64>> {
-    Some(match p {
-        Property::ListChar(v) => v.iter().map(|&x| x as i64).collect(),
-        Property::ListUChar(v) => v.iter().map(|&x| x as i64).collect(),
-        Property::ListShort(v) => v.iter().map(|&x| x as i64).collect(),
-        Property::ListUShort(v) => v.iter().map(|&x| x as i64).collect(),
-        Property::ListInt(v) => v.iter().map(|&x| x as i64).collect(),
-        Property::ListUInt(v) => v.iter().map(|&x| x as i64).collect(),
-        _ => return None,
-    })
-}
-
-/// ply-rs-bw reports ASCII errors as "Line N: …": lift N into the location.
-fn parse_error(path: &Path, message: &str) -> SceneError {
-    let message = message.replace('\n', " ").trim().to_string();
-    let line = message
-        .strip_prefix("Line ")
-        .and_then(|rest| rest.split(':').next())
-        .and_then(|n| n.trim().parse::<u32>().ok());
-    match line {
-        Some(line) => SceneError::at(
-            &Location::new(path, line, 1),
-            format!("invalid ply: {}", message.split_once(": ").map_or(message.as_str(), |(_, m)| m)),
-        ),
-        None => SceneError::file(path, format!("invalid ply: {message}")),
-    }
-}
 
 /// Loads a PLY file.
 pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut bytes.as_slice())
-        .map_err(|e| parse_error(path, &e.to_string()))?;
-    let ascii = ply.header.encoding == ply_rs_bw::ply::Encoding::Ascii;
-    // for ASCII files, element k of the first element list sits on line header_lines + k + 1
-    let header_lines =
-        bytes.split(|&b| b == b'\n').position(|l| l.starts_with(b"end_header")).map_or(0, |i| i + 1) as u32;
-    let vertex_loc =
-        |k: usize| if ascii { Location::new(path, header_lines + k as u32 + 1, 1) } else { Location::new(path, 0, 0) };
-    let vertices = ply.payload.get("vertex").ok_or_else(|| SceneError::file(path, "no \"vertex\" element"))?;
-    let faces = ply.payload.get("face").ok_or_else(|| SceneError::file(path, "no \"face\" element"))?;
-    let mut mesh = Mesh::default();
-    let property_names = |element: &str| -> Vec<String> {
-        ply.header.elements.get(element).map(|e| e.properties.keys().cloned().collect()).unwrap_or_default()
+    load_ply_bytes(path, &bytes)
+}
+
+/// Loads PLY data; `path` names it in messages.
+pub fn load_ply_bytes(path: &Path, bytes: &[u8]) -> Result<Mesh, SceneError> {
+    let elements = ply_format::read(bytes, &["vertex", "face"])
+        .map_err(|e| SceneError::at(&Location::new(path, e.line, 0), format!("invalid ply: {}", e.message)))?;
+    let find = |name: &str| {
+        elements
+            .iter()
+            .find(|e| e.def.name == name)
+            .ok_or_else(|| SceneError::file(path, format!("no \"{name}\" element")))
     };
-    let has_normals =
-        vertices.first().is_some_and(|v| v.contains_key("nx") && v.contains_key("ny") && v.contains_key("nz"));
-    let mut normals = Vec::with_capacity(if has_normals { vertices.len() } else { 0 });
-    // Mitsuba's names for texture coordinates, in its order of preference
-    let uv_names = ["u", "texture_u", "s"]
-        .iter()
-        .zip(["v", "texture_v", "t"])
-        .find(|(u, v)| vertices.first().is_some_and(|x| x.contains_key(**u) && x.contains_key(*v)));
-    let mut uvs = Vec::new();
-    for (k, v) in vertices.iter().enumerate() {
-        let get = |name: &str| -> Result<f32, SceneError> {
-            let p = v
-                .get(name)
-                .ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex {k} has no property \"{name}\"")))?;
-            let x = scalar(p)
-                .ok_or_else(|| SceneError::at(&vertex_loc(k), format!("vertex property \"{name}\" must be a number")))?
-                as f32;
-            if !x.is_finite() {
-                return Err(SceneError::at(&vertex_loc(k), format!("vertex {k} has a non-finite \"{name}\"")));
-            }
-            Ok(x)
-        };
-        mesh.positions.push(Vec3::new(get("x")?, get("y")?, get("z")?));
-        if has_normals {
-            normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?).normalize_or_zero());
-        }
-        if let Some((u, v)) = uv_names {
-            uvs.push(glam::Vec2::new(get(u)?, get(v)?));
-        }
+    let (vertices, faces) = (find("vertex")?, find("face")?);
+    let at = |e: &ElementData, k: usize| Location::new(path, e.line(k), 0);
+    let mut mesh = Mesh::default();
+    let names = |e: &ElementData| e.def.properties.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+    let vertex_names = names(vertices);
+    let has = |n: &str| vertex_names.iter().any(|x| x == n);
+    let count = vertices.def.count as usize;
+    let position = vec3_column(path, vertices, ["x", "y", "z"], true)?;
+    mesh.positions = position.ok_or_else(|| SceneError::file(path, "vertices have no x, y and z"))?;
+    if has("nx") && has("ny") && has("nz") {
+        let normals = vec3_column(path, vertices, ["nx", "ny", "nz"], true)?.unwrap_or_default();
+        mesh.normals = Some(normals.into_iter().map(|n| n.normalize_or_zero()).collect());
+    }
+    let uv_names = ["u", "texture_u", "s"].iter().zip(["v", "texture_v", "t"]).find(|(u, v)| has(u) && has(v));
+    if let Some((u, v)) = uv_names {
+        let (u, v) = (values(path, vertices, &[u.to_string()])?, values(path, vertices, &[v.to_string()])?);
+        mesh.uvs = Some((0..count).map(|k| glam::Vec2::new(u[k], v[k])).collect());
     }
     let mut reserved = vec!["x", "y", "z", "nx", "ny", "nz"];
     if let Some((u, v)) = uv_names {
         reserved.extend([*u, v]);
     }
-    for (name, fields) in attribute_groups("vertex_", &property_names("vertex"), &reserved, path) {
-        let data = values(vertices, &fields, |k| vertex_loc(k))?;
+    for (name, fields) in attribute_groups("vertex_", &vertex_names, &reserved, path) {
+        let data = values(path, vertices, &fields)?;
         mesh.attributes.push(attribute(path, name, fields.len(), data)?);
     }
     let mut face_attributes = Vec::new();
-    for (name, fields) in attribute_groups("face_", &property_names("face"), &["vertex_indices", "vertex_index"], path)
-    {
-        let data = values(faces, &fields, |_| Location::new(path, 0, 0))?;
+    for (name, fields) in attribute_groups("face_", &names(faces), &["vertex_indices", "vertex_index"], path) {
+        let data = values(path, faces, &fields)?;
         face_attributes.push((name, fields.len(), data, Vec::new()));
     }
-    let n = mesh.positions.len() as i64;
-    for (k, f) in faces.iter().enumerate() {
-        let loc = if ascii {
-            Location::new(path, header_lines + vertices.len() as u32 + k as u32 + 1, 1)
-        } else {
-            Location::new(path, 0, 0)
-        };
-        let idx = f
-            .get("vertex_indices")
-            .or_else(|| f.get("vertex_index"))
-            .and_then(list)
-            .ok_or_else(|| SceneError::at(&loc, format!("face {k} has no vertex_indices list")))?;
+    let lists = faces.column("vertex_indices").or_else(|| faces.column("vertex_index"));
+    let Some(Column::List { offsets, items }) = lists else {
+        return Err(SceneError::file(path, "faces have no vertex_indices list"));
+    };
+    let n = mesh.positions.len() as f64;
+    for k in 0..faces.def.count as usize {
+        let idx = &items[offsets[k]..offsets[k + 1]];
         if idx.len() < 3 {
-            return Err(SceneError::at(&loc, format!("face {k} has {} vertices (at least 3 needed)", idx.len())));
+            return Err(SceneError::at(
+                &at(faces, k),
+                format!("face {k} has {} vertices (at least 3 needed)", idx.len()),
+            ));
         }
-        if let Some(bad) = idx.iter().find(|&&i| i < 0 || i >= n) {
-            return Err(SceneError::at(&loc, format!("face {k} refers to vertex {bad}, but there are {n}")));
+        if let Some(bad) = idx.iter().find(|&&i| !(i >= 0.0 && i < n)) {
+            return Err(SceneError::at(&at(faces, k), format!("face {k} refers to vertex {bad}, but there are {n}")));
         }
         for j in 1..idx.len() - 1 {
             mesh.triangles.push([idx[0] as u32, idx[j] as u32, idx[j + 1] as u32]);
-            // a polygon's triangles share its face attributes
             for (_, dim, data, per_triangle) in &mut face_attributes {
                 per_triangle.extend_from_slice(&data[k * *dim..(k + 1) * *dim]);
             }
@@ -152,41 +91,59 @@ pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
     for (name, dim, _, per_triangle) in face_attributes {
         mesh.attributes.push(attribute(path, name, dim, per_triangle)?);
     }
-    if has_normals {
-        mesh.normals = Some(normals);
-    }
-    if uv_names.is_some() {
-        mesh.uvs = Some(uvs);
-    }
     Ok(mesh)
+}
+
+/// Three scalar properties as vectors, `None` if one is missing; `finite` refuses a
+/// non-finite value, naming its record.
+fn vec3_column(path: &Path, e: &ElementData, names: [&str; 3], finite: bool) -> Result<Option<Vec<Vec3>>, SceneError> {
+    let mut cols = Vec::new();
+    for name in names {
+        match e.column(name) {
+            Some(Column::Scalar(v)) => cols.push(v),
+            Some(Column::List { .. }) => {
+                return Err(SceneError::file(path, format!("vertex property \"{name}\" must be a number")));
+            }
+            None => return Ok(None),
+        }
+    }
+    let mut out = Vec::with_capacity(cols[0].len());
+    for k in 0..cols[0].len() {
+        let p = Vec3::new(cols[0][k] as f32, cols[1][k] as f32, cols[2][k] as f32);
+        if finite && let Some(i) = (0..3).find(|&i| !p[i].is_finite()) {
+            let loc = Location::new(path, e.line(k), 0);
+            return Err(SceneError::at(&loc, format!("vertex {k} has a non-finite \"{}\"", names[i])));
+        }
+        out.push(p);
+    }
+    Ok(Some(out))
 }
 
 fn attribute(path: &Path, name: String, dim: usize, data: Vec<f32>) -> Result<MeshAttribute, SceneError> {
     MeshAttribute::new(name, dim, data).map_err(|e| SceneError::file(path, e.to_string()))
 }
 
-/// The values of `fields` for every element, interleaved.
-fn values(
-    elements: &[DefaultElement],
-    fields: &[String],
-    loc: impl Fn(usize) -> Location,
-) -> Result<Vec<f32>, SceneError> {
-    let mut out = Vec::with_capacity(elements.len() * fields.len());
-    for (k, e) in elements.iter().enumerate() {
-        for f in fields {
-            let v = e
-                .get(f)
-                .and_then(scalar)
-                .ok_or_else(|| SceneError::at(&loc(k), format!("property \"{f}\" of element {k} must be a number")))?;
-            out.push(v as f32);
+/// The scalar properties `fields` of every record, interleaved.
+fn values(path: &Path, e: &ElementData, fields: &[String]) -> Result<Vec<f32>, SceneError> {
+    let mut cols = Vec::new();
+    for f in fields {
+        match e.column(f) {
+            Some(Column::Scalar(v)) => cols.push(v),
+            _ => {
+                return Err(SceneError::file(
+                    path,
+                    format!("property \"{f}\" of element \"{}\" must be a number", e.def.name),
+                ));
+            }
         }
+    }
+    let mut out = Vec::with_capacity(e.def.count as usize * fields.len());
+    for k in 0..e.def.count as usize {
+        out.extend(cols.iter().map(|c| c[k] as f32));
     }
     Ok(out)
 }
 
-/// Mitsuba's grouping of the properties of one element (`kind` is `vertex_` or `face_`) that
-/// are not `reserved` into named attributes: (attribute name, property names in order).
-/// What Mitsuba ignores with a warning is ignored with one here.
 fn attribute_groups(kind: &str, names: &[String], reserved: &[&str], path: &Path) -> Vec<(String, Vec<String>)> {
     let has = |n: &str| names.iter().any(|x| x == n);
     let mut groups = Vec::new();

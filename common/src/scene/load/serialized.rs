@@ -5,7 +5,9 @@
 //! table of their offsets and their count; `shape_index` picks one.
 //!
 //! Counts come from the file, so nothing is allocated for them up front: data is read as it
-//! decompresses and a file that ends early is an error, whatever counts it claims.
+//! decompresses and a file that ends early is an error, whatever counts it claims. A mesh
+//! inflates to at most [`MAX_INFLATE_RATIO`] times the compressed bytes it starts at, and
+//! counts that need more are refused before anything is read.
 
 use crate::scene::error::SceneError;
 use crate::scene::shape::Mesh;
@@ -24,6 +26,11 @@ const DOUBLE_PRECISION: u32 = 0x2000;
 /// stored, unflipped, as Mitsuba reads them); colours are skipped, as Mitsuba skips them.
 pub fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::file(path, format!("cannot read mesh: {e}")))?;
+    load_serialized_bytes(path, &bytes, shape_index)
+}
+
+/// Loads mesh `shape_index` of serialized data; `path` names it in messages.
+pub fn load_serialized_bytes(path: &Path, bytes: &[u8], shape_index: u32) -> Result<Mesh, SceneError> {
     let bad = |why: String| SceneError::file(path, format!("invalid serialized mesh: {why}"));
     let u16_at = |at: usize| bytes.get(at..at + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
     let (format, version) = (u16_at(0).ok_or_else(|| bad("too short".into()))?, u16_at(2).unwrap_or(0));
@@ -35,7 +42,46 @@ pub fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, SceneError
     }
     let start = if shape_index == 0 { 4 } else { substream_offset(&bytes, version, shape_index).map_err(bad)? + 4 };
     let stream = bytes.get(start..).ok_or_else(|| bad("mesh offset past the end of the file".into()))?;
-    read_mesh(&mut ZlibDecoder::new(stream), version).map_err(bad)
+    let limit = (stream.len() as u64).saturating_mul(MAX_INFLATE_RATIO).max(MIN_INFLATE_LIMIT);
+    read_mesh(&mut Inflated { inner: ZlibDecoder::new(stream), left: limit, limit }, version).map_err(bad)
+}
+
+/// How much a mesh may inflate: zlib can reach about 1000:1, but vertex positions hardly
+/// compress and real meshes shrink to a half or a third; a mesh that claims more is refused
+/// before it costs memory out of proportion to the file.
+const MAX_INFLATE_RATIO: u64 = 64;
+/// What any mesh may inflate to, however small its file.
+const MIN_INFLATE_LIMIT: u64 = 1 << 20;
+
+/// A reader that fails once more than `limit` bytes have come out of `inner`.
+struct Inflated<R> {
+    inner: R,
+    left: u64,
+    limit: u64,
+}
+
+impl<R: Read> Inflated<R> {
+    /// Fails if `bytes` more cannot come out (a declared size, checked before it is read).
+    fn expect(&self, bytes: u64, what: &str) -> Result<(), String> {
+        if bytes > self.left {
+            return Err(format!(
+                "the {what} need {bytes} bytes, more than the file can inflate to ({} bytes: {MAX_INFLATE_RATIO} times its compressed size)",
+                self.limit
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl<R: Read> Read for Inflated<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.left = self
+            .left
+            .checked_sub(n as u64)
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidData, "the data inflates past its limit"))?;
+        Ok(n)
+    }
 }
 
 /// Where mesh `index` (> 0) starts: read from the offset table at the end of the file.
@@ -87,7 +133,7 @@ fn reals(r: &mut impl Read, count: u64, dim: u64, double: bool, what: &str) -> R
     Ok(values)
 }
 
-fn read_mesh(r: &mut impl Read, version: u16) -> Result<Mesh, String> {
+fn read_mesh<R: Read>(r: &mut Inflated<R>, version: u16) -> Result<Mesh, String> {
     let word = |b: Vec<u8>| u32::from_le_bytes(b.try_into().expect("invariant: 4 bytes"));
     let flags = word(take(r, 4, "header")?);
     if version == 4 {
@@ -107,6 +153,12 @@ fn read_mesh(r: &mut impl Read, version: u16) -> Result<Mesh, String> {
         return Err(format!("{vertices} vertices and {faces} faces"));
     }
     let double = flags & DOUBLE_PRECISION != 0;
+    let per_vertex = [true, flags & HAS_NORMALS != 0, flags & HAS_COLORS != 0].iter().filter(|&&b| b).count() as u64
+        * 3
+        + if flags & HAS_TEXCOORDS != 0 { 2 } else { 0 };
+    let declared =
+        vertices.saturating_mul(per_vertex * if double { 8 } else { 4 }).saturating_add(faces.saturating_mul(12));
+    r.expect(declared, &format!("{vertices} vertices and {faces} faces"))?;
     let positions = reals(r, vertices, 3, double, "vertex positions")?;
     let normals = (flags & HAS_NORMALS != 0).then(|| reals(r, vertices, 3, double, "vertex normals")).transpose()?;
     let uvs = (flags & HAS_TEXCOORDS != 0).then(|| reals(r, vertices, 2, double, "texture coordinates")).transpose()?;
@@ -191,6 +243,39 @@ mod tests {
         let mut file = vec![0x1C, 0x04, 4, 0];
         file.extend(z.finish().unwrap());
         let e = load_serialized(&write("lying", &file), 0).unwrap_err().to_string();
+        assert!(
+            e.contains("4294967295 vertices and 1 faces need") && e.contains("more than the file can inflate to"),
+            "{e}"
+        );
+        // counts within the bound with too little data behind them
+        let mut small = body[..6].to_vec();
+        small.extend_from_slice(&1000u64.to_le_bytes());
+        small.extend_from_slice(&1u64.to_le_bytes());
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        std::io::Write::write_all(&mut z, &small).unwrap();
+        let mut file = vec![0x1C, 0x04, 4, 0];
+        file.extend(z.finish().unwrap());
+        let e = load_serialized(&write("short", &file), 0).unwrap_err().to_string();
         assert!(e.contains("ends inside the vertex positions"), "{e}");
+    }
+
+    /// A stream of zeros inflates about a thousandfold; it is cut off at 64 times the file.
+    #[test]
+    fn inflation_is_bounded_by_the_file_size() {
+        let mut body = Vec::new();
+        body.extend_from_slice(&0x1000u32.to_le_bytes());
+        body.extend_from_slice(b"x\0");
+        let (vertices, faces) = (2_000_000u64, 1u64);
+        body.extend_from_slice(&vertices.to_le_bytes());
+        body.extend_from_slice(&faces.to_le_bytes());
+        body.resize(body.len() + 12 * vertices as usize + 12, 0);
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        std::io::Write::write_all(&mut z, &body).unwrap();
+        let compressed = z.finish().unwrap();
+        assert!(compressed.len() * 64 < body.len() && body.len() < (1 << 20) * 64, "{}", compressed.len());
+        let e =
+            load_serialized_bytes(Path::new("zeros.serialized"), &[&[0x1C, 0x04, 4, 0][..], &compressed].concat(), 0);
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("more than the file can inflate to"), "{e}");
     }
 }

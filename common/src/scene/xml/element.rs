@@ -109,6 +109,26 @@ impl Element {
         }
     }
 
+    /// Bytes this element holds besides its children, about: what copying it costs.
+    pub(super) fn own_bytes(&self) -> usize {
+        let strings = [Some(&self.tag), Some(&self.plugin), self.id.as_ref(), self.name.as_ref()];
+        let properties: usize = self
+            .properties
+            .iter()
+            .map(|p| {
+                let value = match &p.value {
+                    Value::String(s) => s.len(),
+                    Value::Spectrum(Spectrum::Sampled { wavelengths, values }) => {
+                        8 * (wavelengths.len() + values.len())
+                    }
+                    _ => 0,
+                };
+                std::mem::size_of::<Property>() + p.name.len() + value
+            })
+            .sum();
+        std::mem::size_of::<Element>() + strings.iter().flatten().map(|s| s.len()).sum::<usize>() + properties
+    }
+
     /// A short description for messages, e.g. `bsdf "diffuse"`.
     pub fn describe(&self) -> String {
         format!("{} \"{}\"", self.tag, self.plugin)

@@ -28,6 +28,7 @@
 mod element;
 mod params;
 mod parser;
+mod position;
 mod property;
 mod refs;
 #[cfg(test)]
@@ -37,7 +38,7 @@ mod upgrade;
 pub use super::resolver::FileResolver;
 pub use crate::spectrum::ColorUsage;
 pub use element::{Element, Property, Value};
-pub use parser::MAX_INCLUDE_DEPTH;
+pub use parser::{MAX_INCLUDE_DEPTH, MAX_NESTING, MAX_XML_BYTES};
 
 use super::error::SceneError;
 use params::Params;
@@ -93,7 +94,8 @@ pub fn parse_confined(
         Some(root) => FileResolver::confined(dir, root),
         None => FileResolver::new(dir),
     };
-    let mut session = Session::new(Params::new(defines), resolver);
+    let params = Params::new(defines).map_err(|e| SceneError::file(file, e))?;
+    let mut session = Session::new(params, resolver);
     let (mut root, old) = parse_document(&mut session, file, text, 0)?;
     if root.tag != "scene" {
         return Err(SceneError::at(&root.location, format!("the root element must be <scene>, found <{}>", root.tag)));

@@ -4,21 +4,36 @@
 //! Elements are handled in document order, so a `<default>` applies from where it is written,
 //! an `<alias>` sees only ids defined before it, and a `<path>` affects what follows. Every
 //! attribute of every element is substituted before the element is interpreted, as in Mitsuba.
+//!
+//! A scene may be hostile (docs/decisions/0015-limits-on-hostile-input.md), so the walk is
+//! bounded: elements nest at most [`MAX_NESTING`] deep (the walk recurses, and so do the later
+//! walks and the tree's drop), a scene has at most [`MAX_XML_BYTES`] of XML and
+//! [`MAX_XML_NODES`] nodes across its files, at most [`MAX_SEARCH_PATHS`] `<path>`s, and every
+//! location costs constant time ([`Positions`]).
 
 use super::super::error::{Location, SceneError};
 use super::super::resolver::FileResolver;
 use super::element::Element;
 use super::params::{MAX_TOTAL_BYTES, MAX_VALUE_BYTES, Params, SubstituteError};
+use super::position::Positions;
 use super::upgrade::upgrade_from_v1;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Mitsuba's `max_include_depth`: the main file is depth 0, so includes nest 14 deep.
 pub const MAX_INCLUDE_DEPTH: usize = 15;
-/// The most XML a scene may have, its includes (each time included) counted.
-pub const MAX_XML_BYTES: usize = 256 << 20;
-/// The most XML nodes (elements, attributes' text and whitespace) one file may have.
+/// The most XML a scene may have, its includes (each time included) counted. Mitsuba scenes
+/// keep geometry in mesh files; the largest real ones have a few MiB of XML.
+pub const MAX_XML_BYTES: usize = 64 << 20;
+/// The most XML nodes (elements, attributes' text and whitespace) a scene may have across its
+/// files: at this limit roxmltree holds about 95 MB.
 pub const MAX_XML_NODES: u32 = 1_000_000;
+/// How deep elements may nest, counting the root and objects of included files where they are
+/// included. Real scenes nest about ten deep; every walk of the tree recurses this deep.
+pub const MAX_NESTING: usize = 32;
+/// The most `<path>` folders a scene may add: every file name is looked for in each.
+pub const MAX_SEARCH_PATHS: usize = 64;
 
 /// Tags of plugin objects (besides `<scene>` and `<spectrum type=..>`).
 const OBJECT_TAGS: &[&str] = &[
@@ -47,19 +62,48 @@ pub(super) struct Session {
     pub(super) resolver: FileResolver,
     /// Included XML and spectrum files read, in order, without repeats.
     pub(super) files: Vec<PathBuf>,
+    files_seen: HashSet<PathBuf>,
     /// Bytes of XML parsed so far.
     pub(super) xml_bytes: usize,
+    /// XML nodes parsed so far.
+    xml_nodes: u32,
+    /// How deep the element being parsed is nested (the root is 1).
+    nesting: usize,
+    /// `<path>` folders added.
+    search_paths: usize,
 }
 
 impl Session {
     pub(super) fn new(params: Params, resolver: FileResolver) -> Self {
-        Session { params, ids: HashMap::new(), aliases: HashMap::new(), resolver, files: vec![], xml_bytes: 0 }
+        Session {
+            params,
+            ids: HashMap::new(),
+            aliases: HashMap::new(),
+            resolver,
+            files: vec![],
+            files_seen: HashSet::new(),
+            xml_bytes: 0,
+            xml_nodes: 0,
+            nesting: 0,
+            search_paths: 0,
+        }
     }
 
     pub(super) fn record_file(&mut self, path: &Path) {
-        if !self.files.iter().any(|f| f == path) {
+        if self.files_seen.insert(path.to_path_buf()) {
             self.files.push(path.to_path_buf());
         }
+    }
+
+    /// Fails when `more` bytes of XML would pass [`MAX_XML_BYTES`]; `file` is what reads them.
+    fn check_xml_bytes(&self, more: u64, loc: &Location) -> Result<(), SceneError> {
+        if self.xml_bytes as u64 + more > MAX_XML_BYTES as u64 {
+            return Err(SceneError::at(
+                loc,
+                format!("the scene's XML, includes counted each time, exceeds {} MiB", MAX_XML_BYTES >> 20),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -101,32 +145,33 @@ pub(super) fn parse_document(
     text: &str,
     depth: usize,
 ) -> Result<(Element, bool), SceneError> {
+    let file: Arc<Path> = Arc::from(file);
+    session.check_xml_bytes(text.len() as u64, &Location::shared(&file, 0, 0))?;
     session.xml_bytes += text.len();
-    if session.xml_bytes > MAX_XML_BYTES {
-        return Err(SceneError::file(
-            file,
-            format!("the scene's XML, includes counted each time, exceeds {} MiB", MAX_XML_BYTES >> 20),
-        ));
-    }
-    let options = roxmltree::ParsingOptions { nodes_limit: MAX_XML_NODES, ..Default::default() };
+    // roxmltree refuses DTDs (and so entity expansion) unless told otherwise
+    let options = roxmltree::ParsingOptions { nodes_limit: MAX_XML_NODES - session.xml_nodes, ..Default::default() };
     let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| match e {
-        roxmltree::Error::NodesLimitReached => {
-            SceneError::file(file, format!("more than {MAX_XML_NODES} XML nodes in one file"))
-        }
+        roxmltree::Error::NodesLimitReached => SceneError::at(
+            &Location::shared(&file, 0, 0),
+            format!("the scene has more than {MAX_XML_NODES} XML nodes, its includes counted"),
+        ),
         e => {
             let pos = e.pos();
-            SceneError::at(&Location::new(file, pos.row, pos.col), format!("malformed xml: {e}"))
+            SceneError::at(&Location::shared(&file, pos.row, pos.col), format!("malformed xml: {e}"))
         }
     })?;
-    let mut parser = FileParser { session, file, doc: &doc, depth, old: false };
+    session.xml_nodes += doc.descendants().count() as u32;
+    let positions = Positions::new(text);
+    let mut parser = FileParser { session, file: &file, positions: &positions, depth, old: false };
     let root = parser.root(doc.root_element())?;
     Ok((root, parser.old))
 }
 
-pub(super) struct FileParser<'a, 'd, 'i> {
+pub(super) struct FileParser<'a, 'i> {
     pub(super) session: &'a mut Session,
-    pub(super) file: &'a Path,
-    pub(super) doc: &'d roxmltree::Document<'i>,
+    pub(super) file: &'a Arc<Path>,
+    positions: &'a Positions<'i>,
+    /// Include depth of this file.
     depth: usize,
     /// The file's version is below 2.0.0.
     old: bool,
@@ -146,10 +191,10 @@ fn parse_version(s: &str) -> Option<(u32, u32, u32)> {
     }
 }
 
-impl FileParser<'_, '_, '_> {
+impl FileParser<'_, '_> {
     pub(super) fn loc(&self, node: roxmltree::Node) -> Location {
-        let pos = self.doc.text_pos_at(node.range().start);
-        Location::new(self.file, pos.row, pos.col)
+        let (line, column) = self.positions.at(node.range().start);
+        Location::shared(self.file, line, column)
     }
 
     /// Every attribute of `node`, substituted.
@@ -215,16 +260,20 @@ impl FileParser<'_, '_, '_> {
         loc: Location,
         is_root: bool,
     ) -> Result<Element, SceneError> {
+        if self.session.nesting >= MAX_NESTING {
+            return Err(SceneError::at(&loc, format!("elements nest more than {MAX_NESTING} deep")));
+        }
         let mut e = Element::new(tag, plugin, loc);
         e.id = attrs.get("id").map(str::to_string);
         e.name = attrs.get("name").map(str::to_string);
         if let Some(id) = &e.id {
             self.register_id(id, &e.location)?;
         }
-        for child in node.children().filter(|n| n.is_element()) {
-            self.child(child, &mut e, is_root)?;
-        }
-        Ok(e)
+        self.session.nesting += 1;
+        let children =
+            node.children().filter(|n| n.is_element()).try_for_each(|child| self.child(child, &mut e, is_root));
+        self.session.nesting -= 1;
+        children.map(|()| e)
     }
 
     fn register_id(&mut self, id: &str, loc: &Location) -> Result<(), SceneError> {
@@ -258,7 +307,10 @@ impl FileParser<'_, '_, '_> {
                 if name.is_empty() {
                     return Err(SceneError::at(&loc, "<default> needs a non-empty name"));
                 }
-                self.session.params.add_default(name, attrs.required("value", &loc)?);
+                self.session
+                    .params
+                    .add_default(name, attrs.required("value", &loc)?)
+                    .map_err(|e| SceneError::at(&loc, e))?;
             }
             "path" => self.path(&attrs, &loc, parent_is_root)?,
             "translate" | "rotate" | "scale" | "lookat" | "matrix" => {
@@ -316,8 +368,10 @@ impl FileParser<'_, '_, '_> {
             .resolver
             .find(Path::new(filename))
             .ok_or_else(|| SceneError::at(loc, format!("included file \"{filename}\" not found")))?;
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| SceneError::at(loc, format!("cannot read included file {}: {e}", path.display())))?;
+        let cannot = |e: std::io::Error| SceneError::at(loc, format!("cannot read included file \"{filename}\": {e}"));
+        // refused before it is read: the file may be large
+        self.session.check_xml_bytes(std::fs::metadata(&path).map_err(cannot)?.len(), loc)?;
+        let text = std::fs::read_to_string(&path).map_err(cannot)?;
         self.session.record_file(&path);
         parse_document(self.session, &path, &text, self.depth + 1)
     }
@@ -344,6 +398,10 @@ impl FileParser<'_, '_, '_> {
         if !parent_is_root {
             return Err(SceneError::at(loc, "<path> can only be a direct child of the root element"));
         }
+        if self.session.search_paths >= MAX_SEARCH_PATHS {
+            return Err(SceneError::at(loc, format!("a scene may add at most {MAX_SEARCH_PATHS} <path> folders")));
+        }
+        self.session.search_paths += 1;
         let value = attrs.required("value", loc)?;
         let p = Path::new(value);
         let dir = if p.is_absolute() {

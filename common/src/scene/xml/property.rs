@@ -11,6 +11,9 @@ use crate::spectrum::Spectrum;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use std::path::Path;
 
+/// The largest spectrum file read: measured spectra have hundreds of samples.
+const MAX_SPECTRUM_FILE_BYTES: u64 = 1 << 20;
+
 fn number(loc: &Location, what: &str, s: &str) -> Result<f64, SceneError> {
     let v: f64 =
         s.trim().parse().map_err(|_| SceneError::at(loc, format!("\"{s}\" is not a number (parameter \"{what}\")")))?;
@@ -64,7 +67,7 @@ fn coordinate_system_up(n: DVec3) -> DVec3 {
     DVec3::new(n.x * n.x * a * sign + 1.0, b * sign, -n.x * sign)
 }
 
-impl FileParser<'_, '_, '_> {
+impl FileParser<'_, '_> {
     pub(super) fn property(
         &mut self,
         node: roxmltree::Node,
@@ -120,11 +123,20 @@ impl FileParser<'_, '_, '_> {
                     .resolver
                     .find(Path::new(filename))
                     .ok_or_else(|| SceneError::at(loc, format!("spectrum file \"{filename}\" not found")))?;
-                let text = std::fs::read_to_string(&path)
-                    .map_err(|e| SceneError::at(loc, format!("cannot read spectrum file {}: {e}", path.display())))?;
+                let cannot =
+                    |e: std::io::Error| SceneError::at(loc, format!("cannot read spectrum file \"{filename}\": {e}"));
+                // a spectrum file is a few hundred lines; it is read whole, so its size is checked first
+                let len = std::fs::metadata(&path).map_err(cannot)?.len();
+                if len > MAX_SPECTRUM_FILE_BYTES {
+                    return Err(SceneError::at(
+                        loc,
+                        format!("spectrum file \"{filename}\" has {len} bytes, over {MAX_SPECTRUM_FILE_BYTES}"),
+                    ));
+                }
+                let text = std::fs::read_to_string(&path).map_err(cannot)?;
                 self.session.record_file(&path);
                 Spectrum::parse_file(&text)
-                    .map_err(|e| SceneError::at(loc, format!("spectrum file {}: {e}", path.display())))
+                    .map_err(|e| SceneError::at(loc, format!("spectrum file \"{filename}\": {e}")))
             }
             _ => Err(SceneError::at(loc, "<spectrum> needs either \"value\" or \"filename\" (not both)")),
         }

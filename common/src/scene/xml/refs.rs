@@ -3,62 +3,97 @@
 //! the id an `<alias>` maps it to), taking the ref's `name`. Plugin code therefore sees plain
 //! nested elements; a copy keeps its target's `id`, which is how builders share one instance.
 //! An unknown id or a cycle (an element reaching itself through refs or nesting) is an error.
+//!
+//! Copies multiply: a 1 MiB string referenced by a thousand shapes is a gigabyte. So the
+//! expanded tree is counted in bytes ([`MAX_EXPANDED_BYTES`]), and in depth ([`MAX_DEPTH`]:
+//! a ref puts its target's whole depth below it, and every later walk recurses that deep).
 
 use super::super::error::SceneError;
 use super::element::Element;
-use std::collections::HashMap;
+use super::parser::MAX_NESTING;
+use std::collections::{HashMap, HashSet};
 
-/// More element copies than this means references multiply out of proportion (a reference
-/// bomb); real scenes stay far below.
-const MAX_ELEMENTS: usize = 1_000_000;
+/// The most bytes the tree may hold once references are copied in.
+pub const MAX_EXPANDED_BYTES: usize = 64 << 20;
+/// How deep elements may nest once references are copied in.
+pub const MAX_DEPTH: usize = 2 * MAX_NESTING;
 
 /// Replaces every `<ref>` below `root` (at any depth) by the element it names. `aliases` maps an
 /// alias to the id it stands for.
 pub(super) fn resolve_refs(root: &mut Element, aliases: &HashMap<String, String>) -> Result<(), SceneError> {
-    let mut definitions = HashMap::new();
-    collect(root, &mut definitions);
-    let mut resolver = Resolver { definitions, aliases, done: HashMap::new(), stack: vec![], count: 0 };
+    let mut referenced = HashSet::new();
+    refs_below(root, aliases, &mut referenced);
+    let mut resolver =
+        Resolver { definitions: HashMap::new(), aliases, done: HashMap::new(), stack: vec![], bytes: 0, depth: 0 };
+    // only referenced elements are kept aside: each copy of a subtree counts
+    resolver.collect(root, &referenced)?;
     resolver.expand(root)
 }
 
-fn collect(e: &Element, out: &mut HashMap<String, Element>) {
-    if let Some(id) = &e.id {
-        out.insert(id.clone(), e.clone());
-    }
+/// The ids `<ref>`s below `e` name (aliases followed).
+fn refs_below(e: &Element, aliases: &HashMap<String, String>, out: &mut HashSet<String>) {
     for c in &e.children {
-        collect(c, out);
+        if c.tag == "ref" {
+            out.insert(aliases.get(&c.plugin).unwrap_or(&c.plugin).clone());
+        } else {
+            refs_below(c, aliases, out);
+        }
     }
 }
 
-fn size(e: &Element) -> usize {
-    1 + e.children.iter().map(size).sum::<usize>()
+/// Bytes of `e` with its children.
+fn bytes(e: &Element) -> usize {
+    e.own_bytes() + e.children.iter().map(bytes).sum::<usize>()
+}
+
+/// How many levels `e` spans (1 for a leaf).
+fn depth(e: &Element) -> usize {
+    1 + e.children.iter().map(depth).max().unwrap_or(0)
 }
 
 struct Resolver<'a> {
-    /// Every element with an id, as parsed.
+    /// Every referenced element with an id, as parsed.
     definitions: HashMap<String, Element>,
     aliases: &'a HashMap<String, String>,
-    /// Definitions with their refs resolved, and how many elements each holds.
-    done: HashMap<String, (Element, usize)>,
+    /// Definitions with their refs resolved, with their bytes and depth.
+    done: HashMap<String, (Element, usize, usize)>,
     /// Ids of the elements being expanded, outermost first.
     stack: Vec<String>,
-    count: usize,
+    /// Bytes held so far: the tree, the definitions and their copies.
+    bytes: usize,
+    /// How deep the element being expanded is.
+    depth: usize,
 }
 
 impl Resolver<'_> {
-    fn grow(&mut self, n: usize, at: &Element) -> Result<(), SceneError> {
-        self.count += n;
-        if self.count > MAX_ELEMENTS {
-            return Err(SceneError::at(&at.location, "references expand to more than a million elements"));
+    fn grow(&mut self, bytes: usize, levels: usize, at: &Element) -> Result<(), SceneError> {
+        self.bytes += bytes;
+        if self.bytes > MAX_EXPANDED_BYTES {
+            return Err(SceneError::at(
+                &at.location,
+                format!("references expand the scene past {} MiB", MAX_EXPANDED_BYTES >> 20),
+            ));
+        }
+        if self.depth + levels > MAX_DEPTH {
+            return Err(SceneError::at(&at.location, format!("references nest elements more than {MAX_DEPTH} deep")));
         }
         Ok(())
     }
 
+    fn collect(&mut self, e: &Element, referenced: &HashSet<String>) -> Result<(), SceneError> {
+        if let Some(id) = e.id.as_ref().filter(|id| referenced.contains(*id)) {
+            self.grow(bytes(e), 0, e)?;
+            self.definitions.insert(id.clone(), e.clone());
+        }
+        e.children.iter().try_for_each(|c| self.collect(c, referenced))
+    }
+
     fn expand(&mut self, e: &mut Element) -> Result<(), SceneError> {
-        self.grow(1, e)?;
+        self.grow(e.own_bytes(), 1, e)?;
         if let Some(id) = &e.id {
             self.stack.push(id.clone());
         }
+        self.depth += 1;
         for child in &mut e.children {
             if child.tag == "ref" {
                 *child = self.target(child)?;
@@ -66,6 +101,7 @@ impl Resolver<'_> {
                 self.expand(child)?;
             }
         }
+        self.depth -= 1;
         if e.id.is_some() {
             self.stack.pop();
         }
@@ -81,18 +117,22 @@ impl Resolver<'_> {
             return Err(SceneError::at(&r.location, format!("circular reference: {}", cycle.join(" -> "))));
         }
         let mut target = match self.done.get(&id) {
-            Some((t, size)) => {
-                let (t, size) = (t.clone(), *size);
-                self.grow(size, r)?;
-                t
+            Some((_, bytes, levels)) => {
+                let (bytes, levels) = (*bytes, *levels);
+                // counted before the copy is made
+                self.grow(bytes, levels, r)?;
+                self.done[&id].0.clone()
             }
             None => {
                 let mut t =
                     self.definitions.get(&id).cloned().ok_or_else(|| {
                         SceneError::at(&r.location, format!("reference to unknown id \"{}\"", r.plugin))
                     })?;
+                // placed here, so expanded at this depth; the copy kept for later refs counts too
                 self.expand(&mut t)?;
-                self.done.insert(id, (t.clone(), size(&t)));
+                let (b, d) = (bytes(&t), depth(&t));
+                self.grow(b, 0, r)?;
+                self.done.insert(id, (t.clone(), b, d));
                 t
             }
         };

@@ -2,6 +2,7 @@
 //! first part, channels recognised by the suffix after the last `.` (any case), and one sample
 //! type for all channels, that of the alphabetically first channel. Half files stay half.
 
+use super::budget::Reservation;
 use super::{Ctx, Image, Samples, xyz_to_rgb};
 use crate::texture::TextureError;
 use exr::meta::MetaData;
@@ -12,18 +13,30 @@ use std::io::{BufRead, Seek, SeekFrom};
 use std::result::Result;
 
 /// Reads the first part of an EXR file as Y or RGB.
-pub(super) fn read_exr<R: BufRead + Seek>(ctx: &Ctx, mut reader: R) -> Result<Image, TextureError> {
+
+/// Peak allocation over the samples the header declares: the crate's channels, the f32
+/// interleaving, half files' conversion back to f16 and the texels' own copy.
+const PEAK: u64 = 6;
+pub(super) fn read_exr<R: BufRead + Seek>(ctx: &Ctx, mut reader: R) -> Result<(Image, Reservation), TextureError> {
     let meta = MetaData::read_from_buffered(&mut reader, false).map_err(|e| ctx.corrupt(e))?;
     let header = meta.headers.first().ok_or_else(|| ctx.corrupt("no image part"))?;
     if header.deep {
         return Err(ctx.unsupported("deep data"));
+    }
+    // the reader allocates an offset table of 8 bytes per chunk, which the file must hold
+    let chunks: u64 = meta.headers.iter().map(|h| h.chunk_count as u64).sum();
+    if chunks.saturating_mul(8) > ctx.file_len {
+        return Err(ctx.corrupt(format!(
+            "the header claims {chunks} chunks, more than the file's {} bytes can list",
+            ctx.file_len
+        )));
     }
     let channels = &header.channels.list;
     let (width, height) = (header.layer_size.x(), header.layer_size.y());
     let (w32, h32) = (u32::try_from(width), u32::try_from(height));
     let (Ok(w32), Ok(h32)) = (w32, h32) else { return Err(ctx.unsupported("image too large")) };
     let bytes_per_pixel: u64 = channels.iter().map(|c| sample_bytes(c.sample_type)).sum();
-    ctx.check_budget(w32, h32, bytes_per_pixel)?;
+    let reservation = ctx.reserve(w32, h32, bytes_per_pixel, PEAK)?;
 
     let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
     let layout = classify(&names)
@@ -75,7 +88,7 @@ pub(super) fn read_exr<R: BufRead + Seek>(ctx: &Ctx, mut reader: R) -> Result<Im
     // half → f32 → half is exact, so routing every channel through f32 loses nothing
     let samples =
         if half { Samples::F16(linear.into_iter().map(f16::from_f32).collect()) } else { Samples::F32(linear) };
-    Ok(Image { width: w32, height: h32, channels: sources.len().min(3), samples, srgb: false })
+    Ok((Image { width: w32, height: h32, channels: sources.len().min(3), samples, srgb: false }, reservation))
 }
 
 fn sample_bytes(t: SampleType) -> u64 {

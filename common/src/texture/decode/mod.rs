@@ -5,12 +5,14 @@
 //! pixel is decoded. Alpha is dropped and XYZ converted here, so every [`Image`] has 1 (Y) or 3
 //! (RGB) channels, rows top to bottom.
 
+pub mod budget;
 mod exr;
 mod netpbm;
 mod raster;
 mod rgbe;
 
 use super::{TextureError, TextureLimits};
+use budget::Reservation;
 use half::f16;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
@@ -77,16 +79,18 @@ impl Format {
     }
 }
 
-/// Reads `path` within the budget.
-pub(crate) fn read(path: &Path, limits: &TextureLimits) -> Result<Image, TextureError> {
+/// Reads `path` within the budget; the reservation covers the decoded image until the caller
+/// has made its texels.
+pub(crate) fn read(path: &Path, limits: &TextureLimits) -> Result<(Image, Reservation), TextureError> {
     let mut file = std::fs::File::open(path).map_err(|e| io_error(path, e))?;
+    let file_len = file.metadata().map_err(|e| io_error(path, e))?.len();
     let format = detect(path, &mut file).map_err(|e| io_error(path, e))?.ok_or_else(|| {
         let extension = path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
         TextureError::UnknownFormat { path: path.to_path_buf(), extension }
     })?;
     file.seek(SeekFrom::Start(0)).map_err(|e| io_error(path, e))?;
     let reader = std::io::BufReader::new(file);
-    let ctx = Ctx { path, format, limits };
+    let ctx = Ctx { path, format, limits, file_len };
     // The decoders are third-party parsers of untrusted files: a panic on a malformed file must
     // become an error for this texture, not take the worker down.
     let image = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match format {
@@ -97,6 +101,7 @@ pub(crate) fn read(path: &Path, limits: &TextureLimits) -> Result<Image, Texture
         _ => raster::read(&ctx, reader),
     }))
     .unwrap_or_else(|_| Err(ctx.corrupt("the decoder failed on malformed data")))?;
+    let (image, reservation) = image;
     if image.width == 0 || image.height == 0 {
         return Err(ctx.corrupt("the image has no pixels"));
     }
@@ -104,7 +109,7 @@ pub(crate) fn read(path: &Path, limits: &TextureLimits) -> Result<Image, Texture
     if image.samples.len() != image.width as usize * image.height as usize * image.channels {
         return Err(ctx.corrupt("the decoder returned a wrong number of samples"));
     }
-    Ok(image)
+    Ok((image, reservation))
 }
 
 fn io_error(path: &Path, e: std::io::Error) -> TextureError {
@@ -172,6 +177,8 @@ pub(crate) struct Ctx<'a> {
     pub path: &'a Path,
     pub format: Format,
     pub limits: &'a TextureLimits,
+    /// The file's size in bytes.
+    pub file_len: u64,
 }
 
 impl Ctx<'_> {
@@ -187,9 +194,19 @@ impl Ctx<'_> {
         TextureError::Unsupported { path: self.path.to_path_buf(), format: self.format.name(), message: message.into() }
     }
 
-    /// Refuses an image whose decoded samples (`width`×`height`×`bytes_per_pixel`, in the
-    /// decoder's own layout, which is at least what the texture keeps) exceed the budget.
-    pub fn check_budget(&self, width: u32, height: u32, bytes_per_pixel: u64) -> Result<(), TextureError> {
+    /// Checks an image's header before a pixel is decoded, and reserves the decode's memory
+    /// from the process's [`budget`]. Refused: decoded samples (`width`×`height`×
+    /// `bytes_per_pixel`, in the decoder's own layout, at least what the texture keeps) over
+    /// the scene's budget, or more than [`MAX_INFLATION`] times the file's bytes (a header's
+    /// claim that no data could back). `peak` is what the decoder allocates at most, the kept
+    /// texels included, in units of the decoded samples' bytes (×`peak`).
+    pub fn reserve(
+        &self,
+        width: u32,
+        height: u32,
+        bytes_per_pixel: u64,
+        peak: u64,
+    ) -> Result<Reservation, TextureError> {
         let needed = (width as u64).saturating_mul(height as u64).saturating_mul(bytes_per_pixel);
         if needed > self.limits.max_decoded_bytes {
             return Err(TextureError::OverBudget {
@@ -200,9 +217,29 @@ impl Ctx<'_> {
                 limit: self.limits.max_decoded_bytes,
             });
         }
-        Ok(())
+        let backed = self.file_len.saturating_mul(MAX_INFLATION).max(MIN_INFLATED);
+        if needed > backed {
+            return Err(self.corrupt(format!(
+                "the header claims {width}x{height} pixels ({needed} bytes decoded), more than {MAX_INFLATION} times the file's {} bytes",
+                self.file_len
+            )));
+        }
+        budget::GLOBAL.take(needed.saturating_mul(peak)).map_err(|refusal| match refusal {
+            budget::Refusal::TooLarge { capacity } => self.unsupported(format!(
+                "decoding needs {} bytes at its peak, more than the {capacity} bytes this process lets decodes hold",
+                needed.saturating_mul(peak)
+            )),
+            budget::Refusal::Busy => self.unsupported("other images held the decoding memory for minutes: try again"),
+        })
     }
 }
+
+/// The most an image's decoded samples may outweigh its file. Compression can reach about
+/// 1000:1 on a flat image, but real textures shrink a few times, rarely a hundred; a file that
+/// claims more is refused before it costs memory out of proportion to what was sent.
+pub const MAX_INFLATION: u64 = 256;
+/// What any image may decode to whatever its file's size (a flat 4096² RGB map).
+pub const MIN_INFLATED: u64 = 64 << 20;
 
 /// Keeps the first `keep` of every `stride` interleaved samples: drops alpha (Mitsuba ignores
 /// it, with no premultiplication).

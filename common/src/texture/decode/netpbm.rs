@@ -2,6 +2,7 @@
 //! PFM rows are stored bottom-up and flipped, its samples multiplied by |scale| when that is
 //! not 1; PPM samples are bytes normalised by 255 whatever the declared maximum.
 
+use super::budget::Reservation;
 use super::{Ctx, Image, Samples};
 use crate::texture::TextureError;
 use std::io::BufRead;
@@ -10,7 +11,12 @@ use std::io::BufRead;
 const MAX_TOKEN: usize = 32;
 
 /// Reads a PFM file (`PF` colour, `Pf` grey).
-pub(super) fn read_pfm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, TextureError> {
+
+/// Peak allocation over the declared samples: the bytes read, their floats and the texels'
+/// copy (PFM); the bytes and the texels' copy (PPM).
+const PFM_PEAK: u64 = 4;
+const PPM_PEAK: u64 = 3;
+pub(super) fn read_pfm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<(Image, Reservation), TextureError> {
     let magic = token(ctx, &mut reader)?;
     let channels = match magic.as_str() {
         "PF" => 3,
@@ -20,7 +26,7 @@ pub(super) fn read_pfm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, Te
     let width: u32 = number(ctx, &mut reader)?;
     let height: u32 = number(ctx, &mut reader)?;
     let scale: f32 = number(ctx, &mut reader)?;
-    ctx.check_budget(width, height, 4 * channels as u64)?;
+    let reservation = ctx.reserve(width, height, 4 * channels as u64, PFM_PEAK)?;
 
     let count = width as usize * height as usize * channels;
     let bytes = read_exact_vec(ctx, &mut reader, count * 4)?;
@@ -36,11 +42,11 @@ pub(super) fn read_pfm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, Te
             if factor != 1.0 { v * factor } else { v }
         }));
     }
-    Ok(Image { width, height, channels, samples: Samples::F32(samples), srgb: false })
+    Ok((Image { width, height, channels, samples: Samples::F32(samples), srgb: false }, reservation))
 }
 
 /// Reads a binary (`P6`) PPM file with at most 8 bits per sample.
-pub(super) fn read_ppm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, TextureError> {
+pub(super) fn read_ppm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<(Image, Reservation), TextureError> {
     if token(ctx, &mut reader)? != "P6" {
         return Err(ctx.corrupt("bad PPM magic"));
     }
@@ -51,9 +57,9 @@ pub(super) fn read_ppm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, Te
         // Mitsuba would read these samples in the wrong byte order; refuse rather than differ
         return Err(ctx.unsupported("16-bit samples"));
     }
-    ctx.check_budget(width, height, 3)?;
+    let reservation = ctx.reserve(width, height, 3, PPM_PEAK)?;
     let bytes = read_exact_vec(ctx, &mut reader, width as usize * height as usize * 3)?;
-    Ok(Image { width, height, channels: 3, samples: Samples::U8(bytes), srgb: true })
+    Ok((Image { width, height, channels: 3, samples: Samples::U8(bytes), srgb: true }, reservation))
 }
 
 /// The next whitespace-delimited token; consumes the one whitespace byte that ends it, so the

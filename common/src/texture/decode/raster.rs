@@ -1,6 +1,7 @@
 //! PNG, JPEG, BMP and TGA through the `image` crate's decoders, which expand
 //! PNG palettes, transparency and sub-byte greys as libpng does for Mitsuba.
 
+use super::budget::Reservation;
 use super::{Ctx, Format, Image, Samples, keep_channels};
 use crate::texture::TextureError;
 use image::codecs::{bmp::BmpDecoder, jpeg::JpegDecoder, png::PngDecoder, tga::TgaDecoder};
@@ -8,7 +9,11 @@ use image::{ColorType, ImageDecoder, ImageError, Limits};
 use std::io::{BufRead, Seek};
 
 /// Decodes a file of one of the formats above.
-pub(super) fn read<R: BufRead + Seek>(ctx: &Ctx, reader: R) -> Result<Image, TextureError> {
+
+/// Peak allocation over the decoder's samples: its buffer, the 16-bit widening, alpha
+/// dropped and the texels' copy.
+const PEAK: u64 = 4;
+pub(super) fn read<R: BufRead + Seek>(ctx: &Ctx, reader: R) -> Result<(Image, Reservation), TextureError> {
     let err = |e| map_error(ctx, e);
     match ctx.format {
         Format::Png => decode(ctx, PngDecoder::new(reader).map_err(err)?),
@@ -29,10 +34,10 @@ pub(super) fn read<R: BufRead + Seek>(ctx: &Ctx, reader: R) -> Result<Image, Tex
     }
 }
 
-fn decode<D: ImageDecoder>(ctx: &Ctx, mut decoder: D) -> Result<Image, TextureError> {
+fn decode<D: ImageDecoder>(ctx: &Ctx, mut decoder: D) -> Result<(Image, Reservation), TextureError> {
     let (width, height) = decoder.dimensions();
     let color = decoder.color_type();
-    ctx.check_budget(width, height, color.bytes_per_pixel() as u64)?;
+    let reservation = ctx.reserve(width, height, color.bytes_per_pixel() as u64, PEAK)?;
     // the budget also caps the decoder's own working memory (the crate's default is 512 MiB)
     let mut limits = Limits::no_limits();
     limits.max_alloc = Some(ctx.limits.max_decoded_bytes);
@@ -59,7 +64,7 @@ fn decode<D: ImageDecoder>(ctx: &Ctx, mut decoder: D) -> Result<Image, TextureEr
         }
     };
     // all four formats are sRGB-encoded integers (core/bitmap.cpp, read_*)
-    Ok(Image { width, height, channels: keep, samples, srgb: true })
+    Ok((Image { width, height, channels: keep, samples, srgb: true }, reservation))
 }
 
 fn map_error(ctx: &Ctx, e: ImageError) -> TextureError {

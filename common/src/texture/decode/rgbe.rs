@@ -3,6 +3,7 @@
 //! writes `#?RGBE`) and expands pre-1991 run markers that Mitsuba reads as pixels. Only the
 //! standard `-Y H +X W` orientation exists for Mitsuba; `xyze` files are converted to RGB.
 
+use super::budget::Reservation;
 use super::{Ctx, Image, Samples, xyz_to_rgb};
 use crate::texture::TextureError;
 use std::io::{BufRead, Read};
@@ -11,7 +12,10 @@ use std::io::{BufRead, Read};
 const MAX_LINE: u64 = 4096;
 
 /// Reads an RGBE file as linear RGB floats.
-pub(super) fn read_rgbe<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, TextureError> {
+
+/// Peak allocation over the declared floats: the image and the texels' copy.
+const PEAK: u64 = 3;
+pub(super) fn read_rgbe<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<(Image, Reservation), TextureError> {
     let first = line(ctx, &mut reader)?;
     if !first.starts_with("#?") {
         return Err(ctx.corrupt("invalid header"));
@@ -32,7 +36,7 @@ pub(super) fn read_rgbe<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, T
         }
     };
     let Some(xyz) = xyz else { return Err(ctx.corrupt("no FORMAT=32-bit_rle_rgbe line")) };
-    ctx.check_budget(width, height, 12)?;
+    let reservation = ctx.reserve(width, height, 12, PEAK)?;
 
     let (w, count) = (width as usize, width as usize * height as usize);
     let mut out = Vec::new();
@@ -66,7 +70,7 @@ pub(super) fn read_rgbe<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<Image, T
             px.copy_from_slice(&xyz_to_rgb([px[0], px[1], px[2]]));
         }
     }
-    Ok(Image { width, height, channels: 3, samples: Samples::F32(out), srgb: false })
+    Ok((Image { width, height, channels: 3, samples: Samples::F32(out), srgb: false }, reservation))
 }
 
 /// One header line without its line ending.

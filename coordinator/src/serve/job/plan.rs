@@ -24,9 +24,15 @@ use tessera_common::emis::{
     Strategy, calls, collecting_call, final_call, iterations_at_pace, seconds_per_iteration, update_pays,
 };
 use tessera_common::film::Rect;
+use tessera_common::settings::MAX_SPP;
 
 /// Edge of the rectangles of image-tile integrators.
 pub const TILE_SIZE: u32 = 64;
+
+/// The most iterations one pass of a time budget plans. Passes are planned one at a time at
+/// barriers, so this only caps what one planning allocates: a 10⁸ s budget at a fast pace
+/// asked for a tenth of it, about 10⁹ full-frame tiles, in one pass.
+pub const MAX_TIMED_PASS: u32 = 1024;
 
 /// A pass to append: its tiles, and whether they collect EMIS moments.
 #[derive(Clone, Debug, PartialEq)]
@@ -111,8 +117,9 @@ fn next_count(spec: &JobSpec, spp_done: u32, kept_from: u32, clock: Clock) -> u3
                 return 0;
             }
             let pace = clock.pace(spp_done);
-            let fit = (remaining / pace).floor().min(u32::MAX as f64) as u32;
-            fit.min(((budget * 0.1 / pace) as u32).max(1))
+            // float-to-int casts saturate; the iteration count ends at MAX_SPP
+            let fit = (remaining / pace).floor() as u32;
+            fit.min(((budget * 0.1 / pace) as u32).max(1)).min(MAX_TIMED_PASS).min(MAX_SPP.saturating_sub(spp_done))
         }
         (None, None) => 0,
     }
@@ -127,7 +134,8 @@ fn plan_from(spec: &JobSpec, spp_done: u32, count: u32, may_collect: bool, total
     let timed = spec.settings.spp.is_none();
     let update = spec.settings.emis_updates.iter().copied().find(|&u| u > spp_done);
     let update = update.filter(|&u| may_collect && is_emis(spec) && update_pays(u, total, timed));
-    let end = update.map_or(spp_done + count, |u| u.min(spp_done + count));
+    let end = spp_done.saturating_add(count);
+    let end = update.map_or(end, |u| u.min(end));
     let collect = update.is_some();
     let full_frame = |samples| TileSpec { rect: Rect::full(spec.width, spec.height), samples };
     let tiles = if collect {
@@ -152,6 +160,7 @@ pub fn first_pass(spec: &JobSpec) -> PassPlan {
 /// Tiles rendering samples `[begin, begin + count)` of every pixel; full-frame tiles take one
 /// iteration each.
 pub fn pass_tiles(spec: &JobSpec, begin: u32, count: u32) -> Vec<TileSpec> {
+    let count = count.min(u32::MAX - begin);
     if spec.full_frame {
         (begin..begin + count)
             .map(|i| TileSpec { rect: Rect::full(spec.width, spec.height), samples: i..i + 1 })
@@ -255,6 +264,38 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(after_pass(&s, 50, 0, 10.5, false, 0.0), BarrierAction::Finish);
+    }
+
+    /// A 10⁸ s budget at a microsecond an iteration: passes stay small, counts never
+    /// overflow, and the job ends at MAX_SPP iterations (it once planned 10⁹ tiles, or
+    /// wrapped around to an empty pass and never ended).
+    #[test]
+    fn plan_a_huge_time_budget_in_bounded_passes_that_end() {
+        for integrator in [IntegratorName::Lt, IntegratorName::Pt, IntegratorName::EmisVcm] {
+            let s = spec(integrator, None, Some(1e8));
+            let mut done = first_pass(&s).tiles.last().unwrap().samples.end;
+            let mut passes = 0;
+            loop {
+                let clock = Clock { elapsed_s: done as f64 * 1e-6, last_pass_s: 1e-6 };
+                match after_pass(&s, done, 0, clock, false, 0.0) {
+                    BarrierAction::NextPass(p) => {
+                        let end = p.tiles.iter().map(|t| t.samples.end).max().unwrap();
+                        assert!(end > done && end - done <= MAX_TIMED_PASS, "{integrator:?}: {done}..{end}");
+                        assert!(
+                            p.tiles.len() <= MAX_TIMED_PASS as usize * 6,
+                            "{integrator:?}: {} tiles",
+                            p.tiles.len()
+                        );
+                        done = end;
+                    }
+                    BarrierAction::Finish => break,
+                    BarrierAction::Optimize => unreachable!("no moments collected"),
+                }
+                passes += 1;
+                assert!(passes <= MAX_SPP / MAX_TIMED_PASS + 2, "{integrator:?} does not end");
+            }
+            assert_eq!(done, MAX_SPP, "{integrator:?}");
+        }
     }
 
     /// The passes and barriers of an EMIS job with a sample budget, as `render_emis` does
