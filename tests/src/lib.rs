@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+pub mod hostile;
+
 /// A binary of the workspace, from the target directory this test runs in.
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
@@ -52,10 +54,21 @@ impl Coordinator {
         extra: &[&str],
         configure: impl FnOnce(&mut Command),
     ) -> Coordinator {
+        Coordinator::start_bin(&bin("tessera"), data_dir, listen, extra, configure)
+    }
+
+    /// [`Coordinator::start_with`] of the `tessera` binary at `binary`.
+    pub fn start_bin(
+        binary: &Path,
+        data_dir: &Path,
+        listen: &str,
+        extra: &[&str],
+        configure: impl FnOnce(&mut Command),
+    ) -> Coordinator {
         static STARTS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let n = STARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let log = data_dir.with_extension(format!("coordinator-{n}.log"));
-        let mut command = Command::new(bin("tessera"));
+        let mut command = Command::new(binary);
         command
             .args(["serve", "--listen", listen, "--data-dir"])
             .arg(data_dir)
@@ -109,7 +122,12 @@ pub struct Worker {
 impl Worker {
     /// Starts `tessera-worker` against `url` with one thread and `extra` flags.
     pub fn start(url: &str, cache: &Path, extra: &[&str]) -> Worker {
-        let child = Command::new(bin("tessera-worker"))
+        Worker::start_bin(&bin("tessera-worker"), url, cache, extra)
+    }
+
+    /// [`Worker::start`] of the `tessera-worker` binary at `binary`.
+    pub fn start_bin(binary: &Path, url: &str, cache: &Path, extra: &[&str]) -> Worker {
+        let child = Command::new(binary)
             .args(["--coordinator", url, "--threads", "1", "--cache-dir"])
             .arg(cache)
             .args(extra)
@@ -307,6 +325,73 @@ pub mod rest {
         })
     }
 
+    /// [`send`] that answers status 0 when the server cannot be reached or does not answer
+    /// within two minutes (a coordinator that died), instead of panicking.
+    pub fn try_send(extra: Extra, build: impl FnOnce(&reqwest::Client) -> RequestBuilder) -> (u16, Vec<u8>) {
+        rt().block_on(async {
+            let mut req = build(&client(extra.ca_pem)).timeout(std::time::Duration::from_secs(120));
+            for (name, value) in extra.headers {
+                req = req.header(*name, *value);
+            }
+            match req.send().await {
+                Ok(r) => (r.status().as_u16(), r.bytes().await.map(|b| b.to_vec()).unwrap_or_default()),
+                Err(_) => (0, Vec::new()),
+            }
+        })
+    }
+
+    /// GET that answers status 0 when the server is gone.
+    pub fn try_get(url: &str) -> (u16, Vec<u8>) {
+        try_send(Extra::default(), |c| c.get(url))
+    }
+
+    /// GET JSON that answers status 0 when the server is gone.
+    pub fn try_get_json(url: &str) -> (u16, serde_json::Value) {
+        json(try_get(url))
+    }
+
+    /// POST without a body that answers status 0 when the server is gone.
+    pub fn try_post(url: &str) -> (u16, serde_json::Value) {
+        json(try_send(Extra::default(), |c| c.request(Method::POST, url)))
+    }
+
+    /// DELETE that answers status 0 when the server is gone.
+    pub fn try_delete(url: &str) -> (u16, serde_json::Value) {
+        json(try_send(Extra::default(), |c| c.request(Method::DELETE, url)))
+    }
+
+    /// [`submit`] that answers status 0 when the server is gone.
+    pub fn try_submit(
+        base: &str,
+        scene: (&str, Vec<u8>),
+        assets: Vec<(String, Vec<u8>)>,
+        settings: serde_json::Value,
+    ) -> (u16, serde_json::Value) {
+        try_submit_with(base, Extra::default(), scene, assets, settings)
+    }
+
+    /// [`try_submit`] with `extra`.
+    pub fn try_submit_with(
+        base: &str,
+        extra: Extra,
+        scene: (&str, Vec<u8>),
+        assets: Vec<(String, Vec<u8>)>,
+        settings: serde_json::Value,
+    ) -> (u16, serde_json::Value) {
+        let form = form(scene, assets, settings);
+        json(try_send(extra, |c| c.post(format!("{base}/api/v1/jobs")).multipart(form)))
+    }
+
+    fn form(scene: (&str, Vec<u8>), assets: Vec<(String, Vec<u8>)>, settings: serde_json::Value) -> Form {
+        let mut form = Form::new()
+            .part("scene", Part::bytes(scene.1).file_name(scene.0.to_string()))
+            .text("settings", settings.to_string());
+        for (path, bytes) in assets {
+            form = form.part("asset", Part::bytes(bytes).file_name(path));
+        }
+        form
+    }
+
     fn json(status_body: (u16, Vec<u8>)) -> (u16, serde_json::Value) {
         (status_body.0, serde_json::from_slice(&status_body.1).unwrap_or(serde_json::Value::Null))
     }
@@ -356,12 +441,7 @@ pub mod rest {
         assets: Vec<(String, Vec<u8>)>,
         settings: serde_json::Value,
     ) -> (u16, serde_json::Value) {
-        let mut form = Form::new()
-            .part("scene", Part::bytes(scene.1).file_name(scene.0.to_string()))
-            .text("settings", settings.to_string());
-        for (path, bytes) in assets {
-            form = form.part("asset", Part::bytes(bytes).file_name(path));
-        }
+        let form = form(scene, assets, settings);
         json(send(token, extra, |c| c.post(format!("{base}/api/v1/jobs")).multipart(form)))
     }
 }

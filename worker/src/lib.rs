@@ -57,6 +57,15 @@ pub struct Args {
     /// per image, 4096 in all]; a job whose scene needs more fails on this worker.
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
+    /// Most triangles a job's scene may hold on this worker; a job whose scene has more fails
+    /// here (and runs on workers that allow it).
+    #[arg(long, default_value_t = tessera_common::scene::DEFAULT_MAX_TRIANGLES)]
+    pub max_triangles: u64,
+    /// Memory one tile may need on this worker, in MiB, as estimated from the job's settings
+    /// and film, checked before anything is allocated for it [default: the machine's memory,
+    /// at most 16384].
+    #[arg(long, value_name = "MIB")]
+    pub max_tile_memory: Option<u64>,
     /// Log format.
     #[command(flatten)]
     pub log: tessera_proto::settings::LogArgs,
@@ -87,6 +96,20 @@ pub fn init_logging(format: tessera_proto::settings::LogFormat) {
     tessera_proto::settings::logging::init(format, "warn,tessera_worker=info");
 }
 
+/// What a tile may ask of this worker: `--max-tile-memory` MiB, or the machine's memory (at
+/// most the coordinator's default), so that a job too large for this machine fails here with a
+/// reason instead of aborting the process on an allocation.
+pub fn work_limits(max_tile_memory_mib: Option<u64>) -> tessera_common::settings::WorkLimits {
+    let machine = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
+        let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib << 10)
+    });
+    let default = tessera_common::settings::DEFAULT_MAX_TILE_BYTES;
+    let max_tile_bytes =
+        max_tile_memory_mib.map_or_else(|| machine.map_or(default, |m| m.min(default)), |mib| mib << 20);
+    tessera_common::settings::WorkLimits { max_tile_bytes, ..Default::default() }
+}
+
 /// Runs the worker until it is told to stop.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if args.threads == Some(0) {
@@ -115,6 +138,8 @@ mod tests {
             ("name", "\"node-7\""),
             ("max-tiles", "2"),
             ("texture-budget", "256"),
+            ("max-triangles", "2000000"),
+            ("max-tile-memory", "4096"),
             ("log-format", "\"json\""),
         ];
         let keys = tessera_proto::settings::file_keys(&Args::command());

@@ -51,7 +51,9 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
     std::fs::create_dir_all(&cache_dir)?;
     let identity = crate::identity::Identity::keep(&cache_dir)?;
-    let mut cache = SceneCache::new(cache_dir, args.texture_budget, args.cache_limit.saturating_mul(1 << 20));
+    let mut cache =
+        SceneCache::new(cache_dir, args.texture_budget, args.max_triangles, args.cache_limit.saturating_mul(1 << 20));
+    cache.work_limits = crate::work_limits(args.max_tile_memory);
     let name = args.name.clone().unwrap_or_else(|| std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into()));
     let max_tiles = args.max_tiles.unwrap_or(threads as u32).max(1);
     let (drain_tx, drain) = watch::channel(false);
@@ -200,6 +202,9 @@ async fn render_and_upload(
     let prepared = async {
         let settings = convert::settings(first.settings.as_ref()).map_err(anyhow::Error::msg)?;
         let scene = cache.get(client, &first.bundle_digest, &settings.define_map()).await?;
+        // the coordinator checked the settings; this worker checks them against itself before
+        // it allocates anything for the tile
+        settings.check_work(scene.camera.width, scene.camera.height, &cache.work_limits)?;
         let renderer = settings.make_renderer(&scene)?;
         let emis = match (&renderer, &first.strategy) {
             (Renderer::Emis(..), Some(s)) => {

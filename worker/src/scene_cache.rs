@@ -14,7 +14,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::SystemTime;
 use tessera_common::bundle::{Bundle, safe_relative_path};
-use tessera_common::scene::{LoadOptions, Scene};
+use tessera_common::scene::{LoadOptions, Scene, SceneLimits};
+use tessera_common::settings::WorkLimits;
 use tessera_common::texture::TextureLimits;
 use tessera_proto::v1 as pb;
 use tokio_stream::StreamExt;
@@ -40,15 +41,17 @@ pub struct SceneCache {
     loaded: Vec<(SceneKey, Arc<Scene>)>,
     /// The current EMIS merge mask.
     pub masks: MaskCache,
-    texture_limits: TextureLimits,
+    limits: SceneLimits,
+    /// What a tile of a job may ask of this worker, checked once its scene is loaded.
+    pub work_limits: WorkLimits,
 }
 
 impl SceneCache {
     /// A cache under `dir` holding at most `limit_bytes` of unpacked bundles (besides the one
     /// in use); trims what an earlier run left over the limit.
-    pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>, limit_bytes: u64) -> Self {
-        let texture_limits =
-            texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+    pub fn new(dir: PathBuf, texture_budget_mib: Option<u64>, max_triangles: u64, limit_bytes: u64) -> Self {
+        let textures = texture_budget_mib.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+        let limits = SceneLimits { textures, max_triangles };
         if let Err(e) = evict(&dir, limit_bytes, &HashSet::new()) {
             tracing::warn!(error = %e, "cannot trim the scene cache");
         }
@@ -57,7 +60,14 @@ impl SceneCache {
             Ok(n) => tracing::info!(folders = n, "removed unfinished unpackings of killed workers"),
             Err(e) => tracing::warn!(error = %e, "cannot remove unfinished unpackings"),
         }
-        SceneCache { dir, limit_bytes, loaded: Vec::new(), masks: MaskCache::default(), texture_limits }
+        SceneCache {
+            dir,
+            limit_bytes,
+            loaded: Vec::new(),
+            masks: MaskCache::default(),
+            limits,
+            work_limits: WorkLimits::default(),
+        }
     }
 
     /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
@@ -77,11 +87,8 @@ impl SceneCache {
         let scene_file = self.unpack_retrying(client, digest).await?;
         touch(&self.dir, digest);
         // the scene may name only files of its own bundle, whatever the coordinator checked
-        let options = LoadOptions {
-            defines: defines.clone(),
-            texture_limits: self.texture_limits,
-            confine_to: Some(self.dir.join(digest)),
-        };
+        let options =
+            LoadOptions { defines: defines.clone(), limits: self.limits, confine_to: Some(self.dir.join(digest)) };
         let scene = tokio::task::spawn_blocking(move || Scene::load_options(&scene_file, &options)).await??;
         let scene = Arc::new(scene);
         self.loaded.push((key, scene.clone()));

@@ -8,7 +8,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
 use tessera_common::render::{Budget, RenderOptions};
-use tessera_common::scene::{LoadOptions, Scene};
+use tessera_common::scene::{LoadOptions, Scene, SceneLimits};
+use tessera_common::settings::WorkLimits;
 use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera render`.
@@ -38,11 +39,14 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     if args.threads == Some(0) {
         bail!("--threads must be at least 1");
     }
-    let texture_limits = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
-    let scene = Scene::load_options(
-        &args.scene,
-        &LoadOptions { defines: settings.define_map(), texture_limits, confine_to: None },
-    )?;
+    let textures = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
+    // the user's own scene on the user's own machine: as many triangles and as much memory
+    // per tile as it takes, but no setting that overflows or asks for absurd work
+    let limits = SceneLimits { textures, max_triangles: u64::MAX };
+    let scene =
+        Scene::load_options(&args.scene, &LoadOptions { defines: settings.define_map(), limits, confine_to: None })?;
+    let work = WorkLimits { max_tile_bytes: u64::MAX, ..WorkLimits::default() };
+    settings.resolved(&scene).check_work(scene.camera.width, scene.camera.height, &work)?;
     let renderer = make_renderer(&settings, &scene)?;
     let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
     let budget = match settings.time_s {

@@ -4,12 +4,17 @@
 //! TLS configuration.
 
 use super::auth::Tokens;
-use super::job::service::{DEFAULT_MAX_PIXELS, DEFAULT_MAX_TILES, LeaseLifetime, ServiceConfig};
+use super::job::service::{
+    DEFAULT_MAX_PIXELS, DEFAULT_MAX_TILES, DEFAULT_MAX_WORKERS, DEFAULT_MIN_FREE_SPACE_MIB, LeaseLifetime,
+    ServiceConfig,
+};
 use anyhow::{Context, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
+use tessera_common::scene::{DEFAULT_MAX_TRIANGLES, SceneLimits};
+use tessera_common::settings::{DEFAULT_MAX_TILE_BYTES, WorkLimits};
 use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera serve`.
@@ -72,10 +77,29 @@ pub struct ServeArgs {
     /// Largest film a job may have, in pixels (width × height).
     #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
     pub max_pixels: u64,
+    /// Most triangles a submitted scene's shapes may hold together (each shape naming a mesh
+    /// holds its own copy; about 150 bytes a triangle on the coordinator and on workers).
+    #[arg(long, default_value_t = DEFAULT_MAX_TRIANGLES)]
+    pub max_triangles: u64,
+    /// Memory one tile of a job may need on a worker, in MiB, as estimated from its settings
+    /// and film (light paths, EMIS moments): jobs that need more are refused at submission.
+    #[arg(long, value_name = "MIB", default_value_t = DEFAULT_MAX_TILE_BYTES >> 20)]
+    pub max_tile_memory: u64,
     /// Delete finished, failed and cancelled jobs with all their data this long after they
     /// ended (`90s`, `30m`, `24h`, `7d`, `1h30m`) [default: keep them until deleted].
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     pub retain_finished: Option<Duration>,
+    /// Most workers known at once: registrations past it are refused until silent workers are
+    /// forgotten.
+    #[arg(long, default_value_t = DEFAULT_MAX_WORKERS)]
+    pub max_workers: usize,
+    /// Forget workers silent this long that hold no lease (`90s`, `30m`, `24h`, `7d`).
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration, default_value = "1h")]
+    pub forget_workers_after: Duration,
+    /// MiB of free disk space kept in reserve in the data folder: below it, submissions are
+    /// refused (507) and no tile is leased, so that deleting and cancelling always have room.
+    #[arg(long, value_name = "MIB", default_value_t = DEFAULT_MIN_FREE_SPACE_MIB)]
+    pub min_free_space: u64,
     /// Log format.
     #[command(flatten)]
     pub log: tessera_proto::settings::LogArgs,
@@ -138,13 +162,20 @@ impl ServeArgs {
                 factor: self.lease_max_factor,
             },
             checkpoint_interval_ms: (self.checkpoint_interval.max(0.0) * 1000.0) as u64,
-            texture_limits: self
-                .texture_budget
-                .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
+            scene_limits: SceneLimits {
+                textures: self
+                    .texture_budget
+                    .map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20)),
+                max_triangles: self.max_triangles,
+            },
+            work_limits: WorkLimits { max_tile_bytes: self.max_tile_memory << 20, ..WorkLimits::default() },
             max_pixels: self.max_pixels,
             max_tiles: self.max_job_tiles,
             retain_finished_ms: self.retain_finished.map(|d| d.as_millis() as u64),
             result_file_bytes: crate::serve::storage::blobs::RESULT_FILE_BYTES,
+            max_workers: self.max_workers,
+            forget_workers_ms: self.forget_workers_after.as_millis() as u64,
+            min_free_bytes: self.min_free_space << 20,
         };
         Ok(Resolved { tokens, service: cfg, tls })
     }

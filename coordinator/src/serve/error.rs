@@ -21,6 +21,10 @@ pub enum ErrorCode {
     FailedPrecondition,
     /// The upload is larger than the server accepts.
     PayloadTooLarge,
+    /// A bounded resource is in use; the request may succeed later.
+    ResourceExhausted,
+    /// The server's disk is (nearly) full; the request may succeed once space is freed.
+    InsufficientStorage,
     /// Storage or another internal failure.
     Internal,
 }
@@ -36,6 +40,8 @@ impl ErrorCode {
             ErrorCode::PermissionDenied => S::FORBIDDEN,
             ErrorCode::FailedPrecondition => S::CONFLICT,
             ErrorCode::PayloadTooLarge => S::PAYLOAD_TOO_LARGE,
+            ErrorCode::ResourceExhausted => S::TOO_MANY_REQUESTS,
+            ErrorCode::InsufficientStorage => S::INSUFFICIENT_STORAGE,
             ErrorCode::Internal => S::INTERNAL_SERVER_ERROR,
         }
     }
@@ -49,7 +55,9 @@ impl ErrorCode {
             ErrorCode::Unauthenticated => C::Unauthenticated,
             ErrorCode::PermissionDenied => C::PermissionDenied,
             ErrorCode::FailedPrecondition => C::FailedPrecondition,
-            ErrorCode::PayloadTooLarge => C::ResourceExhausted,
+            ErrorCode::PayloadTooLarge | ErrorCode::ResourceExhausted | ErrorCode::InsufficientStorage => {
+                C::ResourceExhausted
+            }
             ErrorCode::Internal => C::Internal,
         }
     }
@@ -63,6 +71,8 @@ impl ErrorCode {
             ErrorCode::PermissionDenied => "permission_denied",
             ErrorCode::FailedPrecondition => "failed_precondition",
             ErrorCode::PayloadTooLarge => "payload_too_large",
+            ErrorCode::ResourceExhausted => "resource_exhausted",
+            ErrorCode::InsufficientStorage => "insufficient_storage",
             ErrorCode::Internal => "internal",
         }
     }
@@ -91,17 +101,32 @@ impl ApiError {
 
 impl From<ServiceError> for ApiError {
     fn from(e: ServiceError) -> Self {
+        // no wildcard: a new error variant must be given its code here
         let code = match &e {
             ServiceError::InvalidArgument(_) | ServiceError::InvalidResult(_) => ErrorCode::InvalidArgument,
             ServiceError::TooLarge(_) => ErrorCode::PayloadTooLarge,
+            ServiceError::ResourceExhausted(_) => ErrorCode::ResourceExhausted,
+            ServiceError::InsufficientStorage(_) => ErrorCode::InsufficientStorage,
+            ServiceError::Io(io) if io.kind() == std::io::ErrorKind::StorageFull => ErrorCode::InsufficientStorage,
             ServiceError::NotFound(_) | ServiceError::Transition(TransitionError::UnknownJob(_)) => ErrorCode::NotFound,
-            ServiceError::FailedPrecondition(_) | ServiceError::Transition(TransitionError::Unfinished { .. }) => {
+            ServiceError::FailedPrecondition(_)
+            | ServiceError::Transition(TransitionError::Unfinished { .. } | TransitionError::NotOptimizing(_)) => {
                 ErrorCode::FailedPrecondition
             }
-            ServiceError::Storage(_) | ServiceError::Io(_) | ServiceError::Output(_) => ErrorCode::Internal,
-            #[allow(unreachable_patterns)]
-            _ => ErrorCode::Internal,
+            ServiceError::Transition(TransitionError::DuplicateJob(_))
+            | ServiceError::Corrupt { .. }
+            | ServiceError::Emis { .. }
+            | ServiceError::Storage(_)
+            | ServiceError::Io(_)
+            | ServiceError::Output(_) => ErrorCode::Internal,
         };
+        if code == ErrorCode::InsufficientStorage && matches!(e, ServiceError::Io(_)) {
+            tracing::error!(error = %e, "the data folder's disk is full");
+            return ApiError::new(
+                code,
+                "the coordinator's disk is full: delete finished jobs or free space, then retry",
+            );
+        }
         if code == ErrorCode::Internal {
             tracing::error!(error = %e, "internal error");
             return ApiError::new(code, "internal error (see the coordinator's log)");

@@ -502,11 +502,15 @@ mod tests {
             lease_timeout_ms: 60_000,
             lease_lifetime: crate::serve::job::service::LeaseLifetime { floor_ms: 600_000, factor: 8.0 },
             checkpoint_interval_ms: 0,
-            texture_limits: Default::default(),
+            scene_limits: Default::default(),
+            work_limits: Default::default(),
             max_pixels: DEFAULT_MAX_PIXELS,
             max_tiles: u64::MAX,
             retain_finished_ms: None,
             result_file_bytes: crate::serve::storage::blobs::RESULT_FILE_BYTES,
+            max_workers: crate::serve::job::service::DEFAULT_MAX_WORKERS,
+            forget_workers_ms: 3_600_000,
+            min_free_bytes: 0,
         };
         let svc = JobService::open(dir.path(), cfg, 0).unwrap();
         let req = generated_job(integrator, width, height, spp, "t");

@@ -77,6 +77,7 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         };
         let rect = rect_from_pb(header.rect)?;
         let lease = lease_from_pb(header.lease)?;
+        let _slot = self.0.upload_slot(&lease)?;
         // the lease is checked before anything is buffered, and bounds what may arrive: never
         // more than the leased tile can need, whatever rectangle the header claims
         let svc = self.0.svc.clone();

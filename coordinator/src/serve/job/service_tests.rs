@@ -14,11 +14,15 @@ pub(super) const CFG: ServiceConfig = ServiceConfig {
     lease_timeout_ms: 10_000,
     lease_lifetime: super::leasing::LeaseLifetime { floor_ms: 60_000, factor: 8.0 },
     checkpoint_interval_ms: 3_600_000,
-    texture_limits: tessera_common::texture::TextureLimits { max_decoded_bytes: 1 << 30, max_total_bytes: 4 << 30 },
+    scene_limits: tessera_common::scene::SceneLimits::DEFAULT,
+    work_limits: tessera_common::settings::WorkLimits::DEFAULT,
     max_pixels: super::service::DEFAULT_MAX_PIXELS,
     max_tiles: 1_000,
     retain_finished_ms: None,
     result_file_bytes: crate::serve::storage::blobs::RESULT_FILE_BYTES,
+    max_workers: crate::serve::job::service::DEFAULT_MAX_WORKERS,
+    forget_workers_ms: 3_600_000,
+    min_free_bytes: 0,
 };
 
 pub(super) fn cornell() -> (Bundle, Scene) {

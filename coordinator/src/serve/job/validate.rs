@@ -48,6 +48,7 @@ pub fn validate_result(
     if let Some(i) = accum.splat.iter().flatten().position(|s| !s.iter().all(|c| c.is_finite())) {
         return Err(format!("result splat of pixel {i} is not finite"));
     }
+    check_magnitudes(tile, &accum)?;
     let samples = tile.samples.len() as u32;
     let b = layout.bounds;
     for (i, &count) in accum.count.iter().enumerate() {
@@ -62,6 +63,30 @@ pub fn validate_result(
         return Err(format!("result claims {} non-finite samples, more than possible", claim.non_finite));
     }
     Ok(accum)
+}
+
+/// What one sample may add to a pixel: a finite f32 radiance (the renderer zeroes the rest)
+/// times a filter weight of at most 1, with headroom for splats of several light vertices.
+const MAX_PER_SAMPLE: f64 = f32::MAX as f64 * 64.0;
+
+/// Refuses sums no renderer could make from the tile's samples: a worker's finite 1e300 came
+/// out of the film as Inf.
+fn check_magnitudes(tile: &TileSpec, accum: &TileAccum) -> Result<(), String> {
+    let bound = (tile.pixel_samples().max(1) as f64) * MAX_PER_SAMPLE;
+    let within = |v: f64| v.abs() <= bound;
+    if let Some(i) = accum.sum.iter().position(|s| !s.iter().all(|&c| within(c))) {
+        return Err(format!(
+            "result sum of pixel {i} ({:?}) is more than the tile's samples can add up to",
+            accum.sum[i]
+        ));
+    }
+    if let Some(i) = accum.weight.iter().flatten().position(|&w| !within(w)) {
+        return Err(format!("result weight of pixel {i} is more than the tile's samples can add up to"));
+    }
+    if let Some(i) = accum.splat.iter().flatten().position(|s| !s.iter().all(|&c| within(c))) {
+        return Err(format!("result splat of pixel {i} is more than the tile's samples can add up to"));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -101,6 +126,11 @@ mod tests {
         assert!(validate_result(&tile(), boxed(), &claim(), &short).unwrap_err().contains("bytes"));
         let nan = payload(&[[f64::NAN, 0.0, 0.0], [0.0; 3]], None, &[4, 4]);
         assert!(validate_result(&tile(), boxed(), &claim(), &nan).unwrap_err().contains("not finite"));
+        let huge = payload(&[[1e300, 0.0, 0.0], [0.0; 3]], None, &[4, 4]);
+        let e = validate_result(&tile(), boxed(), &claim(), &huge).unwrap_err();
+        assert!(e.contains("more than the tile's samples can add up to"), "{e}");
+        let big = payload(&[[1e38 * 8.0, 0.0, 0.0], [0.0; 3]], None, &[4, 4]);
+        assert!(validate_result(&tile(), boxed(), &claim(), &big).is_ok(), "8 samples of f32's largest finite values");
         let counts = payload(&[[0.0; 3], [0.0; 3]], None, &[4, 5]);
         let e = validate_result(&tile(), boxed(), &claim(), &counts).unwrap_err();
         assert!(e.contains("sample count of pixel (1, 0)"), "{e}");

@@ -87,6 +87,14 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 
+/// `GET /api/v1/server`: the coordinator's own state: its data folder's free space and the
+/// reserve below which it takes no new work (`disk.low`).
+pub async fn server(State(st): St) -> Json<serde_json::Value> {
+    let svc = st.svc.clone();
+    let disk = tokio::task::spawn_blocking(move || svc.space()).await.ok().flatten();
+    Json(serde_json::json!({ "disk": disk }))
+}
+
 /// A page of `GET /api/v1/jobs`.
 #[derive(serde::Deserialize)]
 pub struct Page {

@@ -532,6 +532,12 @@ impl Store {
         Ok(())
     }
 
+    /// Forgets the worker `id`.
+    pub fn delete_worker(&self, id: &str) -> Result<(), StoreError> {
+        self.conn.execute("DELETE FROM workers WHERE id = ?1", params![id])?;
+        Ok(())
+    }
+
     /// Every registered worker.
     pub fn load_workers(&self) -> Result<Vec<WorkerRow>, StoreError> {
         let mut stmt =

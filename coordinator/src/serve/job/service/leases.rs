@@ -24,6 +24,7 @@ impl JobService {
         identity: Option<(&str, &str)>,
         now_ms: u64,
     ) -> Result<String, ServiceError> {
+        check_registration(name, threads)?;
         let mut inner = self.lock();
         let (id, secret_sha256) = match identity {
             None => (uuid::Uuid::new_v4().to_string(), None),
@@ -40,6 +41,13 @@ impl JobService {
                 (id.to_string(), Some(hash))
             }
         };
+        if !inner.workers.contains_key(&id) && inner.workers.len() >= self.cfg.max_workers {
+            return Err(ServiceError::ResourceExhausted(format!(
+                "this coordinator knows {} workers, its limit (tessera serve --max-workers); silent ones are forgotten after {} s",
+                inner.workers.len(),
+                self.cfg.forget_workers_ms / 1000
+            )));
+        }
         let registered_ms = inner.workers.get(&id).map_or(now_ms, |w| w.registered_ms);
         let row = WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256 };
         self.commits.store().save_worker(&row)?;
@@ -62,6 +70,29 @@ impl JobService {
         Ok(row.id)
     }
 
+    /// Forgets the workers silent for [`super::ServiceConfig::forget_workers_ms`] that hold no
+    /// lease (`held`: leases per worker), so that the workers known stay bounded; one that
+    /// comes back registers again.
+    fn forget_workers(
+        &self,
+        inner: &mut Inner,
+        held: &HashMap<String, usize>,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
+        let silent: Vec<String> = inner
+            .workers
+            .values()
+            .filter(|w| now_ms.saturating_sub(w.last_seen_ms) > self.cfg.forget_workers_ms && !held.contains_key(&w.id))
+            .map(|w| w.id.clone())
+            .collect();
+        for id in silent {
+            self.commits.store().delete_worker(&id)?;
+            inner.workers.remove(&id);
+            tracing::info!(worker_id = %id, "worker forgotten: silent too long");
+        }
+        Ok(())
+    }
+
     fn seen(&self, inner: &mut Inner, worker: &str, now_ms: u64) -> Result<(), ServiceError> {
         let w = inner
             .workers
@@ -80,6 +111,10 @@ impl JobService {
     pub fn lease(&self, worker: &str, max_tiles: usize, now_ms: u64) -> Result<Vec<LeaseGrant>, ServiceError> {
         let mut inner = self.lock();
         self.seen(&mut inner, worker, now_ms)?;
+        if self.disk.refusal().is_some() {
+            // no new work below the reserve: what is leased already may still come back
+            return Ok(Vec::new());
+        }
         let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
         if let Some(l) = leases.first() {
             // an EMIS job's state is made at its first lease (all leases are of one job)
@@ -165,6 +200,7 @@ impl JobService {
         if let Some(previous_ms) = previous_ms {
             super::events::workers_lost(inner.workers.values(), &held, previous_ms, now_ms, self.cfg.lease_timeout_ms);
         }
+        self.forget_workers(&mut inner, &held, now_ms)?;
         let live: Vec<String> = inner
             .workers
             .values()
@@ -313,6 +349,20 @@ impl JobService {
 }
 
 /// A kept identity is a short printable id and a secret long enough not to be guessed.
+/// A worker's name is shown on the dashboard and kept in memory: printable and short.
+fn check_registration(name: &str, threads: u32) -> Result<(), ServiceError> {
+    use super::{MAX_WORKER_NAME_BYTES, MAX_WORKER_THREADS};
+    if name.len() > MAX_WORKER_NAME_BYTES || name.chars().any(char::is_control) {
+        return Err(ServiceError::InvalidArgument(format!(
+            "field \"name\" must be at most {MAX_WORKER_NAME_BYTES} bytes without control characters"
+        )));
+    }
+    if threads > MAX_WORKER_THREADS {
+        return Err(ServiceError::InvalidArgument(format!("field \"threads\" must be at most {MAX_WORKER_THREADS}")));
+    }
+    Ok(())
+}
+
 fn check_identity(id: &str, secret: &str) -> Result<(), ServiceError> {
     let printable = |s: &str| s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
     if id.is_empty() || id.len() > 64 || !printable(id) {

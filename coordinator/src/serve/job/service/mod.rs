@@ -25,6 +25,7 @@ use super::emis::{EmisJob, TileStrategy};
 pub use super::leasing::LeaseLifetime;
 use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, TileSpec, TransitionError};
 use crate::serve::storage::commit::{Committer, Ticket};
+use crate::serve::storage::disk::{Disk, Space};
 use crate::serve::storage::{BlobStore, Extra, Store, StoreError, WorkerRow, sqlite::Batch};
 use runtime::JobRuntime;
 use std::collections::{BTreeMap, HashMap};
@@ -49,8 +50,11 @@ pub struct ServiceConfig {
     /// checkpoint's cost (see [`CHECKPOINT_SPACING`]); a finished job's outputs replace its last
     /// checkpoint.
     pub checkpoint_interval_ms: u64,
-    /// What a submitted scene's decoded textures may take when the coordinator loads it.
-    pub texture_limits: tessera_common::texture::TextureLimits,
+    /// What a submitted scene's decoded textures and meshes may take when the coordinator
+    /// loads it (workers load it with their own).
+    pub scene_limits: tessera_common::scene::SceneLimits,
+    /// What a job's settings may ask of a worker (light paths, connections, memory per tile).
+    pub work_limits: tessera_common::settings::WorkLimits,
     /// The largest film a job may have, in pixels: the coordinator holds it (16 bytes a pixel,
     /// more under EMIS) from the job's first run to its end.
     pub max_pixels: u64,
@@ -63,7 +67,24 @@ pub struct ServiceConfig {
     /// Accepted results of at least this many bytes are stored as files instead of database
     /// rows ([`crate::serve::storage::blobs::RESULT_FILE_BYTES`] outside tests).
     pub result_file_bytes: usize,
+    /// The most workers the coordinator knows at once; registrations past it are refused.
+    pub max_workers: usize,
+    /// Workers silent this long, holding no lease, are forgotten.
+    pub forget_workers_ms: u64,
+    /// Free bytes kept in reserve on the data folder's disk: below them, submissions and
+    /// leases are refused ([`JobService::check_space`]).
+    pub min_free_bytes: u64,
 }
+
+/// `tessera serve --min-free-space` unless given, in MiB.
+pub const DEFAULT_MIN_FREE_SPACE_MIB: u64 = 1024;
+
+/// [`ServiceConfig::max_workers`] unless `tessera serve --max-workers` says otherwise.
+pub const DEFAULT_MAX_WORKERS: usize = 10_000;
+/// The longest name a worker may register with.
+pub const MAX_WORKER_NAME_BYTES: usize = 256;
+/// The most render threads a worker may claim.
+pub const MAX_WORKER_THREADS: u32 = 1 << 16;
 
 /// [`ServiceConfig::max_tiles`] unless `tessera serve --max-job-tiles` says otherwise.
 pub const DEFAULT_MAX_TILES: u64 = 1_000_000;
@@ -89,6 +110,12 @@ pub enum ServiceError {
     /// An upload (a scene bundle) is over the coordinator's limit.
     #[error("{0}")]
     TooLarge(String),
+    /// A bounded resource is in use (too many workers, an upload already running).
+    #[error("{0}")]
+    ResourceExhausted(String),
+    /// The data folder's disk has less free space than the coordinator keeps in reserve.
+    #[error("{0}")]
+    InsufficientStorage(String),
     /// A tile result failed validation; the tile was re-queued.
     #[error("tile result refused: {0}")]
     InvalidResult(String),
@@ -192,6 +219,8 @@ impl Inner {
 /// The job service.
 pub struct JobService {
     cfg: ServiceConfig,
+    /// The data folder's free space and its reserve.
+    disk: Disk,
     blobs: BlobStore,
     scenes_dir: PathBuf,
     inner: Mutex<Inner>,
@@ -206,6 +235,16 @@ pub struct JobService {
 }
 
 impl JobService {
+    /// Fails when the data folder's disk is below its reserve: no new work is taken then.
+    pub fn check_space(&self) -> Result<(), ServiceError> {
+        self.disk.refusal().map_or(Ok(()), |why| Err(ServiceError::InsufficientStorage(why)))
+    }
+
+    /// The data folder's free space, if it can be read.
+    pub fn space(&self) -> Option<Space> {
+        self.disk.space()
+    }
+
     /// Opens the data directory and resumes every unfinished job.
     pub fn open(data_dir: &Path, cfg: ServiceConfig, now_ms: u64) -> Result<JobService, ServiceError> {
         std::fs::create_dir_all(data_dir)?;
@@ -264,6 +303,7 @@ impl JobService {
             inner.model.restore(job);
         }
         let svc = JobService {
+            disk: Disk::open(data_dir, cfg.min_free_bytes),
             cfg,
             blobs,
             scenes_dir: data_dir.join("scenes"),

@@ -68,6 +68,7 @@ impl JobService {
 
     /// Cancels a job.
     pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
+        self.disk.make_room();
         let mut inner = self.lock();
         let changes = inner.model.cancel(job, now_ms).map_err(super::retention::refused)?;
         self.persist(&mut inner, &changes, &[])?;

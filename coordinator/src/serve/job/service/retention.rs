@@ -53,9 +53,12 @@ impl JobService {
     /// ([`ServiceError::FailedPrecondition`]: cancel it first). Answered once the rows are
     /// committed and the files are gone.
     pub fn delete(&self, job: &str) -> Result<(), ServiceError> {
+        self.disk.make_room();
         let mut inner = self.lock();
         self.remove_jobs(&mut inner, &[job.to_string()])?;
         tracing::info!(job_id = %job, "job deleted");
+        drop(inner);
+        self.disk.restore_ballast();
         Ok(())
     }
 

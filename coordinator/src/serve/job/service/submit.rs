@@ -44,6 +44,8 @@ impl JobService {
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        // the bundle just received may have taken the last of the reserve
+        self.check_space()?;
         let blob = self.blobs.temp_path(".bundle");
         let digest = match upload.finish(scene_path, &blob) {
             Ok(digest) => digest,
@@ -129,6 +131,11 @@ impl JobService {
                 self.cfg.max_tiles
             )));
         }
+        integrator_settings.check_work(w, h, &self.cfg.work_limits).map_err(|e| {
+            let e = e.to_string();
+            let hint = if e.contains("MiB per tile") { " (tessera serve --max-tile-memory)" } else { "" };
+            ServiceError::InvalidArgument(format!("{e}{hint}"))
+        })?;
         Ok(JobSpec {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(scene_path)),
             priority,
@@ -148,13 +155,11 @@ impl JobService {
         let dir = self.scenes_dir.join(digest);
         let options = LoadOptions {
             defines: settings.define_map(),
-            texture_limits: self.cfg.texture_limits,
+            limits: self.cfg.scene_limits,
             confine_to: Some(dir.clone()),
         };
-        Scene::load_options(&dir.join(scene_path), &options).map_err(|e| {
-            let prefix = format!("{}/", dir.display());
-            ServiceError::InvalidArgument(e.to_string().replace(&prefix, ""))
-        })
+        // confined, so the error names files inside the bundle
+        Scene::load_options(&dir.join(scene_path), &options).map_err(|e| ServiceError::InvalidArgument(e.to_string()))
     }
 }
 

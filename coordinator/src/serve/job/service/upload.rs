@@ -2,13 +2,23 @@
 //! staging folder (the bundle unpacked), and the bundle's blob is then encoded from those files
 //! while it is hashed, so no copy of the bundle is ever whole in memory. A staging folder that
 //! is never finished is removed when its upload is dropped, or by the start-up sweep.
+//!
+//! A bundle holds at most [`MAX_BUNDLE_FILES`] files with paths of at most
+//! [`MAX_PATH_BYTES`]: each file costs a folder entry and a multipart part, and 100 000
+//! one-byte parts once took 20 s and left as many files behind.
 
 use super::{JobService, ServiceError};
 use crate::serve::storage::blobs::remove_all;
+use std::collections::HashSet;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use tessera_common::bundle::safe_relative_path;
+
+/// The most files a bundle may hold (a scene, its includes, meshes and textures).
+pub const MAX_BUNDLE_FILES: usize = 10_000;
+/// The longest path a bundle's file may have.
+pub const MAX_PATH_BYTES: usize = 1024;
 
 /// A bundle being received: [`JobService::begin_upload`], then [`BundleUpload::start_file`]
 /// and [`BundleUpload::write`] for each file, then [`JobService::submit_upload`].
@@ -18,6 +28,8 @@ pub struct BundleUpload {
     dir: PathBuf,
     /// Path and length of every file so far, in arrival order.
     files: Vec<(String, u64)>,
+    /// The paths of `files`, to find a repeat at once.
+    paths: HashSet<String>,
     current: Option<BufWriter<File>>,
     total: u64,
     limit: u64,
@@ -26,9 +38,10 @@ pub struct BundleUpload {
 impl JobService {
     /// A new upload, refused past `limit` bytes of file data in all.
     pub fn begin_upload(&self, limit: u64) -> Result<BundleUpload, ServiceError> {
+        self.check_space()?;
         let dir = self.scenes_dir.join(format!("staging-{}", uuid::Uuid::new_v4()));
         std::fs::create_dir_all(&dir)?;
-        Ok(BundleUpload { dir, files: Vec::new(), current: None, total: 0, limit })
+        Ok(BundleUpload { dir, files: Vec::new(), paths: HashSet::new(), current: None, total: 0, limit })
     }
 }
 
@@ -37,9 +50,15 @@ impl BundleUpload {
     pub fn start_file(&mut self, path: &str) -> Result<(), ServiceError> {
         let invalid = ServiceError::InvalidArgument;
         self.close_current()?;
+        if self.files.len() >= MAX_BUNDLE_FILES {
+            return Err(invalid(format!("a bundle holds at most {MAX_BUNDLE_FILES} files")));
+        }
+        if path.len() > MAX_PATH_BYTES {
+            return Err(invalid(format!("bundle file paths are at most {MAX_PATH_BYTES} bytes long")));
+        }
         let relative = safe_relative_path(path)
             .ok_or_else(|| invalid(format!("bundle file path \"{path}\" must be relative without \"..\"")))?;
-        if self.files.iter().any(|(p, _)| p == path) {
+        if !self.paths.insert(path.to_string()) {
             return Err(invalid(format!("bundle has the file \"{path}\" twice")));
         }
         let target = self.dir.join(&relative);
@@ -90,7 +109,7 @@ impl BundleUpload {
         if safe_relative_path(scene_path).is_none() {
             return Err(invalid(format!("bundle scene path \"{scene_path}\" is not a relative path")));
         }
-        if !self.files.iter().any(|(p, _)| p == scene_path) {
+        if !self.paths.contains(scene_path) {
             return Err(invalid(format!("bundle has no file \"{scene_path}\" (the scene)")));
         }
         let mut out = HashingWriter {
