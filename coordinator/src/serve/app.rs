@@ -1,6 +1,6 @@
 //! `tessera serve`: wiring of the coordinator. Opens the data directory (resuming unfinished
 //! jobs), serves gRPC (`JobService`, `WorkerService`) and REST on one port, over TLS when given
-//! a certificate, behind the cross-origin guard and bearer-token authentication, expires leases
+//! a certificate, behind the browser guard and bearer-token authentication, expires leases
 //! on a timer (and, with `--retain-finished`, deletes jobs that ended long enough ago on
 //! another), and shuts down gracefully on SIGINT/SIGTERM.
 
@@ -8,7 +8,7 @@ use super::auth::Tokens;
 use super::config::{Resolved, ServeArgs};
 use super::error::{ApiError, ErrorCode};
 use super::job::service::JobService;
-use super::origin::Scheme;
+use super::origin::{AllowedHosts, Guard, Scheme};
 use super::state::{AppState, now_ms};
 use super::tls::TlsListener;
 use anyhow::Context;
@@ -19,22 +19,22 @@ use std::time::Duration;
 /// How long a graceful shutdown waits for open requests (long polls, watch streams).
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(3);
 
-/// The whole HTTP surface: gRPC and REST on one router, behind the cross-origin guard (first,
-/// so that a foreign page is refused with or without a token) and authentication. `scheme` is
-/// the one the server is reached by, part of its origin.
-pub fn router(state: Arc<AppState>, tokens: Tokens, scheme: Scheme) -> axum::Router {
+/// The whole HTTP surface: gRPC and REST on one router, behind the browser guard (first, so
+/// that a foreign page is refused with or without a token) and authentication.
+pub fn router(state: Arc<AppState>, tokens: Tokens, guard: Guard) -> axum::Router {
     crate::serve::grpc::router(state.clone())
         .merge(crate::serve::rest::router(state))
         // tonic's routes answer unknown paths with 200 + grpc-status 12 unless a fallback is set
         .fallback(|| async { ApiError::new(ErrorCode::NotFound, "no such route") })
         .layer(axum::middleware::from_fn_with_state(Arc::new(tokens), crate::serve::auth::require_token))
-        .layer(axum::middleware::from_fn_with_state(scheme, crate::serve::origin::refuse_foreign_origins))
+        .layer(axum::middleware::from_fn_with_state(Arc::new(guard), crate::serve::origin::refuse_foreign_browsers))
         .layer(tower_http::trace::TraceLayer::new_for_http())
 }
 
 /// Runs `tessera serve`.
 pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
     let Resolved { tokens, service: cfg, tls } = args.resolve()?;
+    let hosts = AllowedHosts::new(&args.allowed_hosts);
     let runtime = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     runtime.block_on(async {
         let data_dir = args.data_dir.clone();
@@ -55,6 +55,7 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
             }
         });
         let scheme = if tls.is_some() { Scheme::Https } else { Scheme::Http };
+        tracing::info!(extra = ?hosts.extra(), "browsers allowed at localhost, IP addresses and the extra host names");
         // the one line of stdout: scripts and tests read the address from it
         println!("tessera serve: listening on {}://{addr}", scheme.as_str());
         tracing::info!(%addr, scheme = scheme.as_str(), data_dir = %args.data_dir.display(), "coordinator started");
@@ -88,7 +89,7 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             })
         });
-        let app = router(state, tokens, scheme);
+        let app = router(state, tokens, Guard { scheme, hosts });
         match tls {
             Some(config) => serve_until_stopped(TlsListener::new(listener, config), app).await?,
             None => serve_until_stopped(listener, app).await?,

@@ -43,6 +43,18 @@ pub struct ServeArgs {
     /// Allow a non-loopback address without TLS or without tokens.
     #[arg(long)]
     pub insecure: bool,
+    /// A host name browsers may reach the coordinator under (the dashboard's address),
+    /// besides localhost, *.localhost and IP addresses; repeatable or comma-separated
+    /// (`TESSERA_ALLOWED_HOSTS`). `*.example.com` allows its subdomains, `*` any name (behind a
+    /// proxy of your own). Clients that are not browsers may use any name.
+    #[arg(
+        long = "allowed-host",
+        value_name = "NAME",
+        env = "TESSERA_ALLOWED_HOSTS",
+        value_delimiter = ',',
+        value_parser = super::origin::parse_allowed_host
+    )]
+    pub allowed_hosts: Vec<String>,
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
