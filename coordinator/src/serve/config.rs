@@ -55,6 +55,14 @@ pub struct ServeArgs {
         value_parser = super::origin::parse_allowed_host
     )]
     pub allowed_hosts: Vec<String>,
+    /// Most connections at once; beyond it the least recently active is closed for the newcomer
+    /// [default: the file descriptor limit minus a reserve, at most 8192].
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..))]
+    pub max_connections: Option<usize>,
+    /// Most connections at once from one IP address (IPv6: one /64) [default: a quarter of
+    /// --max-connections; behind a proxy, raise it to --max-connections].
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_connections_per_ip: Option<usize>,
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
