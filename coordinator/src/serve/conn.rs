@@ -19,8 +19,9 @@
 //!   recently active (accepted, or a request started or ended). A flood of idle sockets, even
 //!   from the address real clients use (all of loopback is one peer), thus only evicts itself:
 //!   `/healthz` and real clients are served on fresh connections and kept while they work.
-//!   Refusing would leave the newcomer in the kernel's backlog behind the flood. Between the
-//!   accept and the close there are at most cap + 1 sockets.
+//!   Refusing would leave the newcomer in the kernel's backlog behind the flood. Sockets
+//!   being closed may outnumber the cap by 17 until their tasks drop them; beyond that the
+//!   next accept waits for them (the reserve covers it).
 //! * **Idle connections end.** A connection that has not started a request within
 //!   [`FIRST_REQUEST_TIMEOUT`] of its accept (a TLS handshake included), or has had none in
 //!   flight for [`IDLE_TIMEOUT`], is closed. This plays the part of hyper's HTTP/1 header-read
@@ -58,6 +59,10 @@ pub const IDLE_TIMEOUT: Duration = Duration::from_secs(120);
 const SWEEP_PERIOD: Duration = Duration::from_secs(1);
 /// Descriptors kept for anything but connections: at least this many, or an eighth.
 const FD_RESERVE_MIN: u64 = 64;
+/// Sockets being closed that may still be open when the next connection is accepted (taken
+/// from the reserve): a connection whose task does not notice its close at once (an upload
+/// whose handler is not reading just then) must not stop the accept loop.
+const CLOSING_SLACK: usize = 16;
 
 /// The limits a [`LimitedListener`] enforces.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -320,10 +325,11 @@ impl Registry {
         self.epoch.elapsed().as_millis() as u64
     }
 
-    /// Waits until another socket fits under the cap (plus the newcomer's one).
+    /// Waits until another socket fits: under the cap, counting the newcomer and up to
+    /// [`CLOSING_SLACK`] sockets being closed.
     async fn room(&self) {
         loop {
-            if self.table().conns.len() <= self.limits.max_connections {
+            if self.table().conns.len() <= self.limits.max_connections + CLOSING_SLACK {
                 return;
             }
             // notify_one keeps a permit, so a socket freed since the check is not missed

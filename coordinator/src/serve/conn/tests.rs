@@ -185,7 +185,8 @@ async fn an_idle_flood_from_the_clients_own_address_evicts_only_itself() {
     assert_eq!(answer.expect("/healthz during the flood").as_str(), "ok");
     {
         let table = registry.table();
-        assert!(table.conns.len() <= 33, "{} sockets for a cap of 32", table.conns.len());
+        assert!(table.conns.len() <= 32 + CLOSING_SLACK + 1, "{} sockets for a cap of 32", table.conns.len());
+        assert!(table.conns.len() - table.closing <= 32);
         assert!(table.live[&PeerKey::of(local.into())] <= 8);
     }
     // the request in flight was kept and completes
@@ -211,6 +212,20 @@ async fn a_flood_from_one_peer_leaves_the_connections_of_others_alone() {
     assert_eq!(tokio::time::timeout(ANSWER_WITHIN, get(&mut probe, "/healthz")).await.unwrap(), "ok");
     let second = tokio::time::timeout(ANSWER_WITHIN, get(&mut kept, "/healthz")).await;
     assert_eq!(second.expect("the other peer's connection was closed"), "ok");
+}
+
+#[tokio::test]
+async fn a_full_server_stays_under_its_cap_and_serves_the_newcomer() {
+    let (addr, registry, _release) = serve(limits(16, 16)).await;
+    let mut flood = Vec::new();
+    for _ in 0..60 {
+        flood.push(connect_from(Ipv4Addr::new(127, 0, 0, 2), addr).await);
+    }
+    let mut probe = connect_from(Ipv4Addr::new(127, 0, 0, 3), addr).await;
+    assert_eq!(tokio::time::timeout(ANSWER_WITHIN, get(&mut probe, "/healthz")).await.unwrap(), "ok");
+    let table = registry.table();
+    assert!(table.conns.len() <= 16 + CLOSING_SLACK + 1, "{} sockets for a cap of 16", table.conns.len());
+    assert!(table.conns.len() - table.closing <= 16);
 }
 
 #[tokio::test]
