@@ -289,6 +289,11 @@ fn browsers_must_reach_the_coordinator_under_an_allowed_host_name() {
     let rebound = [("host", evil.as_str()), ("origin", evil_origin.as_str()), ("sec-fetch-site", "same-origin")];
     let (status, _, body) = raw(addr, "GET", "/api/v1/jobs", &rebound);
     assert!(status == 403 && body.contains("permission_denied"), "{status} {body}");
+    // over plain HTTP a page's GET carries no Origin nor Sec-Fetch-*: its user agent tells
+    let chrome = [("host", evil.as_str()), ("user-agent", "Mozilla/5.0 (X11; Linux x86_64) Chrome/156.0")];
+    assert_eq!(raw(addr, "GET", "/api/v1/jobs", &chrome).0, 403);
+    let curl = [("host", evil.as_str()), ("user-agent", "curl/8.5.0")];
+    assert_eq!(raw(addr, "GET", "/api/v1/jobs", &curl).0, 200);
 
     // a job submitted by a client; the rebound page cannot cancel or delete it
     let xml = std::fs::read(scene("cornell-box")).unwrap();

@@ -9,11 +9,16 @@
 //!
 //! The rule in force:
 //!
-//! * **Only browsers are checked.** A request is a browser's when it carries `Origin` or any
-//!   `Sec-Fetch-*` header: browsers add those themselves (`Sec-Fetch-*` on every request since
-//!   2020–2023, `Origin` on every state-changing one) and no page can remove them. The
-//!   `tessera` command, workers, curl and API libraries send neither and pass unchecked,
-//!   whatever host name they use; they cannot be rebound, since nothing steers them to a name.
+//! * **Only browsers are checked.** A request is a browser's when it carries `Origin`, any
+//!   `Sec-Fetch-*` header, or a `User-Agent` starting with `Mozilla/`. Browsers add `Origin` to
+//!   every request but GET and HEAD and no page can remove it; `Sec-Fetch-*` to every request,
+//!   but only to HTTPS and `localhost` URLs, so over plain HTTP a page's GET carries neither and
+//!   the user agent, which every browser's starts with and Chromium's and Safari's pages cannot
+//!   change, is what is left (checked with a headless Chromium: a rebound plain-HTTP page was
+//!   otherwise served). The `tessera` command, workers, curl, Python clients, Prometheus and
+//!   probes send none of the three and pass unchecked, whatever host name they use; they
+//!   cannot be rebound, since nothing steers them to a name. A non-browser client that calls
+//!   itself `Mozilla/` (PowerShell's `Invoke-WebRequest`) must use an allowed name or an IP.
 //! * **A browser must reach the server under an allowed host name**, on every method: the
 //!   `Host` header (HTTP/2's `:authority`), port and IPv6 brackets removed, compared without
 //!   case. Allowed are `localhost` and `*.localhost` (browsers resolve them to loopback
@@ -31,9 +36,11 @@
 //!   `Host` it was reached at). The dashboard calls the API from its own origin and passes.
 //!   gRPC paths are guarded too, since a form can post to any path.
 //!
-//! What remains: a browser too old to send `Sec-Fetch-*` (before Chrome 76, Firefox 90,
-//! Safari 16.4) is not recognised on GET, so a rebound page in it could read job lists and
-//! images; it still cannot change anything, since `Origin` is checked on every other method.
+//! What remains: a Firefox page may replace the user agent of its own plain-HTTP fetches, and
+//! a browser too old to send `Sec-Fetch-*` (before Chrome 76, Firefox 90, Safari 16.4) may
+//! send no signal on GET, so a rebound page in them could read job lists and images of a farm
+//! without tokens; neither can change anything, since `Origin` is checked on every other
+//! method.
 
 use crate::serve::error::{ApiError, ErrorCode};
 use axum::extract::{Request, State};
@@ -216,9 +223,12 @@ impl Refusal {
     }
 }
 
-/// Whether a browser sent the request: only browsers send `Origin` or `Sec-Fetch-*`.
+/// Whether a browser sent the request (see the module doc).
 fn from_browser(headers: &HeaderMap) -> bool {
-    headers.contains_key(http::header::ORIGIN) || headers.keys().any(|k| k.as_str().starts_with("sec-fetch-"))
+    let mozilla = headers.get(http::header::USER_AGENT).is_some_and(|ua| ua.as_bytes().starts_with(b"Mozilla/"));
+    mozilla
+        || headers.contains_key(http::header::ORIGIN)
+        || headers.keys().any(|k| k.as_str().starts_with("sec-fetch-"))
 }
 
 /// Whether a request may proceed. `host` is where the client reached the server (the `Host`
@@ -367,9 +377,13 @@ mod tests {
             let e = check(&g, &method, Some("evil.example:7878"), &rebound).unwrap_err();
             assert_eq!(e, Refusal::Host("evil.example".into()));
         }
-        // a navigation sends Sec-Fetch-* but no Origin
+        // a navigation sends Sec-Fetch-* but no Origin; over plain HTTP only the user agent
         let navigation = headers(&[("sec-fetch-mode", "navigate"), ("sec-fetch-dest", "document")]);
         assert!(check(&g, &Method::GET, Some("Evil.Example"), &navigation).is_err());
+        let plain_http = headers(&[("user-agent", "Mozilla/5.0 (X11; Linux x86_64) HeadlessChrome/156.0")]);
+        assert!(check(&g, &Method::GET, Some("evil.example:7878"), &plain_http).is_err());
+        let curl = headers(&[("user-agent", "curl/8.5.0")]);
+        assert_eq!(check(&g, &Method::GET, Some("evil.example:7878"), &curl), Ok(()));
         assert_eq!(check(&g, &Method::GET, None, &navigation), Err(Refusal::Host(String::new())));
         for ok in ["127.0.0.1:7878", "localhost:7878", "[::1]:7878", "FARM1:7878", "192.168.1.20"] {
             assert_eq!(check(&g, &Method::GET, Some(ok), &navigation), Ok(()), "{ok}");
