@@ -15,8 +15,10 @@ the peak RSS is the process's since it started. Standard library only; Linux (/p
 """
 
 import argparse
+import errno
 import os
 import resource
+import selectors
 import shutil
 import socket
 import ssl
@@ -41,16 +43,30 @@ def status_of(pid):
         return float("nan"), -1
 
 
-def connect(host, port, source="127.0.0.1", timeout=1.0):
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.settimeout(timeout)
-    try:
-        s.bind((source, 0))
-        s.connect((host, port))
-        return s
-    except OSError:
-        s.close()
-        return None
+def open_sockets(host, port, sources, count, wait=5.0):
+    """Connects `count` sockets at once (round robin over `sources`); those connected within
+    `wait` seconds (a server that stops accepting leaves the rest in a full backlog)."""
+    sel, connected = selectors.DefaultSelector(), []
+    for i in range(count):
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s.setblocking(False)
+        s.bind((sources[i % len(sources)], 0))
+        if s.connect_ex((host, port)) in (0, errno.EINPROGRESS):
+            sel.register(s, selectors.EVENT_WRITE)
+        else:
+            s.close()
+    deadline = time.monotonic() + wait
+    while sel.get_map() and time.monotonic() < deadline:
+        for key, _ in sel.select(timeout=max(0.0, deadline - time.monotonic())):
+            sel.unregister(key.fileobj)
+            if key.fileobj.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR) == 0:
+                key.fileobj.settimeout(1.0)
+                connected.append(key.fileobj)
+            else:
+                key.fileobj.close()
+    for key in list(sel.get_map().values()):
+        key.fileobj.close()
+    return connected
 
 
 def probe(host, port, tls):
@@ -76,13 +92,15 @@ def probe(host, port, tls):
 
 
 def closed_by_server(sockets):
-    """How many of `sockets` the server has closed (a read would return EOF or fail)."""
+    """How many of `sockets` the server has closed: reading what it sent (an answer, TLS
+    tickets; raw bytes, past any TLS layer) ends in EOF or an error."""
     n = 0
     for s in sockets:
         try:
             s.setblocking(False)
-            if s.recv(1, socket.MSG_PEEK) == b"":
-                n += 1
+            while socket.socket.recv(s, 65536):
+                pass
+            n += 1
         except BlockingIOError:
             pass
         except OSError:
@@ -92,24 +110,22 @@ def closed_by_server(sockets):
 
 def flood(case, host, port, count):
     """Opens the case's sockets; returns them and a function that stops any background work."""
-    sockets, stop = [], threading.Event()
+    stop = threading.Event()
     sources = ["127.0.0.1"] if case != "silent-tcp-8-ips" else [f"127.0.0.{i}" for i in range(2, 10)]
-    for i in range(count):
-        s = connect(host, port, sources[i % len(sources)])
-        if s is None:
-            continue
-        sockets.append(s)
-        if case == "keepalive-idle":
-            s.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
-        elif case == "tls-idle":
-            try:
+    sockets = open_sockets(host, port, sources, count)
+    deadline = time.monotonic() + 30  # a server that does not answer must not stall the run
+    for i, s in enumerate(sockets):
+        try:
+            if case == "keepalive-idle":
+                s.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            elif case == "tls-idle" and time.monotonic() < deadline:
                 ctx = ssl.create_default_context()
                 ctx.check_hostname, ctx.verify_mode = False, ssl.CERT_NONE
-                sockets[-1] = ctx.wrap_socket(s)
-            except OSError:
-                pass
-        elif case == "slowloris":
-            s.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ")
+                sockets[i] = ctx.wrap_socket(s)
+            elif case == "slowloris":
+                s.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ")
+        except OSError:
+            pass
 
     def dribble():
         # one byte per socket and second: a request that never ends, but is never silent
