@@ -213,14 +213,16 @@ impl Table {
         let live = self.live.entry(peer).or_default();
         *live += 1;
         if *live > limits.max_per_peer
-            && let Some(victim) = self.victim(peer, id)
+            && let Some(victim) = self.victim(|c| c.peer == peer, id)
         {
             self.close(&victim, Reason::PeerLimit);
             self.warn_full(limits, Reason::PeerLimit, now_ms);
         }
         if self.conns.len() - self.closing > limits.max_connections {
-            let heaviest = self.live.iter().max_by_key(|(_, n)| **n).map(|(p, _)| *p);
-            if let Some(victim) = heaviest.and_then(|p| self.victim(p, id)) {
+            // of the peers holding the most (the newcomer alone may be one of them: then any)
+            let most = self.live.values().copied().max().unwrap_or(0);
+            let heaviest = |c: &Conn| self.live.get(&c.peer) == Some(&most);
+            if let Some(victim) = self.victim(heaviest, id).or_else(|| self.victim(|_| true, id)) {
                 self.close(&victim, Reason::GlobalLimit);
             }
             self.warn_full(limits, Reason::GlobalLimit, now_ms);
@@ -228,9 +230,9 @@ impl Table {
         conn
     }
 
-    /// The connection of `peer` to close first, never `except`.
-    fn victim(&self, peer: PeerKey, except: u64) -> Option<Arc<Conn>> {
-        let candidates = self.conns.values().filter(|c| c.peer == peer && c.id != except);
+    /// Of the connections `among` picks, the one to close first, never `except`.
+    fn victim(&self, among: impl Fn(&Conn) -> bool, except: u64) -> Option<Arc<Conn>> {
+        let candidates = self.conns.values().filter(|c| c.id != except && among(c));
         candidates.filter(|c| !c.closing.load(Ordering::Relaxed)).min_by_key(|c| c.rank()).cloned()
     }
 

@@ -70,6 +70,12 @@ fn a_full_server_closes_a_connection_of_the_heaviest_peer() {
     assert!(closing(&heavy[0]), "the heaviest peer's least recently active");
     assert!(!closing(&lone) && !closing(&newcomer), "not the lone peer's older connection");
     assert!(!closing(&heavy[1]) && !closing(&heavy[2]));
+    // one connection per peer, the newcomer's peer as heavy as any: the least recent of all
+    let mut table = Table::default();
+    let first = table.admit(&l, peer(1), epoch, 0);
+    let others: Vec<_> = (2..=4).map(|p| table.admit(&l, peer(p), epoch, u64::from(p))).collect();
+    let newcomer = table.admit(&l, peer(5), epoch, 10);
+    assert!(closing(&first) && !closing(&newcomer) && others.iter().all(|c| !closing(c)));
 }
 
 #[test]
