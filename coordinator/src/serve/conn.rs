@@ -13,8 +13,8 @@
 //! * **Per peer.** One IPv4 address (or IPv6 /64) may hold a quarter of the connections
 //!   (`--max-connections-per-ip`), so one host cannot push out the others.
 //! * **Full means evict, not refuse.** A newcomer beyond either limit is accepted and the
-//!   least useful connection closed: of the newcomer's peer at the per-peer limit, of the peer
-//!   holding the most at the global cap. Least useful is: no request in flight before one
+//!   least useful connection closed: of the newcomer's peer at the per-peer limit, of the
+//!   peers holding the most at the global cap. Least useful is: no request in flight before one
 //!   with a request in flight (a long poll, a watch stream, an upload), then the least
 //!   recently active (accepted, or a request started or ended). A flood of idle sockets, even
 //!   from the address real clients use (all of loopback is one peer), thus only evicts itself:
@@ -23,8 +23,8 @@
 //!   being closed may outnumber the cap by 17 until their tasks drop them; beyond that the
 //!   next accept waits for them (the reserve covers it).
 //! * **Idle connections end.** A connection that has not started a request within
-//!   [`FIRST_REQUEST_TIMEOUT`] of its accept (a TLS handshake included), or has had none in
-//!   flight for [`IDLE_TIMEOUT`], is closed. This plays the part of hyper's HTTP/1 header-read
+//!   [`FIRST_REQUEST_TIMEOUT`] (10 s) of its accept (a TLS handshake included), or has had none
+//!   in flight for [`IDLE_TIMEOUT`] (2 min), is closed, checked every second. This plays the part of hyper's HTTP/1 header-read
 //!   timeout and of HTTP/2 keep-alive, which `axum::serve` does not expose, the same way for
 //!   both protocols and for TLS; a peer dropping out of the network mid-request is found by
 //!   TCP keep-alive probes (set in `app.rs`).
