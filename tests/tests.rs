@@ -468,6 +468,7 @@ fn image_comparison_notices_a_different_seed() {
 
 mod bad_results;
 mod bounded_memory;
+mod connections;
 mod emis;
 mod faults;
 mod hostile;

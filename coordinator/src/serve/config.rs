@@ -48,6 +48,26 @@ pub struct ServeArgs {
     /// Allow a non-loopback address without TLS or without tokens.
     #[arg(long)]
     pub insecure: bool,
+    /// A host name browsers may reach the coordinator under (the dashboard's address),
+    /// besides localhost, *.localhost and IP addresses; repeatable or comma-separated
+    /// (`TESSERA_ALLOWED_HOSTS`). `*.example.com` allows its subdomains, `*` any name (behind a
+    /// proxy of your own). Clients that are not browsers may use any name.
+    #[arg(
+        long = "allowed-host",
+        value_name = "NAME",
+        env = "TESSERA_ALLOWED_HOSTS",
+        value_delimiter = ',',
+        value_parser = super::origin::parse_allowed_host
+    )]
+    pub allowed_hosts: Vec<String>,
+    /// Most connections at once; beyond it the least recently active is closed for the newcomer
+    /// [default: the file descriptor limit minus a reserve, at most 8192].
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..))]
+    pub max_connections: Option<usize>,
+    /// Most connections at once from one IP address (IPv6: one /64) [default: a quarter of
+    /// --max-connections; behind a proxy, raise it to --max-connections].
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_connections_per_ip: Option<usize>,
     /// Seconds a lease lives without a heartbeat before its tile is re-queued.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,

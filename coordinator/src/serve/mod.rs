@@ -1,9 +1,9 @@
 //! The coordinator service, `tessera serve`: the pure job state machine and the service that
 //! persists and merges around it ([`job`]), bundles received in pieces ([`bundle_stream`]),
 //! durable storage ([`storage`]), the gRPC and REST APIs ([`grpc`], [`rest`]) over the state
-//! they share ([`state`]), authentication, the cross-origin guard ([`origin`]), TLS ([`tls`]),
-//! the error table, metrics ([`metrics`]) and logging, and the wiring ([`app`]) configured by
-//! [`config`].
+//! they share ([`state`]), authentication, the browser guard ([`origin`]), connection limits
+//! ([`conn`]), TLS ([`tls`]), the error table, metrics ([`metrics`]) and logging, and the
+//! wiring ([`app`]) configured by [`config`].
 //!
 //! Nothing here imports the command line or the benchmarks.
 
@@ -11,6 +11,7 @@ pub mod app;
 pub mod auth;
 pub mod bundle_stream;
 pub mod config;
+pub mod conn;
 pub mod error;
 pub mod grpc;
 pub mod job;

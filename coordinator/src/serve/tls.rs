@@ -3,6 +3,16 @@
 //! [`TlsListener`], an axum listener that hands `axum::serve` finished TLS streams. gRPC, REST
 //! and the dashboard keep sharing one port, and graceful shutdown works as without TLS.
 //!
+//! Handshakes cannot be held hostage: each has [`HANDSHAKE_TIMEOUT`], and at most
+//! [`MAX_PENDING_HANDSHAKES`] run at once; a connection arriving when all are taken is still
+//! accepted, and the oldest pending handshake is dropped for it. Refusing instead (leaving the
+//! newcomer in the kernel's backlog) let a few hundred sockets that never send a ClientHello
+//! stop every client, `/healthz` included, for the length of the timeout, again and again. A
+//! real client finishes its handshake in a round trip or two, so it is dropped only when as
+//! many connections as there are slots arrive in that time. Under the coordinator, the
+//! listener beneath (`conn::LimitedListener`) also counts handshaking sockets against the
+//! connection limits.
+//!
 //! ```no_run
 //! # async fn f(router: axum::Router) -> Result<(), Box<dyn std::error::Error>> {
 //! use tessera_coordinator::serve::tls::{TlsListener, server_config};
@@ -16,18 +26,19 @@ use axum::serve::Listener;
 use rustls::ServerConfig;
 use rustls_pki_types::pem::PemObject;
 use rustls_pki_types::{CertificateDer, PrivateKeyDer};
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::task::JoinSet;
+use tokio::task::{AbortHandle, JoinSet};
 use tokio_rustls::TlsAcceptor;
 use tokio_rustls::server::TlsStream;
 
 /// A client that has not finished its handshake by then is dropped.
-const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
-/// Handshakes in progress at once; beyond this, new connections wait in the kernel's backlog,
-/// so that clients that never finish cannot hold unbounded memory.
-const MAX_PENDING_HANDSHAKES: usize = 256;
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+/// Handshakes in progress at once; beyond this the oldest is dropped for the newcomer, so that
+/// clients that never finish cannot hold unbounded memory nor keep others out.
+pub const MAX_PENDING_HANDSHAKES: usize = 256;
 
 /// Why the certificate or key cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -102,12 +113,46 @@ pub struct TlsListener<L: Listener> {
     inner: L,
     acceptor: TlsAcceptor,
     handshakes: JoinSet<Handshake<L>>,
+    /// The handshakes in `handshakes`, oldest first.
+    pending: VecDeque<AbortHandle>,
 }
 
 impl<L: Listener> TlsListener<L> {
     /// Wraps `inner`, serving with `config`.
     pub fn new(inner: L, config: Arc<ServerConfig>) -> Self {
-        TlsListener { inner, acceptor: TlsAcceptor::from(config), handshakes: JoinSet::new() }
+        TlsListener { inner, acceptor: TlsAcceptor::from(config), handshakes: JoinSet::new(), pending: VecDeque::new() }
+    }
+}
+
+impl<L> TlsListener<L>
+where
+    L: Listener,
+    L::Addr: std::fmt::Debug + 'static,
+{
+    /// Starts the handshake of a new connection, dropping the oldest pending one if all slots
+    /// are taken.
+    fn start(&mut self, io: L::Io, addr: L::Addr) {
+        if self.pending.len() >= MAX_PENDING_HANDSHAKES
+            && let Some(oldest) = self.pending.pop_front()
+        {
+            tracing::debug!("tls handshake slots full: dropping the oldest pending handshake");
+            oldest.abort();
+        }
+        let acceptor = self.acceptor.clone();
+        let handle = self.handshakes.spawn(async move {
+            match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(io)).await {
+                Ok(Ok(stream)) => Some((stream, addr)),
+                Ok(Err(e)) => {
+                    tracing::debug!(error = %e, peer = ?addr, "tls handshake failed");
+                    None
+                }
+                Err(_) => {
+                    tracing::debug!(peer = ?addr, "tls handshake timed out");
+                    None
+                }
+            }
+        });
+        self.pending.push_back(handle);
     }
 }
 
@@ -124,24 +169,14 @@ where
     async fn accept(&mut self) -> (Self::Io, Self::Addr) {
         loop {
             tokio::select! {
-                (io, addr) = self.inner.accept(), if self.handshakes.len() < MAX_PENDING_HANDSHAKES => {
-                    let acceptor = self.acceptor.clone();
-                    self.handshakes.spawn(async move {
-                        match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(io)).await {
-                            Ok(Ok(stream)) => Some((stream, addr)),
-                            Ok(Err(e)) => {
-                                tracing::debug!(error = %e, peer = ?addr, "tls handshake failed");
-                                None
-                            }
-                            Err(_) => {
-                                tracing::debug!(peer = ?addr, "tls handshake timed out");
-                                None
-                            }
-                        }
-                    });
-                }
-                Some(done) = self.handshakes.join_next() => {
-                    if let Ok(Some(connection)) = done {
+                (io, addr) = self.inner.accept() => self.start(io, addr),
+                Some(done) = self.handshakes.join_next_with_id() => {
+                    let id = match &done {
+                        Ok((id, _)) => *id,
+                        Err(e) => e.id(),
+                    };
+                    self.pending.retain(|h| h.id() != id);
+                    if let Ok((_, Some(connection))) = done {
                         return connection;
                     }
                 }
@@ -195,7 +230,7 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn tls_listener_serves_h2_and_http1_past_a_stalled_handshake() {
+    async fn tls_listener_serves_h2_and_http1_past_more_stalled_handshakes_than_slots() {
         use tokio::io::{AsyncReadExt, AsyncWriteExt};
         let dir = tempfile::tempdir().unwrap();
         let (cert, key) = pair(dir.path());
@@ -204,11 +239,16 @@ mod tests {
         let app = axum::Router::new().route("/", axum::routing::get(|| async { "over tls" }));
         let server =
             tokio::spawn(axum::serve(TlsListener::new(tcp, server_config(&cert, &key).unwrap()), app).into_future());
-        // a client that connects and never says hello must not hold up the others
-        let _stalled = tokio::net::TcpStream::connect(addr).await.unwrap();
+        // clients that connect and never say hello, more than there are handshake slots, must
+        // not hold up the others (refusing to accept while the slots were full did, for the
+        // length of the timeout)
+        let mut stalled = Vec::new();
+        for _ in 0..MAX_PENDING_HANDSHAKES + 16 {
+            stalled.push(tokio::net::TcpStream::connect(addr).await.unwrap());
+        }
         let h2 = tokio::time::timeout(HANDSHAKE_TIMEOUT / 2, connect(addr, &cert, &[b"h2", b"http/1.1"]))
             .await
-            .expect("the stalled handshake held up the next one");
+            .expect("the stalled handshakes held up the next one");
         assert_eq!(h2.get_ref().1.alpn_protocol(), Some(&b"h2"[..]), "gRPC clients need h2");
         let mut http1 = connect(addr, &cert, &[b"http/1.1"]).await;
         http1.write_all(b"GET / HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n").await.unwrap();
