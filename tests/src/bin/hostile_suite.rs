@@ -22,8 +22,13 @@ fn main() {
     let after = bins(&value("--bin-dir").unwrap_or_else(|| "target/release".into()));
     let before = value("--before").map(|d| bins(&d));
     let cases: Vec<String> = args.windows(2).filter(|w| w[0] == "--case").map(|w| w[1].clone()).collect();
-    let scratch = tempfile::tempdir().expect("scratch folder");
-    println!("{TABLE_HEADER} passed |");
+    let scratch = tempfile::Builder::new().prefix("hostile-suite").tempdir().expect("scratch folder");
+    let scratch = match std::env::var_os("TESSERA_SUITE_KEEP") {
+        Some(_) => tempfile::TempDir::keep(scratch),
+        None => scratch.path().to_path_buf(),
+    };
+    let header: Vec<&str> = TABLE_HEADER.lines().collect();
+    println!("{} passed |\n{}---|", header[0], header[1]);
     let names: Vec<String> = hostile::cases()
         .iter()
         .filter(|c| cases.is_empty() || cases.iter().any(|f| c.name.contains(f.as_str())))
@@ -32,7 +37,7 @@ fn main() {
     let mut failed = 0;
     for name in names {
         for (label, b) in before.iter().map(|b| ("before", b)).chain([("after", &after)]) {
-            for r in hostile::run(b, scratch.path(), std::slice::from_ref(&name)) {
+            for r in hostile::run(b, &scratch, std::slice::from_ref(&name)) {
                 let ok = r.passed && r.survived();
                 failed += (label == "after" && !ok) as usize;
                 let row = r.row().replacen("| ", &format!("| {label}: "), 1);

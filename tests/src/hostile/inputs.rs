@@ -6,7 +6,7 @@ use std::io::Write;
 /// A valid scene's head: a 64² film, a sensor, a light.
 pub const HEAD: &str = r#"<scene version="3.0.0">
 <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
-<film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="64"/></film></sensor>
+<film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="64"/><rfilter type="box"/></film></sensor>
 <emitter type="point"><point name="position" x="0" y="0" z="4"/><rgb name="intensity" value="10"/></emitter>
 "#;
 
@@ -146,4 +146,21 @@ pub fn textured(file: &str) -> String {
     format!(
         "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"{file}\"/></texture></bsdf></shape>\n"
     )
+}
+
+/// The boundary of [`multipart`].
+pub const BOUNDARY: &str = "hostile-suite-boundary";
+
+/// A multipart submission of an empty scene and `parts` one-byte files.
+pub fn multipart(parts: usize) -> Vec<u8> {
+    let part = |disposition: &str, data: &str| {
+        format!("--{BOUNDARY}\r\nContent-Disposition: form-data; {disposition}\r\n\r\n{data}\r\n")
+    };
+    let mut out = part("name=\"settings\"", "{\"spp\": 1}");
+    out += &part("name=\"scene\"; filename=\"scene.xml\"", &String::from_utf8_lossy(&scene("")));
+    for i in 0..parts {
+        out += &part(&format!("name=\"asset\"; filename=\"f/{i}\""), "x");
+    }
+    out += &format!("--{BOUNDARY}--\r\n");
+    out.into_bytes()
 }

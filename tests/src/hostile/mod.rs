@@ -106,7 +106,10 @@ pub fn run(bins: &Bins, scratch: &Path, filter: &[String]) -> Vec<Report> {
             let dir = scratch.join(c.name);
             std::fs::create_dir_all(&dir).expect("scratch folder");
             let report = (c.run)(bins, &dir);
-            let _ = std::fs::remove_dir_all(&dir);
+            // TESSERA_SUITE_KEEP keeps the processes' logs and data for a look afterwards
+            if std::env::var_os("TESSERA_SUITE_KEEP").is_none() {
+                let _ = std::fs::remove_dir_all(&dir);
+            }
             report
         })
         .collect()

@@ -2,6 +2,7 @@
 //! (client stream) and blob download (server stream).
 
 use super::convert::{grant_to_pb, lease_from_pb, lease_to_pb, rect_from_pb};
+use crate::serve::conn::Peer;
 use crate::serve::job::model::ResultOutcome;
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::state::{AppState, blocking, now_ms};
@@ -15,17 +16,25 @@ use tonic::{Request, Response, Status, Streaming};
 /// The service implementation.
 pub struct WorkerApi(pub Arc<AppState>);
 
+/// The longest build version a worker may send.
+const MAX_VERSION_BYTES: usize = 128;
+
 /// Longest long poll.
 const MAX_WAIT: Duration = Duration::from_secs(30);
 
 #[tonic::async_trait]
 impl pb::worker_service_server::WorkerService for WorkerApi {
     async fn register(&self, req: Request<pb::RegisterRequest>) -> Result<Response<pb::RegisterResponse>, Status> {
+        // the address it registers from: failures count against its host too
+        let peer = req.extensions().get::<axum::extract::ConnectInfo<Peer>>().map(|c| c.0.addr.ip());
         let req = req.into_inner();
+        if req.version.len() > MAX_VERSION_BYTES {
+            return Err(Status::invalid_argument(format!("field \"version\" is over {MAX_VERSION_BYTES} bytes")));
+        }
         let svc = self.0.svc.clone();
         let id = blocking(move || {
             let identity = (!req.worker_id.is_empty()).then_some((req.worker_id.as_str(), req.worker_secret.as_str()));
-            svc.register(&req.name, req.threads, identity, now_ms())
+            svc.register(&req.name, req.threads, identity, peer, now_ms())
         })
         .await?;
         let ttl = self.0.svc.lease_timeout_ms();

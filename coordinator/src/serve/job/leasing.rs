@@ -6,7 +6,8 @@
 use std::collections::BTreeSet;
 
 use super::model::{
-    BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, touch,
+    BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, host_of,
+    touch,
 };
 
 /// How long a lease may be held, heartbeats or not: `factor` times what the tile should take at
@@ -73,11 +74,12 @@ impl JobsModel {
     /// (highest priority, then oldest). Full-frame jobs hand out one tile at a time.
     pub fn lease(&mut self, worker: &str, max_tiles: usize, now_ms: u64, ttl_ms: u64) -> (Vec<LeaseRef>, Changes) {
         let mut changes = Changes::new();
+        let host = host_of(&self.hosts, worker);
         let candidate = self
             .jobs
             .values()
             .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
-            .filter(|j| !j.is_blocklisted(worker))
+            .filter(|j| !j.is_blocklisted_on(worker, host))
             .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
             .map(|j| j.id.clone());
@@ -128,6 +130,7 @@ impl JobsModel {
     /// heartbeat and abandons the tile.
     pub fn expire(&mut self, now_ms: u64, lifetime: &LeaseLifetime) -> Changes {
         let mut changes = Changes::new();
+        let hosts = &self.hosts;
         for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
             for i in job.index.leased.clone() {
                 let TileState::Leased { worker, deadline_ms, since_ms } = &job.tiles[i].state else { continue };
@@ -140,7 +143,7 @@ impl JobsModel {
                     continue;
                 };
                 let worker = worker.clone();
-                fail_tile(job, i, &worker, &reason, now_ms);
+                fail_tile(job, i, (&worker, host_of(hosts, &worker)), &reason, now_ms);
                 touch(&mut changes, &job.id, Some(i));
             }
         }
@@ -156,6 +159,9 @@ impl JobsModel {
             .values()
             .filter(|j| !j.state.is_terminal() && !live.is_empty())
             .filter(|j| !j.index.queued.is_empty())
+            // by the workers' own failures: a host blocklisted for workers that registered
+            // afresh before each failure (one token holder lying) leaves the job waiting for
+            // a worker elsewhere
             .filter(|j| live.iter().all(|w| j.is_blocklisted(w)))
             .map(|j| j.id.clone())
             .collect();

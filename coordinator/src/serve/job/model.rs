@@ -22,6 +22,12 @@ use tessera_common::emis::RestartTotal;
 
 /// A worker that failed this many leases of one job gets no more of its tiles.
 pub const BLOCKLIST_AFTER_FAILURES: u32 = 3;
+/// A host's failed leases of one job that blocklist every worker on it for the job: twice a
+/// worker's, so that one faulty worker does not cut off the others on its host.
+pub const HOST_BLOCKLIST_AFTER_FAILURES: u32 = 2 * BLOCKLIST_AFTER_FAILURES;
+/// What one host's failures count towards failing a job ([`fail_tile`]): half of what fails
+/// it, so that no host alone can fail a job, not even by registering afresh before each lie.
+pub const MAX_FAILURES_PER_HOST: u32 = MAX_TILE_FAILURES / 2;
 /// A tile that failed this many times fails its job.
 pub const MAX_TILE_FAILURES: u32 = 6;
 
@@ -190,9 +196,23 @@ impl Job {
         self.merged..(self.merged + window).min(self.tiles.len())
     }
 
-    /// Whether `worker` may lease this job's tiles.
+    /// Whether `worker` may lease this job's tiles, its host aside.
     pub fn is_blocklisted(&self, worker: &str) -> bool {
         self.worker_failures.get(worker).is_some_and(|&n| n >= BLOCKLIST_AFTER_FAILURES)
+    }
+
+    /// Whether `worker` on `host` may lease this job's tiles: neither it nor its host failed
+    /// them too often.
+    pub fn is_blocklisted_on(&self, worker: &str, host: &str) -> bool {
+        self.is_blocklisted(worker)
+            || self.worker_failures.get(&host_key(host)).is_some_and(|&n| n >= HOST_BLOCKLIST_AFTER_FAILURES)
+    }
+
+    /// The job's failures that count towards failing it: each host's, at most
+    /// [`MAX_FAILURES_PER_HOST`].
+    fn failures_counted(&self) -> u32 {
+        let hosts = self.worker_failures.iter().filter(|(k, _)| k.starts_with(HOST_PREFIX));
+        hosts.map(|(_, &n)| n.min(MAX_FAILURES_PER_HOST)).sum()
     }
 
     /// Pixel samples merged into the film.
@@ -350,6 +370,9 @@ pub enum TransitionError {
 pub struct JobsModel {
     /// Jobs by id.
     pub jobs: BTreeMap<String, Job>,
+    /// The address each worker registered from: failures count against it as well as against
+    /// the worker, so that registering afresh does not escape them.
+    pub hosts: BTreeMap<String, String>,
 }
 
 impl JobsModel {
@@ -413,6 +436,7 @@ impl JobsModel {
         now_ms: u64,
     ) -> (ResultOutcome, Changes) {
         let mut changes = Changes::new();
+        let host = host_of(&self.hosts, worker).to_string();
         let Some((job, i)) = self.current_tile(worker, lease) else {
             let duplicate =
                 self.jobs.get(&lease.job).and_then(|j| j.tiles.get(lease.tile)).is_some_and(|t| {
@@ -431,7 +455,7 @@ impl JobsModel {
                 (ResultOutcome::Accepted, changes)
             }
             Err(reason) => {
-                fail_tile(job, i, worker, &reason, now_ms);
+                fail_tile(job, i, (worker, &host), &reason, now_ms);
                 (ResultOutcome::Refused(reason), changes)
             }
         }
@@ -440,8 +464,9 @@ impl JobsModel {
     /// A worker could not render its lease: re-queue the tile and count the failure.
     pub fn report_failure(&mut self, worker: &str, lease: &LeaseRef, message: &str, now_ms: u64) -> Changes {
         let mut changes = Changes::new();
+        let host = host_of(&self.hosts, worker).to_string();
         if let Some((job, i)) = self.current_tile(worker, lease) {
-            fail_tile(job, i, worker, message, now_ms);
+            fail_tile(job, i, (worker, &host), message, now_ms);
             touch(&mut changes, &lease.job, Some(i));
         }
         changes
@@ -561,18 +586,35 @@ impl JobsModel {
     }
 }
 
+/// Keys of a job's `worker_failures` that count a host's failures (worker ids never hold it).
+const HOST_PREFIX: &str = "@";
+
+fn host_key(host: &str) -> String {
+    format!("{HOST_PREFIX}{host}")
+}
+
+/// The host `worker` registered from, as the model knows it: a worker of unknown address
+/// counts as a host of its own.
+pub(super) fn host_of<'a>(hosts: &'a BTreeMap<String, String>, worker: &'a str) -> &'a str {
+    hosts.get(worker).map_or(worker, String::as_str)
+}
+
 /// Sends tile `i` back to the queue with a new epoch and counts the failure against `worker`
-/// (blocklisting it for the job after [`BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile
-/// has failed [`MAX_TILE_FAILURES`] times.
-pub(super) fn fail_tile(job: &mut Job, i: usize, worker: &str, reason: &str, now_ms: u64) {
+/// and its `host` (blocklisting them for the job after [`BLOCKLIST_AFTER_FAILURES`] and
+/// [`HOST_BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile has failed
+/// [`MAX_TILE_FAILURES`] times and the job's failures, at most [`MAX_FAILURES_PER_HOST`] a
+/// host, add up to as many.
+pub(super) fn fail_tile(job: &mut Job, i: usize, (worker, host): (&str, &str), reason: &str, now_ms: u64) {
     job.set_tile_state(i, TileState::Queued);
     let tile = &mut job.tiles[i];
     tile.epoch += 1;
     tile.failures += 1;
+    let failures = tile.failures;
     *job.worker_failures.entry(worker.to_string()).or_default() += 1;
+    *job.worker_failures.entry(host_key(host)).or_default() += 1;
     job.last_failure = Some(reason.to_string());
-    if tile.failures >= MAX_TILE_FAILURES {
-        job.error = Some(format!("tile {i} failed {} times, last: {reason}", tile.failures));
+    if failures >= MAX_TILE_FAILURES && job.failures_counted() >= MAX_TILE_FAILURES {
+        job.error = Some(format!("tile {i} failed {failures} times, last: {reason}"));
         job.finish(JobState::Failed, now_ms);
     }
 }

@@ -148,6 +148,44 @@ fn refused_result_requeues_and_repeat_offender_is_blocklisted() {
     assert_eq!(m.lease("good", 1, 0, TTL).0.len(), 1);
 }
 
+/// A worker token holder on one host registering afresh before each failure it reports
+/// cannot fail a job alone: its host is blocklisted, and a worker elsewhere renders the tile.
+/// Failures from a second host still fail a job that fails everywhere.
+#[test]
+fn one_host_cannot_fail_a_job_alone_even_by_registering_afresh() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(IntegratorName::Bdpt, 1, 0), 0).unwrap();
+    let mut lies = 0;
+    for k in 0..3 * MAX_TILE_FAILURES {
+        let liar = format!("liar{k}");
+        m.hosts.insert(liar.clone(), "10.0.0.66".into());
+        let (l, _) = m.lease(&liar, 1, 0, TTL);
+        if l.is_empty() {
+            break;
+        }
+        m.report_failure(&liar, &l[0], "fake", 0);
+        lies += 1;
+    }
+    assert_eq!(lies, HOST_BLOCKLIST_AFTER_FAILURES, "the host is blocklisted for the job");
+    assert_ne!(m.jobs["a"].state, JobState::Failed);
+    let liars: Vec<String> = (0..lies).map(|k| format!("liar{k}")).collect();
+    let (stranded, _) = m.fail_stranded(&liars.iter().map(String::as_str).collect::<Vec<_>>(), 0);
+    assert!(stranded.is_empty(), "no liar failed three times itself: the job waits for another host");
+    m.hosts.insert("honest".into(), "10.0.0.7".into());
+    let (l, _) = m.lease("honest", 1, 0, TTL);
+    assert_eq!(l.len(), 1, "a worker on another host gets the tile");
+    // it fails too: the tile is broken everywhere, which hosts beside the liar's now show
+    m.report_failure("honest", &l[0], "really broken", 0);
+    assert_ne!(m.jobs["a"].state, JobState::Failed, "the liar's failures count three at most");
+    for k in 0..MAX_FAILURES_PER_HOST - 1 {
+        let w = format!("second{k}");
+        m.hosts.insert(w.clone(), "10.0.0.8".into());
+        let (l, _) = m.lease(&w, 1, 0, TTL);
+        m.report_failure(&w, &l[0], "really broken", 0);
+    }
+    assert_eq!(m.jobs["a"].state, JobState::Failed, "other hosts' failures fail it");
+}
+
 #[test]
 fn tile_failing_too_often_fails_the_job() {
     let mut m = JobsModel::default();

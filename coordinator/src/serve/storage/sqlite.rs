@@ -135,6 +135,8 @@ pub struct WorkerRow {
     pub last_seen_ms: u64,
     /// SHA-256 (hex) of the secret a worker that keeps its identity registered with.
     pub secret_sha256: Option<String>,
+    /// The address it registered from, which its failures are also counted against.
+    pub host: Option<String>,
 }
 
 /// The database.
@@ -159,7 +161,7 @@ CREATE TABLE IF NOT EXISTS results (
     payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
 CREATE TABLE IF NOT EXISTS workers (
     id TEXT PRIMARY KEY, name TEXT NOT NULL, threads INTEGER NOT NULL,
-    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL, secret_sha256 TEXT);
+    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL, secret_sha256 TEXT, host TEXT);
 ";
 
 /// The rows of one transition, taken from the model under the service's lock and written
@@ -290,9 +292,11 @@ impl Store {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
-        // databases from before workers kept their identity, and before EMIS jobs stored their
-        // strategy PNG and report
-        for (table, column) in [("workers", "secret_sha256"), ("jobs", "strategy_png"), ("jobs", "emis_json")] {
+        // databases from before workers kept their identity and address, and before EMIS jobs
+        // stored their strategy PNG and report
+        let added =
+            [("workers", "secret_sha256"), ("workers", "host"), ("jobs", "strategy_png"), ("jobs", "emis_json")];
+        for (table, column) in added {
             let exists =
                 conn.prepare("SELECT 1 FROM pragma_table_info(?1) WHERE name = ?2")?.exists(params![table, column])?;
             if !exists {
@@ -525,9 +529,9 @@ impl Store {
     /// Registers or refreshes a worker.
     pub fn save_worker(&self, w: &WorkerRow) -> Result<(), StoreError> {
         self.conn.execute(
-            "INSERT OR REPLACE INTO workers (id, name, threads, registered_ms, last_seen_ms, secret_sha256)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-            params![w.id, w.name, w.threads, w.registered_ms as i64, w.last_seen_ms as i64, w.secret_sha256],
+            "INSERT OR REPLACE INTO workers (id, name, threads, registered_ms, last_seen_ms, secret_sha256, host)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+            params![w.id, w.name, w.threads, w.registered_ms as i64, w.last_seen_ms as i64, w.secret_sha256, w.host],
         )?;
         Ok(())
     }
@@ -540,8 +544,9 @@ impl Store {
 
     /// Every registered worker.
     pub fn load_workers(&self) -> Result<Vec<WorkerRow>, StoreError> {
-        let mut stmt =
-            self.conn.prepare("SELECT id, name, threads, registered_ms, last_seen_ms, secret_sha256 FROM workers")?;
+        let mut stmt = self
+            .conn
+            .prepare("SELECT id, name, threads, registered_ms, last_seen_ms, secret_sha256, host FROM workers")?;
         let rows = stmt.query_map([], |r| {
             Ok(WorkerRow {
                 id: r.get(0)?,
@@ -550,6 +555,7 @@ impl Store {
                 registered_ms: r.get::<_, i64>(3)? as u64,
                 last_seen_ms: r.get::<_, i64>(4)? as u64,
                 secret_sha256: r.get(5)?,
+                host: r.get(6)?,
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)

@@ -22,6 +22,7 @@ impl JobService {
         name: &str,
         threads: u32,
         identity: Option<(&str, &str)>,
+        peer: Option<std::net::IpAddr>,
         now_ms: u64,
     ) -> Result<String, ServiceError> {
         check_registration(name, threads)?;
@@ -49,7 +50,9 @@ impl JobService {
             )));
         }
         let registered_ms = inner.workers.get(&id).map_or(now_ms, |w| w.registered_ms);
-        let row = WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256 };
+        let host = peer.map(host_of_address);
+        let row =
+            WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256, host };
         self.commits.store().save_worker(&row)?;
         let orphaned = inner.model.leases_of(&row.id);
         let mut changes = crate::serve::job::model::Changes::new();
@@ -65,7 +68,11 @@ impl JobService {
             self.sync(&inner)?;
             self.work.notify_waiters();
         }
-        tracing::info!(worker_id = %row.id, name = %row.name, threads, "worker registered");
+        tracing::info!(worker_id = %row.id, name = %row.name, threads, host = row.host.as_deref().unwrap_or("-"), "worker registered");
+        match &row.host {
+            Some(host) => inner.model.hosts.insert(row.id.clone(), host.clone()),
+            None => inner.model.hosts.remove(&row.id),
+        };
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
     }
@@ -88,6 +95,7 @@ impl JobService {
         for id in silent {
             self.commits.store().delete_worker(&id)?;
             inner.workers.remove(&id);
+            inner.model.hosts.remove(&id);
             tracing::info!(worker_id = %id, "worker forgotten: silent too long");
         }
         Ok(())
@@ -349,6 +357,18 @@ impl JobService {
 }
 
 /// A kept identity is a short printable id and a secret long enough not to be guessed.
+/// The host a peer address stands for: an IPv4 address, or an IPv6 /64 (one host's share of
+/// addresses), as the connection limits count peers.
+fn host_of_address(ip: std::net::IpAddr) -> String {
+    match ip.to_canonical() {
+        std::net::IpAddr::V4(v4) => v4.to_string(),
+        std::net::IpAddr::V6(v6) => {
+            let s = v6.segments();
+            format!("{:x}:{:x}:{:x}:{:x}::/64", s[0], s[1], s[2], s[3])
+        }
+    }
+}
+
 /// A worker's name is shown on the dashboard and kept in memory: printable and short.
 fn check_registration(name: &str, threads: u32) -> Result<(), ServiceError> {
     use super::{MAX_WORKER_NAME_BYTES, MAX_WORKER_THREADS};

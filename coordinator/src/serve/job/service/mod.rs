@@ -259,6 +259,9 @@ impl JobService {
             last_expiry_ms: None,
         };
         for w in store.load_workers()? {
+            if let Some(host) = &w.host {
+                inner.model.hosts.insert(w.id.clone(), host.clone());
+            }
             inner.workers.insert(w.id.clone(), w);
         }
         // one job that cannot be loaded or resumed fails with its error; the others go on

@@ -67,7 +67,7 @@ impl BundleUpload {
             std::fs::create_dir_all(parent).map_err(|_| clash())?;
         }
         let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&target).map_err(|_| clash())?;
-        self.current = Some(BufWriter::with_capacity(1 << 20, file));
+        self.current = Some(BufWriter::with_capacity(64 << 10, file));
         self.files.push((path.to_string(), 0));
         Ok(())
     }
