@@ -118,6 +118,16 @@ HAND_MADE_SCENE = """<scene version="3.0.0">
 """
 
 
+# several files in one input, split at NUL bytes: scene.xml, inc1.xml, inc2.xml, inc3.xml
+INCLUDES_SCENE = "\0".join([
+    '<scene version="3.0.0"><include filename="inc1.xml"/><shape type="sphere"><ref id="inc-bsdf"/></shape></scene>',
+    '<scene version="3.0.0"><include filename="inc2.xml"/><include filename="inc3.xml"/>'
+    '<bsdf type="diffuse" id="inc-bsdf"/></scene>',
+    '<scene version="3.0.0"><bsdf type="roughplastic" id="plastic"/><alias id="plastic" as="p2"/></scene>',
+    '<bsdf version="3.0.0" type="conductor" id="metal"/>',
+])
+
+
 def scene_corpus():
     sources = sorted(ROOT.glob("scenes/*/scene.xml")) + [ROOT / "common/tests/data/uv/scene.xml"]
     for source in sources:
@@ -128,6 +138,8 @@ def scene_corpus():
         put("scene_xml", name, text)
     put("scene_build", "hand-made.xml", HAND_MADE_SCENE)
     put("scene_xml", "hand-made.xml", HAND_MADE_SCENE)
+    put("scene_build", "includes", INCLUDES_SCENE)
+    put("scene_xml", "includes", INCLUDES_SCENE)
 
 
 def asset(filename):

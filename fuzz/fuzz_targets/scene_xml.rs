@@ -9,10 +9,11 @@ use std::collections::HashMap;
 use tessera_common::scene::xml;
 
 fuzz_target!(|data: &[u8]| {
-    // the scene loader reads files with read_to_string: text that is not UTF-8 is refused there
-    let Ok(text) = std::str::from_utf8(data) else { return };
     let dir = tessera_fuzz::scene_folder();
-    // an <include> of scene.xml reads the input again
-    let path = tessera_fuzz::write("scene.xml", data);
+    // written first: an <include> of scene.xml reads it again
+    let path = tessera_fuzz::write_scene(data);
+    let scene = data.split(|&b| b == 0).next().unwrap_or_default();
+    // the scene loader reads files with read_to_string: text that is not UTF-8 is refused there
+    let Ok(text) = std::str::from_utf8(scene) else { return };
     let _ = xml::parse_confined(text, &path, &HashMap::new(), Some(dir));
 });

@@ -62,6 +62,23 @@ const SCENE_ASSETS: &[(&str, &[u8])] = &[
     ("part.xml", include_bytes!("../assets/part.xml")),
 ];
 
+/// The files besides `scene.xml` that a scene target's input holds (a farm job's bundle may hold
+/// any number of XML files: several let includes fan out).
+pub const SCENE_INCLUDES: [&str; 3] = ["inc1.xml", "inc2.xml", "inc3.xml"];
+
+/// Writes a scene target's input to the scratch folder and returns the path of `scene.xml`:
+/// the input up to its first NUL byte (which XML text cannot hold) is `scene.xml`, and the
+/// parts after the next NULs are [`SCENE_INCLUDES`] (each written, empty when absent, so that
+/// no file is left from an earlier input).
+pub fn write_scene(data: &[u8]) -> PathBuf {
+    let mut parts = data.splitn(SCENE_INCLUDES.len() + 1, |&b| b == 0);
+    let scene = write("scene.xml", parts.next().unwrap_or_default());
+    for name in SCENE_INCLUDES {
+        write(name, parts.next().unwrap_or_default());
+    }
+    scene
+}
+
 /// Writes [`SCENE_ASSETS`] to the scratch folder (once per process) and returns the folder.
 pub fn scene_folder() -> &'static Path {
     static ONCE: Once = Once::new();
