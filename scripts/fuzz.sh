@@ -14,7 +14,10 @@
 #   FUZZ_VMEM_MB      address-space limit of each fuzzing process (default 4096), so that one
 #                     huge allocation fails at once instead of slipping past the RSS check
 # Exits 1 when a target that fuzz/known-findings does not name finds a crash, OOM or timeout,
-# or fails one of its reproducers; findings of the targets it names are printed only.
+# or fails one of its reproducers (replayed with TESSERA_FUZZ_STRICT=1, so a caught panic
+# fails); findings of the targets it names are printed only. Caught panics found while fuzzing
+# (caught-panic-* files) are counted but do not fail the run: commit one as a reproducer to
+# hold the decoder to it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -64,7 +67,8 @@ replay() {
     local t=$1 passed=0 failed=0 f
     for f in fuzz/regressions/"$t"/*; do
         [ -f "$f" ] || continue
-        if TESSERA_FUZZ_SCRATCH="$scratch" nice -n 19 "$bin_dir/$t" -rss_limit_mb=1024 -timeout=10 "$f" \
+        # strict: a reproducer of a panic that the code catches fails too
+        if TESSERA_FUZZ_STRICT=1 TESSERA_FUZZ_SCRATCH="$scratch" nice -n 19 "$bin_dir/$t" -rss_limit_mb=1024 -timeout=10 "$f" \
             >"$work/$t/replay.log" 2>&1; then
             passed=$((passed + 1))
         else
