@@ -58,20 +58,20 @@ const GOLDENS: &[Row] = &[
 fn model(name: &str) -> Material {
     let ggx = |au, av| Microfacet::new(MicrofacetKind::Ggx, au, av, true);
     let bxdf = match name {
-        "roughplastic_ggx" => Bxdf::RoughPlastic(RoughPlastic::new(
-            ggx(0.35, 0.35),
-            1.5 / 1.000277,
-            Rgb::new(0.4, 0.42, 0.45),
-            None,
-            false,
-        )),
-        "roughplastic_beckmann_nonlinear" => Bxdf::RoughPlastic(RoughPlastic::new(
-            Microfacet::new(MicrofacetKind::Beckmann, 0.2, 0.2, true),
-            1.33 / 1.000277,
-            Rgb::new(0.8, 0.5, 0.2),
-            None,
-            true,
-        )),
+        "roughplastic_ggx" => Bxdf::RoughPlastic(
+            RoughPlastic::new(ggx(0.35, 0.35), 1.5 / 1.000277, Rgb::new(0.4, 0.42, 0.45), None, false)
+                .expect("a few coatings"),
+        ),
+        "roughplastic_beckmann_nonlinear" => Bxdf::RoughPlastic(
+            RoughPlastic::new(
+                Microfacet::new(MicrofacetKind::Beckmann, 0.2, 0.2, true),
+                1.33 / 1.000277,
+                Rgb::new(0.8, 0.5, 0.2),
+                None,
+                true,
+            )
+            .expect("a few coatings"),
+        ),
         "plastic" => Bxdf::Plastic(Plastic::new(1.5 / 1.000277, Rgb::new(0.4, 0.42, 0.45), None, false)),
         "roughconductor_anisotropic" => Bxdf::RoughConductor(RoughConductor {
             distribution: ggx(0.04, 0.35),

@@ -24,7 +24,7 @@ pub use conductor::{Conductor, RoughConductor};
 pub use dielectric::{Dielectric, RoughDielectric, ThinDielectric};
 pub use diffuse::Diffuse;
 pub use microfacet::{Microfacet, MicrofacetKind};
-pub use plastic::{Plastic, RoughPlastic};
+pub use plastic::{CoatingKey, Plastic, RoughPlastic, coating_key};
 
 /// Which quantity a path carries: radiance (camera paths) or importance (light paths). It
 /// matters for refraction, where radiance is scaled by 1/η² and importance is not.

@@ -111,6 +111,22 @@ pub struct RoughPlastic {
     coating: &'static CoatingTables,
 }
 
+/// What identifies a coating's tables: the distribution's kind, α, η and visible sampling.
+pub type CoatingKey = (bool, u32, u32, bool);
+
+/// The key of the coating of `distribution` over index `eta`.
+pub fn coating_key(distribution: &Microfacet, eta: f32) -> CoatingKey {
+    (
+        distribution.kind == super::MicrofacetKind::Ggx,
+        distribution.alpha_u.to_bits(),
+        eta.to_bits(),
+        distribution.sample_visible,
+    )
+}
+
+/// The most coatings a process keeps tables of (17 MB).
+pub const MAX_COATINGS: usize = 1 << 16;
+
 /// What a rough dielectric coating does to light, tabulated once per (distribution, η).
 #[derive(Debug, PartialEq)]
 struct CoatingTables {
@@ -123,19 +139,22 @@ struct CoatingTables {
 impl CoatingTables {
     /// The tables of a coating, computed on first use and kept for the life of the process (a
     /// process sees few distinct coatings; each costs 260 bytes and about a million quadrature
-    /// evaluations, which repeated scene loads then skip).
-    fn of(distribution: &Microfacet, eta: f32) -> &'static CoatingTables {
-        type Key = (bool, u32, u32, bool);
-        static CACHE: std::sync::LazyLock<std::sync::Mutex<std::collections::HashMap<Key, &'static CoatingTables>>> =
-            std::sync::LazyLock::new(Default::default);
-        let key = (
-            distribution.kind == super::MicrofacetKind::Ggx,
-            distribution.alpha_u.to_bits(),
-            eta.to_bits(),
-            distribution.sample_visible,
-        );
+    /// evaluations, which repeated scene loads then skip). At most [`MAX_COATINGS`] are kept:
+    /// `None` past them (scenes are limited to a few each, so only a process that loaded
+    /// thousands of hostile scenes gets there).
+    fn of(distribution: &Microfacet, eta: f32) -> Option<&'static CoatingTables> {
+        static CACHE: std::sync::LazyLock<
+            std::sync::Mutex<std::collections::HashMap<CoatingKey, &'static CoatingTables>>,
+        > = std::sync::LazyLock::new(Default::default);
+        let key = coating_key(distribution, eta);
         let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
-        cache.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(distribution, eta))))
+        if let Some(tables) = cache.get(&key) {
+            return Some(*tables);
+        }
+        if cache.len() >= MAX_COATINGS {
+            return None;
+        }
+        Some(*cache.entry(key).or_insert_with(|| Box::leak(Box::new(CoatingTables::compute(distribution, eta)))))
     }
 
     /// Mitsuba's tables: μ on a uniform grid over [0, 1] (the first at 1e-6), the internal
@@ -153,24 +172,25 @@ impl CoatingTables {
 }
 
 impl RoughPlastic {
-    /// A rough plastic; precomputes the coating's transmittance table by quadrature.
+    /// A rough plastic; precomputes the coating's transmittance table by quadrature. `None`
+    /// when the process keeps [`MAX_COATINGS`] tables already.
     pub fn new(
         distribution: Microfacet,
         eta: f32,
         diffuse_reflectance: Rgb,
         specular_reflectance: Option<Rgb>,
         nonlinear: bool,
-    ) -> Self {
+    ) -> Option<Self> {
         let s_mean = specular_reflectance.map_or(1.0, mean);
-        RoughPlastic {
+        Some(RoughPlastic {
             distribution,
             eta,
             diffuse_reflectance,
             specular_reflectance: specular_reflectance.unwrap_or(Rgb::ONE),
             nonlinear,
             specular_sampling_weight: s_mean / (mean(diffuse_reflectance) + s_mean),
-            coating: CoatingTables::of(&distribution, eta),
-        }
+            coating: CoatingTables::of(&distribution, eta)?,
+        })
     }
 
     fn transmittance(&self, cos_theta: f32) -> f32 {

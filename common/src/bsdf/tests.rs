@@ -68,7 +68,7 @@ fn smooth_models() -> Vec<(&'static str, Bxdf)> {
         ("plastic", Bxdf::Plastic(Plastic::new(1.49, Rgb::new(0.5, 0.3, 0.2), None, false))),
         (
             "roughplastic-ggx-0.2",
-            Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.2), 1.49, Rgb::new(0.5, 0.3, 0.2), None, false)),
+            Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.2), 1.49, Rgb::new(0.5, 0.3, 0.2), None, false).unwrap()),
         ),
     ]
 }
@@ -204,7 +204,7 @@ fn albedo_never_exceeds_one() {
     models.push(("plastic-white", white(Bxdf::Plastic(Plastic::new(1.5, Rgb::ONE, None, false)))));
     models.push((
         "roughplastic-white",
-        white(Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.3), 1.5, Rgb::ONE, None, false))),
+        white(Bxdf::RoughPlastic(RoughPlastic::new(ggx(0.3), 1.5, Rgb::ONE, None, false).unwrap())),
     ));
     for (name, m) in models {
         for wo in directions().into_iter().filter(|w| w.z > 0.0) {

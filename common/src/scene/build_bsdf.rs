@@ -273,7 +273,15 @@ fn build_bxdf(e: &Element, ctx: &mut Ctx) -> Result<Bxdf, SceneError> {
                     ));
                 }
                 let distribution = microfacet(e, ctx, false, false)?;
-                Bxdf::RoughPlastic(RoughPlastic::new(distribution, eta, diffuse, specular, nonlinear))
+                // each distinct coating costs about a million quadrature evaluations
+                ctx.textures.count_coating(coating_key(&distribution, eta), &e.location)?;
+                let plastic = RoughPlastic::new(distribution, eta, diffuse, specular, nonlinear).ok_or_else(|| {
+                    SceneError::at(
+                        &e.location,
+                        "this process keeps the tables of too many rough plastic coatings: restart it",
+                    )
+                })?;
+                Bxdf::RoughPlastic(plastic)
             }
         }
         "twosided" | "mask" => {

@@ -43,13 +43,17 @@ pub fn load_serialized_bytes(path: &Path, bytes: &[u8], shape_index: u32) -> Res
     let start = if shape_index == 0 { 4 } else { substream_offset(&bytes, version, shape_index).map_err(bad)? + 4 };
     let stream = bytes.get(start..).ok_or_else(|| bad("mesh offset past the end of the file".into()))?;
     let limit = (stream.len() as u64).saturating_mul(MAX_INFLATE_RATIO).max(MIN_INFLATE_LIMIT);
-    read_mesh(&mut Inflated { inner: ZlibDecoder::new(stream), left: limit, limit }, version).map_err(bad)
+    // buffered: the name is read a byte at a time
+    let inner = std::io::BufReader::new(ZlibDecoder::new(stream));
+    read_mesh(&mut Inflated { inner, left: limit, limit }, version).map_err(bad)
 }
 
 /// How much a mesh may inflate: zlib can reach about 1000:1, but vertex positions hardly
 /// compress and real meshes shrink to a half or a third; a mesh that claims more is refused
 /// before it costs memory out of proportion to the file.
 const MAX_INFLATE_RATIO: u64 = 64;
+/// The longest mesh name read (and dropped).
+const MAX_NAME_BYTES: usize = 4096;
 /// What any mesh may inflate to, however small its file.
 const MIN_INFLATE_LIMIT: u64 = 1 << 20;
 
@@ -139,10 +143,13 @@ fn read_mesh<R: Read>(r: &mut Inflated<R>, version: u16) -> Result<Mesh, String>
     if version == 4 {
         // the mesh's name: read and dropped, as Tessera names shapes by their XML id
         let mut byte = [0u8; 1];
-        loop {
+        for read in 0.. {
             r.read_exact(&mut byte).map_err(|_| "the data ends inside the mesh name".to_string())?;
             if byte[0] == 0 {
                 break;
+            }
+            if read >= MAX_NAME_BYTES {
+                return Err(format!("the mesh name is longer than {MAX_NAME_BYTES} bytes"));
             }
         }
     }

@@ -8,7 +8,8 @@
 //! A scene may be hostile (docs/decisions/0015-limits-on-hostile-input.md), so the walk is
 //! bounded: elements nest at most [`MAX_NESTING`] deep (the walk recurses, and so do the later
 //! walks and the tree's drop), a scene has at most [`MAX_XML_BYTES`] of XML and
-//! [`MAX_XML_NODES`] nodes across its files, at most [`MAX_SEARCH_PATHS`] `<path>`s, and every
+//! [`MAX_XML_NODES`] nodes across its files, at most [`MAX_INCLUDES`] includes and
+//! [`MAX_SEARCH_PATHS`] `<path>`s, and every
 //! location costs constant time ([`Positions`]).
 
 use super::super::error::{Location, SceneError};
@@ -34,6 +35,9 @@ pub const MAX_XML_NODES: u32 = 1_000_000;
 pub const MAX_NESTING: usize = 32;
 /// The most `<path>` folders a scene may add: every file name is looked for in each.
 pub const MAX_SEARCH_PATHS: usize = 64;
+/// The most `<include>`s a scene may read, each time counted: three files of 60 includes of
+/// the next one were 216 000 parses.
+pub const MAX_INCLUDES: usize = 1024;
 
 /// Tags of plugin objects (besides `<scene>` and `<spectrum type=..>`).
 const OBJECT_TAGS: &[&str] = &[
@@ -71,6 +75,8 @@ pub(super) struct Session {
     nesting: usize,
     /// `<path>` folders added.
     search_paths: usize,
+    /// `<include>`s read.
+    includes: usize,
 }
 
 impl Session {
@@ -86,6 +92,7 @@ impl Session {
             xml_nodes: 0,
             nesting: 0,
             search_paths: 0,
+            includes: 0,
         }
     }
 
@@ -330,6 +337,10 @@ impl FileParser<'_, '_> {
     fn include(&mut self, attrs: &Attrs, loc: &Location, parent: &mut Element) -> Result<(), SceneError> {
         attrs.check(loc, &["!filename", "name"])?;
         let filename = attrs.required("filename", loc)?;
+        self.session.includes += 1;
+        if self.session.includes > MAX_INCLUDES {
+            return Err(SceneError::at(loc, format!("a scene may read at most {MAX_INCLUDES} <include>s")));
+        }
         if self.depth + 1 >= MAX_INCLUDE_DEPTH {
             return Err(SceneError::at(
                 loc,

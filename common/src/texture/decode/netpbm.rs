@@ -26,6 +26,9 @@ pub(super) fn read_pfm<R: BufRead>(ctx: &Ctx, mut reader: R) -> Result<(Image, R
     let width: u32 = number(ctx, &mut reader)?;
     let height: u32 = number(ctx, &mut reader)?;
     let scale: f32 = number(ctx, &mut reader)?;
+    if width == 0 || height == 0 {
+        return Err(ctx.corrupt("the image has no pixels"));
+    }
     let reservation = ctx.reserve(width, height, 4 * channels as u64, PFM_PEAK)?;
 
     let count = width as usize * height as usize * channels;
