@@ -94,11 +94,10 @@ impl<'a> Outputs<'a> {
                 attributes.push(("tessera/emis_start_weight".into(), Attribute::Float(k as f32)));
             }
         }
+        // no Inf or NaN reaches a file or a preview (film::exr::finite)
         let mut rgb = emis.map_or_else(|| film.average(), |e| e.image(film));
-        // no Inf or NaN reaches a file, whatever sums a film holds: a value past f32's range
-        // is clamped to it, and one that is not a number shows as black
         for c in rgb.iter_mut().flatten() {
-            *c = if c.is_nan() { 0.0 } else { c.clamp(f32::MIN, f32::MAX) };
+            *c = tessera_common::film::exr::finite(*c);
         }
         Outputs { film, rgb, emis: emis.map(|e| (e, e.merge_mask())), attributes }
     }

@@ -56,7 +56,7 @@ pub fn write_exr(
     let (w, h) = (width as usize, height as usize);
     let mut channels = smallvec::SmallVec::<[AnyChannel<FlatSamples>; 4]>::new();
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
-        channels.push(AnyChannel::new(*name, FlatSamples::F32(rgb.iter().map(|p| p[c]).collect())));
+        channels.push(AnyChannel::new(*name, FlatSamples::F32(rgb.iter().map(|p| finite(p[c])).collect())));
     }
     if let Some(counts) = extras.counts {
         channels.push(AnyChannel::new("sample_count.Y", FlatSamples::U32(counts.to_vec())));
@@ -65,7 +65,10 @@ pub fn write_exr(
         if data.len() != w * h {
             return Err(err(path, format!("layer {name} has {} values for {w}x{h} pixels", data.len())));
         }
-        channels.push(AnyChannel::new(format!("{name}.Y").as_str(), FlatSamples::F32(data.to_vec())));
+        channels.push(AnyChannel::new(
+            format!("{name}.Y").as_str(),
+            FlatSamples::F32(data.iter().map(|&v| finite(v)).collect()),
+        ));
     }
     let layer =
         Layer::new(Vec2(w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(channels));
@@ -79,6 +82,12 @@ pub fn write_exr(
         attrs.other.insert(Text::from(k.as_str()), value);
     }
     Image::empty(attrs).with_layer(layer).write().to_file(path).map_err(|e| err(path, e))
+}
+
+/// `v` as written to a file: no Inf or NaN reaches one, whatever sums a film holds (a value
+/// past f32's range is clamped to it, one that is not a number shows as 0).
+pub fn finite(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(f32::MIN, f32::MAX) }
 }
 
 /// Reads one single-channel f32 layer (`NAME.Y`) of a Tessera EXR.
