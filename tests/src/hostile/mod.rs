@@ -6,10 +6,13 @@
 //! coordinator that took the cheap cases in turn must then equal `tessera render` bit for bit.
 //!
 //! The binaries are parameters, so the same cases run against an older build for a table side
-//! by side (`hostile-suite` binary); the farm test `hostile::suite` runs them against this build.
+//! by side (`hostile-suite` binary); the farm test `hostile::adversarial_suite` runs them
+//! against this build. Every process runs under an 8 GiB address-space limit, so that an older
+//! build's runaway allocation aborts it instead of pushing the machine into the OOM killer.
 
 mod canary;
 mod cases;
+mod earlier;
 mod inputs;
 mod net;
 mod procs;
@@ -89,7 +92,8 @@ pub struct Case {
 
 /// Every case, in the order.
 pub fn cases() -> Vec<Case> {
-    let mut all = cases::all();
+    let mut all = earlier::all();
+    all.extend(cases::all());
     all.extend(net::all());
     all.extend(worker_cases::all());
     all.extend(canary::all());

@@ -29,12 +29,53 @@ impl Bins {
 
     /// [`Bins::coordinator`] with the command adjusted first (limits, environment).
     pub fn coordinator_with(&self, dir: &Path, extra: &[&str], configure: impl FnOnce(&mut Command)) -> Coordinator {
-        Coordinator::start_bin(&self.tessera, &dir.join("data"), "127.0.0.1:0", extra, configure)
+        Coordinator::start_bin(&self.tessera, &dir.join("data"), "127.0.0.1:0", extra, |cmd| {
+            bound_address_space(cmd);
+            configure(cmd)
+        })
     }
 
     /// A one-thread worker of `c`, its cache under `dir`.
     pub fn worker(&self, c: &Coordinator, dir: &Path) -> Worker {
-        Worker::start_bin(&self.worker, &c.url, &dir.join("cache"), &[])
+        let child = Command::new(&self.worker)
+            .args(["--coordinator", &c.url, "--threads", "1", "--cache-dir"])
+            .arg(dir.join("cache"))
+            .stdout(std::process::Stdio::null())
+            .stderr(
+                std::fs::File::create(dir.join("worker.log")).map_or_else(|_| std::process::Stdio::null(), Into::into),
+            )
+            .spawn_bounded()
+            .expect("start tessera-worker");
+        Worker { child }
+    }
+}
+
+/// The address space a process of the suite may take: an older build's runaway allocation
+/// (tens of GB) must abort that process, not push the machine into swapping or the OOM killer.
+const ADDRESS_SPACE: u64 = 8 << 30;
+
+fn bound_address_space(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: setrlimit is async-signal-safe, as pre_exec requires
+    unsafe {
+        cmd.pre_exec(|| {
+            let limit = libc::rlimit { rlim_cur: ADDRESS_SPACE, rlim_max: ADDRESS_SPACE };
+            if libc::setrlimit(libc::RLIMIT_AS, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
+trait SpawnBounded {
+    fn spawn_bounded(&mut self) -> std::io::Result<Child>;
+}
+
+impl SpawnBounded for Command {
+    fn spawn_bounded(&mut self) -> std::io::Result<Child> {
+        bound_address_space(self);
+        self.spawn()
     }
 }
 
