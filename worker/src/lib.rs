@@ -57,8 +57,8 @@ pub struct Args {
     /// per image, 4096 in all]; a job whose scene needs more fails on this worker.
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
-    /// Most triangles a job's scene may hold on this worker; a job whose scene has more fails
-    /// here (and runs on workers that allow it).
+    /// Most triangles a job's scene may hold on this worker (about 440 bytes each while it
+    /// loads); a job whose scene has more fails here and runs on workers that allow it.
     #[arg(long, default_value_t = tessera_common::scene::DEFAULT_MAX_TRIANGLES)]
     pub max_triangles: u64,
     /// Memory one tile may need on this worker, in MiB, as estimated from the job's settings

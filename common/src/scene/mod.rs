@@ -61,8 +61,11 @@ pub struct SceneLimits {
     pub max_triangles: u64,
 }
 
-/// [`SceneLimits::max_triangles`] unless configured: about 1.5 GB of meshes and BVH.
-pub const DEFAULT_MAX_TRIANGLES: u64 = 10_000_000;
+/// [`SceneLimits::max_triangles`] unless configured. Loading takes up to about 440 bytes a
+/// triangle at its peak (a million-triangle OBJ: 454 MB, `scripts/million-triangles.sh`), so
+/// a few hundred bytes of XML naming one mesh many times stay under 1 GiB; larger scenes need
+/// the limit raised where they are loaded (`--max-triangles`).
+pub const DEFAULT_MAX_TRIANGLES: u64 = 2_000_000;
 
 impl SceneLimits {
     /// The defaults.

@@ -98,7 +98,8 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = DEFAULT_MAX_PIXELS)]
     pub max_pixels: u64,
     /// Most triangles a submitted scene's shapes may hold together (each shape naming a mesh
-    /// holds its own copy; about 150 bytes a triangle on the coordinator and on workers).
+    /// holds its own copy; loading takes up to about 440 bytes a triangle, on the coordinator
+    /// and on workers, which need the same flag).
     #[arg(long, default_value_t = DEFAULT_MAX_TRIANGLES)]
     pub max_triangles: u64,
     /// Memory one tile of a job may need on a worker, in MiB, as estimated from its settings

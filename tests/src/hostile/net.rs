@@ -53,28 +53,55 @@ fn healthz(url: &str) -> (u16, f64) {
     (if ok { out.trim().parse().unwrap_or(0) } else { 0 }, seconds)
 }
 
-/// Opens `n` TCP connections to `port` that send nothing; returns those that opened.
+/// Opens `n` TCP connections to `port` that send nothing, from eight threads so that the
+/// flood is in place within a second or two; returns those that opened.
 fn idle_connections(port: u16, n: usize) -> Vec<TcpStream> {
-    (0..n)
-        .filter_map(|_| TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(2)).ok())
-        .collect()
+    let threads: Vec<_> = (0..8)
+        .map(|_| {
+            std::thread::spawn(move || {
+                let addr = ([127, 0, 0, 1], port).into();
+                let open = |_| TcpStream::connect_timeout(&addr, Duration::from_millis(500)).ok();
+                (0..n / 8).filter_map(open).collect::<Vec<_>>()
+            })
+        })
+        .collect();
+    threads.into_iter().flat_map(|t| t.join().unwrap_or_default()).collect()
 }
 
-/// 400 connections that never send a ClientHello to a TLS coordinator, then `/healthz`.
+/// Runs a coordinator with `n` file descriptors (soft and hard), a common `ulimit -n`.
+fn with_descriptors(n: u64) -> impl FnOnce(&mut Command) {
+    move |cmd| {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: setrlimit is async-signal-safe, as pre_exec requires
+        unsafe {
+            cmd.pre_exec(move || {
+                let limit = libc::rlimit { rlim_cur: n, rlim_max: n };
+                if libc::setrlimit(libc::RLIMIT_NOFILE, &limit) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+}
+
+/// 2000 connections that never send a ClientHello to a TLS coordinator with 1024 file
+/// descriptors (eight times its handshake slots), then `/healthz`.
 fn tls_flood(bins: &Bins, dir: &Path) -> Report {
     let made = rcgen::generate_simple_self_signed(vec!["localhost".to_string()]).expect("certificate");
     let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
     std::fs::write(&cert, made.cert.pem()).expect("write");
     std::fs::write(&key, made.signing_key.serialize_pem()).expect("write");
     let flags = ["--tls-cert", cert.to_str().expect("utf-8"), "--tls-key", key.to_str().expect("utf-8")];
-    let mut c = bins.coordinator(dir, &flags);
-    let idle = idle_connections(c.port(), 400);
+    let mut c = bins.coordinator_with(dir, &flags, with_descriptors(1024));
+    let idle = idle_connections(c.port(), 2000);
     let ((status, _), seconds) = timed(|| healthz(&c.url));
+    let opened = idle.len();
     drop(idle);
     Report {
         case: "tls-handshake-flood",
         class: "connections",
-        answer: format!("healthz {status} with 400 silent TLS connections open"),
+        answer: format!("healthz {status} with {opened} silent TLS connections opened"),
         seconds,
         coordinator: settle(&mut c.child, Duration::from_millis(100)),
         worker: None,
@@ -84,19 +111,7 @@ fn tls_flood(bins: &Bins, dir: &Path) -> Report {
 
 /// A coordinator with 1024 file descriptors (soft and hard) and 1100 idle connections.
 fn fd_flood(bins: &Bins, dir: &Path) -> Report {
-    let mut c = bins.coordinator_with(dir, &[], |cmd| {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: setrlimit is async-signal-safe, as pre_exec requires
-        unsafe {
-            cmd.pre_exec(|| {
-                let limit = libc::rlimit { rlim_cur: 1024, rlim_max: 1024 };
-                if libc::setrlimit(libc::RLIMIT_NOFILE, &limit) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
-    });
+    let mut c = bins.coordinator_with(dir, &[], with_descriptors(1024));
     let idle = idle_connections(c.port(), 1100);
     let ((status, _), seconds) = timed(|| healthz(&c.url));
     let opened = idle.len();
@@ -132,13 +147,16 @@ fn full_disk(bins: &Bins, dir: &Path) -> Report {
             passed: false,
         };
     }
-    let report = full_disk_on(bins, dir, &disk);
+    // unmounted however the case ends
+    let report = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| full_disk_on(bins, dir, &disk)));
     let _ = Command::new("umount").arg("-l").arg(&disk).status();
-    report
+    report.unwrap_or_else(|e| std::panic::resume_unwind(e))
 }
 
 fn full_disk_on(bins: &Bins, dir: &Path, disk: &Path) -> Report {
-    let mut c = bins.coordinator(disk, &["--min-free-space", "32"]);
+    // an older build has no reserve to set
+    let reserve: &[&str] = if bins.serve_has_flag("--min-free-space") { &["--min-free-space", "32"] } else { &[] };
+    let mut c = bins.coordinator(disk, reserve);
     let mut w = bins.worker(&c, dir);
     let (_, first) = rest::try_submit(&c.url, ("scene.xml", inputs::scene("")), vec![], json!({"spp": 1}));
     let id = first["id"].as_str().unwrap_or("").to_string();

@@ -35,6 +35,14 @@ impl Bins {
         })
     }
 
+    /// Whether `tessera serve` of these binaries has `flag` (an older build may not).
+    pub fn serve_has_flag(&self, flag: &str) -> bool {
+        Command::new(&self.tessera)
+            .args(["serve", "--help"])
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains(flag))
+    }
+
     /// A one-thread worker of `c`, its cache under `dir`.
     pub fn worker(&self, c: &Coordinator, dir: &Path) -> Worker {
         let child = Command::new(&self.worker)

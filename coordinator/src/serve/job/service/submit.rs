@@ -159,7 +159,10 @@ impl JobService {
             confine_to: Some(dir.clone()),
         };
         // confined, so the error names files inside the bundle
-        Scene::load_options(&dir.join(scene_path), &options).map_err(|e| ServiceError::InvalidArgument(e.to_string()))
+        Scene::load_options(&dir.join(scene_path), &options).map_err(|e| {
+            let hint = if e.message.contains("triangles, the limit") { " (tessera serve --max-triangles)" } else { "" };
+            ServiceError::InvalidArgument(format!("{e}{hint}"))
+        })
     }
 }
 
