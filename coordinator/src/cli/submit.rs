@@ -135,7 +135,7 @@ async fn follow(c: &mut Client, id: &str) -> anyhow::Result<pb::Job> {
                 return Ok(job);
             }
             Ok(_) => {}
-            Err(s) if !matches!(s.code(), tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal) => {
+            Err(s) if !lost_connection(&s) => {
                 bar.finish_and_clear();
                 return Err(status_error(s));
             }
@@ -181,7 +181,27 @@ impl From<Download> for anyhow::Error {
     }
 }
 
+/// Whether a call failed for want of the coordinator (a lost connection, a restart) rather than
+/// by its answer: such calls are tried again for [`RECONNECT_FOR`].
+fn lost_connection(s: &tonic::Status) -> bool {
+    matches!(s.code(), Code::Unavailable | Code::Unknown | Code::Internal)
+}
+
+/// Downloads a result, trying again while the coordinator is unreachable.
 async fn download(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> Result<(), Download> {
+    let start = std::time::Instant::now();
+    loop {
+        match download_once(c, id, format, path).await {
+            Err(Download::Status(s)) if lost_connection(&s) && start.elapsed() < RECONNECT_FOR => {
+                tracing::debug!(status = %s, "download interrupted, retrying");
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+            }
+            done => return done,
+        }
+    }
+}
+
+async fn download_once(c: &mut Client, id: &str, format: pb::ResultFormat, path: &Path) -> Result<(), Download> {
     let req = c.request(pb::GetResultRequest { id: id.to_string(), format: format as i32 });
     let mut stream = c.jobs.get_result(req).await.map_err(Download::Status)?.into_inner();
     let mut bytes = Vec::new();

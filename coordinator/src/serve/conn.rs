@@ -15,10 +15,14 @@
 //! * **Full means evict, not refuse.** A newcomer beyond either limit is accepted and the
 //!   least useful connection closed: of the newcomer's peer at the per-peer limit, of the
 //!   peers holding the most at the global cap. Least useful is: no request in flight before one
-//!   with a request in flight (a long poll, a watch stream, an upload), then the least
-//!   recently active (accepted, or a request started or ended). A flood of idle sockets, even
-//!   from the address real clients use (all of loopback is one peer), thus only evicts itself:
-//!   `/healthz` and real clients are served on fresh connections and kept while they work.
+//!   with a request in flight (a long poll, a watch stream, an upload), then one that never
+//!   sent a byte before one that has (a TLS handshake under way, a client between requests),
+//!   then the least recently active (accepted, a request started or ended, bytes received).
+//!   A flood of idle sockets, even from the address real clients use (all of loopback is one
+//!   peer), thus only evicts itself: `/healthz` and real clients are served on fresh
+//!   connections and kept while they work. A TLS client is not yet in a request during its
+//!   handshake; ranked by accept time alone, a flood from its address closed it within a few
+//!   dozen arrivals.
 //!   Refusing would leave the newcomer in the kernel's backlog behind the flood. Sockets
 //!   being closed may outnumber the cap by 17 until their tasks drop them; beyond that the
 //!   next accept waits for them (the reserve covers it).
@@ -152,6 +156,8 @@ struct Conn {
     /// Accept, or the last request start or end.
     last_event_ms: AtomicU64,
     in_flight: AtomicU32,
+    /// One more than the time of the last read that brought bytes; 0 if none has.
+    heard_ms: AtomicU64,
     served: AtomicBool,
     /// Set (under the registry's lock) when the connection is to be closed.
     closing: AtomicBool,
@@ -164,9 +170,16 @@ impl Conn {
         self.last_event_ms.store(self.epoch.elapsed().as_millis() as u64, Ordering::Relaxed);
     }
 
-    /// Lower goes first: idle before busy, then least recently active.
-    fn rank(&self) -> (bool, u64) {
-        (self.in_flight.load(Ordering::Relaxed) > 0, self.last_event_ms.load(Ordering::Relaxed))
+    /// Notes that bytes arrived.
+    fn heard(&self) {
+        self.heard_ms.store(self.epoch.elapsed().as_millis() as u64 + 1, Ordering::Relaxed);
+    }
+
+    /// Lower goes first: idle before busy, silent before heard, then least recently active.
+    fn rank(&self) -> (bool, bool, u64) {
+        let heard = self.heard_ms.load(Ordering::Relaxed);
+        let active = self.last_event_ms.load(Ordering::Relaxed).max(heard.saturating_sub(1));
+        (self.in_flight.load(Ordering::Relaxed) > 0, heard > 0, active)
     }
 }
 
@@ -205,6 +218,7 @@ impl Table {
             accepted_ms: now_ms,
             last_event_ms: AtomicU64::new(now_ms),
             in_flight: AtomicU32::new(0),
+            heard_ms: AtomicU64::new(0),
             served: AtomicBool::new(false),
             closing: AtomicBool::new(false),
             waker: AtomicWaker::new(),
@@ -455,7 +469,12 @@ impl<T: AsyncRead + Unpin> AsyncRead for Tracked<T> {
         if let Some(e) = self.closed(cx) {
             return Poll::Ready(Err(e));
         }
-        Pin::new(&mut self.inner).poll_read(cx, buf)
+        let before = buf.filled().len();
+        let read = Pin::new(&mut self.inner).poll_read(cx, buf);
+        if matches!(read, Poll::Ready(Ok(()))) && buf.filled().len() > before {
+            self.conn.heard();
+        }
+        read
     }
 }
 

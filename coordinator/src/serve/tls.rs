@@ -5,13 +5,14 @@
 //!
 //! Handshakes cannot be held hostage: each has [`HANDSHAKE_TIMEOUT`], and at most
 //! [`MAX_PENDING_HANDSHAKES`] run at once; a connection arriving when all are taken is still
-//! accepted, and the oldest pending handshake is dropped for it. Refusing instead (leaving the
-//! newcomer in the kernel's backlog) let a few hundred sockets that never send a ClientHello
-//! stop every client, `/healthz` included, for the length of the timeout, again and again. A
-//! real client finishes its handshake in a round trip or two, so it is dropped only when as
-//! many connections as there are slots arrive in that time. Under the coordinator, the
-//! listener beneath (`conn::LimitedListener`) also counts handshaking sockets against the
-//! connection limits.
+//! accepted, and a pending handshake is dropped for it: the oldest of those still waiting for
+//! their ClientHello, or the oldest of all if every one has sent it. Refusing instead (leaving
+//! the newcomer in the kernel's backlog) let a few hundred sockets that never send a
+//! ClientHello stop every client, `/healthz` included, for the length of the timeout, again
+//! and again; dropping the oldest regardless let a fast enough flood of them drop real
+//! clients mid-handshake. A real client sends its ClientHello as it connects, so a silent
+//! flood only replaces itself. Under the coordinator, the listener beneath
+//! (`conn::LimitedListener`) also counts handshaking sockets against the connection limits.
 //!
 //! ```no_run
 //! # async fn f(router: axum::Router) -> Result<(), Box<dyn std::error::Error>> {
@@ -29,15 +30,16 @@ use rustls_pki_types::{CertificateDer, PrivateKeyDer};
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tokio::task::{AbortHandle, JoinSet};
-use tokio_rustls::TlsAcceptor;
+use tokio_rustls::LazyConfigAcceptor;
 use tokio_rustls::server::TlsStream;
 
 /// A client that has not finished its handshake by then is dropped.
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
-/// Handshakes in progress at once; beyond this the oldest is dropped for the newcomer, so that
-/// clients that never finish cannot hold unbounded memory nor keep others out.
+/// Handshakes in progress at once; beyond this one is dropped for the newcomer (a silent one
+/// first), so that clients that never finish cannot hold unbounded memory nor keep others out.
 pub const MAX_PENDING_HANDSHAKES: usize = 256;
 
 /// Why the certificate or key cannot be used.
@@ -111,16 +113,23 @@ type Handshake<L> = Option<(TlsStream<<L as Listener>::Io>, <L as Listener>::Add
 /// run concurrently, so one slow client does not hold up the others.
 pub struct TlsListener<L: Listener> {
     inner: L,
-    acceptor: TlsAcceptor,
+    config: Arc<ServerConfig>,
     handshakes: JoinSet<Handshake<L>>,
     /// The handshakes in `handshakes`, oldest first.
-    pending: VecDeque<AbortHandle>,
+    pending: VecDeque<Pending>,
+}
+
+/// A handshake in progress.
+struct Pending {
+    task: AbortHandle,
+    /// Whether the client's ClientHello has arrived.
+    hello: Arc<AtomicBool>,
 }
 
 impl<L: Listener> TlsListener<L> {
     /// Wraps `inner`, serving with `config`.
     pub fn new(inner: L, config: Arc<ServerConfig>) -> Self {
-        TlsListener { inner, acceptor: TlsAcceptor::from(config), handshakes: JoinSet::new(), pending: VecDeque::new() }
+        TlsListener { inner, config, handshakes: JoinSet::new(), pending: VecDeque::new() }
     }
 }
 
@@ -129,18 +138,26 @@ where
     L: Listener,
     L::Addr: std::fmt::Debug + 'static,
 {
-    /// Starts the handshake of a new connection, dropping the oldest pending one if all slots
-    /// are taken.
+    /// Starts the handshake of a new connection, dropping a pending one if all slots are taken:
+    /// the oldest still waiting for its ClientHello, else the oldest.
     fn start(&mut self, io: L::Io, addr: L::Addr) {
-        if self.pending.len() >= MAX_PENDING_HANDSHAKES
-            && let Some(oldest) = self.pending.pop_front()
-        {
-            tracing::debug!("tls handshake slots full: dropping the oldest pending handshake");
-            oldest.abort();
+        if self.pending.len() >= MAX_PENDING_HANDSHAKES {
+            let silent = self.pending.iter().position(|p| !p.hello.load(Ordering::Relaxed));
+            if let Some(victim) = self.pending.remove(silent.unwrap_or(0)) {
+                tracing::debug!(silent = silent.is_some(), "tls handshake slots full: dropping a pending handshake");
+                victim.task.abort();
+            }
         }
-        let acceptor = self.acceptor.clone();
-        let handle = self.handshakes.spawn(async move {
-            match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(io)).await {
+        let config = self.config.clone();
+        let hello = Arc::new(AtomicBool::new(false));
+        let said = hello.clone();
+        let handshake = async move {
+            let start = LazyConfigAcceptor::new(rustls::server::Acceptor::default(), io).await?;
+            said.store(true, Ordering::Relaxed);
+            start.into_stream(config).await
+        };
+        let task = self.handshakes.spawn(async move {
+            match tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await {
                 Ok(Ok(stream)) => Some((stream, addr)),
                 Ok(Err(e)) => {
                     tracing::debug!(error = %e, peer = ?addr, "tls handshake failed");
@@ -152,7 +169,7 @@ where
                 }
             }
         });
-        self.pending.push_back(handle);
+        self.pending.push_back(Pending { task, hello });
     }
 }
 
@@ -175,7 +192,7 @@ where
                         Ok((id, _)) => *id,
                         Err(e) => e.id(),
                     };
-                    self.pending.retain(|h| h.id() != id);
+                    self.pending.retain(|p| p.task.id() != id);
                     if let Ok((_, Some(connection))) = done {
                         return connection;
                     }
@@ -255,6 +272,47 @@ mod tests {
         let mut answer = String::new();
         http1.read_to_string(&mut answer).await.unwrap();
         assert!(answer.starts_with("HTTP/1.1 200") && answer.ends_with("over tls"), "{answer}");
+        server.abort();
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_that_said_hello_outlasts_a_flood_of_silent_sockets() {
+        let dir = tempfile::tempdir().unwrap();
+        let (cert, key) = pair(dir.path());
+        let tcp = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = tcp.local_addr().unwrap();
+        let app = axum::Router::new().route("/", axum::routing::get(|| async { "over tls" }));
+        let server =
+            tokio::spawn(axum::serve(TlsListener::new(tcp, server_config(&cert, &key).unwrap()), app).into_future());
+        // a client slow to finish: its ClientHello is answered, then more silent sockets than
+        // slots arrive before its next flight (dropping the oldest pending dropped it)
+        let finished = tokio::task::spawn_blocking(move || {
+            let mut roots = rustls::RootCertStore::empty();
+            roots.add(CertificateDer::from_pem_file(&cert).unwrap()).unwrap();
+            let provider = Arc::new(rustls::crypto::ring::default_provider());
+            let config = rustls::ClientConfig::builder_with_provider(provider)
+                .with_safe_default_protocol_versions()
+                .unwrap()
+                .with_root_certificates(roots)
+                .with_no_client_auth();
+            let name = rustls_pki_types::ServerName::try_from("localhost").unwrap();
+            let mut client = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
+            let mut socket = std::net::TcpStream::connect(addr).unwrap();
+            socket.set_read_timeout(Some(HANDSHAKE_TIMEOUT / 2)).unwrap();
+            client.write_tls(&mut socket).unwrap();
+            assert!(client.read_tls(&mut socket).unwrap() > 0, "the server answered the hello");
+            let stalled: Vec<_> =
+                (0..MAX_PENDING_HANDSHAKES + 16).map(|_| std::net::TcpStream::connect(addr).unwrap()).collect();
+            std::thread::sleep(Duration::from_millis(200));
+            let mut tls = rustls::Stream::new(&mut client, &mut socket);
+            let request = b"GET / HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n";
+            std::io::Write::write_all(&mut tls, request).expect("the handshake was dropped");
+            let mut answer = String::new();
+            let _ = std::io::Read::read_to_string(&mut tls, &mut answer);
+            assert!(answer.starts_with("HTTP/1.1 200") && answer.ends_with("over tls"), "{answer:?}");
+            drop(stalled);
+        });
+        finished.await.unwrap();
         server.abort();
     }
 

@@ -61,6 +61,29 @@ fn a_peer_at_its_limit_loses_its_least_recently_active_idle_connection() {
 }
 
 #[test]
+fn a_connection_that_has_sent_bytes_outlasts_newer_silent_ones() {
+    let (l, epoch) = (limits(100, 3), Instant::now());
+    let mut table = Table::default();
+    // a TLS client mid-handshake: accepted first, has sent its hello, no request yet
+    let client = table.admit(&l, peer(1), epoch, 0);
+    client.heard_ms.store(1, Ordering::Relaxed);
+    let silent: Vec<_> = (1..=2).map(|t| table.admit(&l, peer(1), epoch, t)).collect();
+    let newcomer = table.admit(&l, peer(1), epoch, 3);
+    assert!(closing(&silent[0]) && !closing(&client) && !closing(&silent[1]) && !closing(&newcomer));
+    let _ = table.admit(&l, peer(1), epoch, 4);
+    assert!(closing(&silent[1]) && !closing(&client), "silent ones go first, however new");
+    // among connections that have spoken, bytes received count as activity
+    let (a, b) = (table.admit(&l, peer(2), epoch, 10), table.admit(&l, peer(2), epoch, 11));
+    let c = table.admit(&l, peer(2), epoch, 12);
+    for (conn, at) in [(&a, 13), (&b, 13), (&c, 14)] {
+        conn.heard_ms.store(at, Ordering::Relaxed);
+    }
+    a.heard_ms.store(21, Ordering::Relaxed);
+    let _ = table.admit(&l, peer(2), epoch, 22);
+    assert!(closing(&b) && !closing(&a) && !closing(&c), "{:?} {:?}", a.rank(), b.rank());
+}
+
+#[test]
 fn a_full_server_closes_a_connection_of_the_heaviest_peer() {
     let (l, epoch) = (limits(4, 4), Instant::now());
     let mut table = Table::default();
