@@ -2,9 +2,11 @@
 //! sample ranges, and merges their sums into a [`Film`] in a fixed order, so the result is
 //! bit-identical for any thread count.
 
+use crate::emis::{EmisState, render_emis};
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::{Integrator, TileRequest};
 use crate::scene::Scene;
+use crate::settings::Renderer;
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -61,6 +63,25 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, RenderError> {
         .num_threads(threads)
         .build()
         .map_err(|e| RenderError::ThreadPool { threads, message: e.to_string() })
+}
+
+impl Renderer {
+    /// Renders `scene` on this machine; for EMIS also returns the final state (decisions and
+    /// reports).
+    pub fn render(
+        &self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(RenderOutput, Option<EmisState>), RenderError> {
+        Ok(match self {
+            Renderer::Tiles(i) => (render(scene, i.as_ref(), opts, progress)?, None),
+            Renderer::Emis(config, settings) => {
+                let out = render_emis(scene, *settings, config, opts, progress)?;
+                (out.render, Some(out.state))
+            }
+        })
+    }
 }
 
 /// Renders `scene` with `integrator`. `progress(done, total)` is called after each tile, in

@@ -18,10 +18,9 @@ use crate::emis::cost::CostModel;
 use crate::emis::denoise::ImageEstimate;
 use crate::emis::estimator::{MergeKernel, MergeRatio, MomentSettings};
 use crate::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
-use crate::emis::{EmisConfig, EmisMethod, EmisState, PilotStart, render_emis};
+use crate::emis::{EmisConfig, EmisMethod, PilotStart};
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
-use crate::render::{RenderError, RenderOptions, RenderOutput, render};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -187,23 +186,6 @@ impl Renderer {
             Renderer::Tiles(i) => i.name(),
             Renderer::Emis(c, _) => c.name(),
         }
-    }
-
-    /// Renders `scene` on this machine; for EMIS also returns the final state (decisions and
-    /// reports).
-    pub fn render(
-        &self,
-        scene: &Scene,
-        opts: &RenderOptions,
-        progress: &(dyn Fn(u64, u64) + Sync),
-    ) -> Result<(RenderOutput, Option<EmisState>), RenderError> {
-        Ok(match self {
-            Renderer::Tiles(i) => (render(scene, i.as_ref(), opts, progress)?, None),
-            Renderer::Emis(config, settings) => {
-                let out = render_emis(scene, *settings, config, opts, progress)?;
-                (out.render, Some(out.state))
-            }
-        })
     }
 }
 

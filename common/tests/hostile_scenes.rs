@@ -34,6 +34,7 @@ fn refused(files: &[(&str, &str)], line: u32, needle: &str) {
     assert_eq!(*err.location.file, *std::path::Path::new("scene.xml"), "{msg}");
     assert_eq!(err.location.line, line, "{msg}");
     assert!(msg.contains(needle), "{msg:?} should mention {needle:?}");
+    assert!(!msg.contains(bundle.to_str().unwrap()), "{msg:?} names the server's folder");
 }
 
 #[test]
@@ -115,6 +116,7 @@ fn too_many_xml_nodes_are_refused() {
     let err = result.err().expect("refused");
     assert!(err.to_string().contains("XML nodes"), "{err}");
     assert_eq!(*err.location.file, *std::path::Path::new("scene.xml"));
+    assert!(!err.to_string().contains(bundle.to_str().unwrap()), "{err} names the server's folder");
 }
 
 /// Runs `f` on a thread with the stack a tokio worker or `spawn_blocking` thread has.

@@ -15,6 +15,7 @@
 //! other.
 
 use super::filter::Image;
+pub use super::guides::Guides;
 use super::halve::Halved;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -82,16 +83,6 @@ impl Default for DenoiseSettings {
     fn default() -> Self {
         DenoiseSettings { levels: 0, ..Self::GUIDED }
     }
-}
-
-/// Per-pixel guides (means over the pilot).
-pub struct Guides<'a> {
-    /// Albedo.
-    pub albedo: &'a [[f32; 3]],
-    /// Unit shading normal, zero where the camera ray escaped.
-    pub normal: &'a [[f32; 3]],
-    /// Distance to the primary hit.
-    pub depth: &'a [f32],
 }
 
 const B3: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];

@@ -9,6 +9,16 @@ use crate::integrator::observer::{IterationStart, PrimaryHit, SampleObserver, Sa
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
+/// Per-pixel guides (means over the pilot).
+pub struct Guides<'a> {
+    /// Albedo.
+    pub albedo: &'a [[f32; 3]],
+    /// Unit shading normal, zero where the camera ray escaped.
+    pub normal: &'a [[f32; 3]],
+    /// Distance to the primary hit.
+    pub depth: &'a [f32],
+}
+
 /// Guide sums of a full frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GuideBuffer {

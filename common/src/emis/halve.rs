@@ -3,7 +3,7 @@
 //! resolution afterwards, so its finest level is not worth a full-resolution pass
 //! (docs/decisions/0042-guided-filter-at-half-resolution.md).
 
-use super::denoise::Guides;
+use super::guides::Guides;
 use rayon::prelude::*;
 
 /// An image and its guides on a grid of ⌈w/2⌉ × ⌈h/2⌉ blocks of up to 2 × 2 pixels.

@@ -57,7 +57,7 @@ impl MomentBuffer {
     /// upload carries 2 bytes per candidate instead of 4 (docs/decisions/0019-compact-pilot-data.md).
     pub fn round_for_wire(&mut self) {
         use rayon::prelude::*;
-        self.sums.par_iter_mut().for_each(|s| *s = super::wire::from_bf16_bits(super::wire::bf16_bits(*s)));
+        self.sums.par_iter_mut().for_each(|s| *s = from_bf16_bits(bf16_bits(*s)));
     }
 
     /// Whether [`MomentBuffer::merge`] would take `other`: the same size and candidates.
@@ -82,6 +82,19 @@ impl MomentBuffer {
             self.sums[i] as f64 / self.iterations as f64
         }
     }
+}
+
+/// The bfloat16 nearest to `x` (ties to even), as bits. A finite `x` too large for it stays
+/// finite (the largest bfloat16): +∞ flags a candidate that cannot sample a path, which
+/// rounding must not invent.
+pub(super) fn bf16_bits(x: f32) -> u16 {
+    let b = half::bf16::from_f32(x);
+    if x.is_finite() && b.is_infinite() { half::bf16::MAX.copysign(b).to_bits() } else { b.to_bits() }
+}
+
+/// The f32 of bfloat16 `bits` (exact).
+pub(super) fn from_bf16_bits(bits: u16) -> f32 {
+    half::bf16::from_bits(bits).to_f32()
 }
 
 #[cfg(test)]

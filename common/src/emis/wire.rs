@@ -7,7 +7,7 @@
 use super::cost::StatisticsSums;
 use super::filter::Image;
 use super::guides::GuideBuffer;
-use super::moments::MomentBuffer;
+use super::moments::{MomentBuffer, bf16_bits, from_bf16_bits};
 use super::start::KeptStart;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
 use crate::integrator::observer::WorkTimes;
@@ -61,19 +61,6 @@ impl Writer {
             self.0.extend_from_slice(&bf16_bits(x).to_le_bytes());
         }
     }
-}
-
-/// The bfloat16 nearest to `x` (ties to even), as bits. A finite `x` too large for it stays
-/// finite (the largest bfloat16): +∞ flags a candidate that cannot sample a path, which
-/// rounding must not invent.
-pub(super) fn bf16_bits(x: f32) -> u16 {
-    let b = half::bf16::from_f32(x);
-    if x.is_finite() && b.is_infinite() { half::bf16::MAX.copysign(b).to_bits() } else { b.to_bits() }
-}
-
-/// The f32 of bfloat16 `bits` (exact).
-pub(super) fn from_bf16_bits(bits: u16) -> f32 {
-    half::bf16::from_bits(bits).to_f32()
 }
 
 /// Little-endian reader that names what ran out.

@@ -3,8 +3,8 @@
 //! counters), and latency histograms of the service calls behind the worker API's uploads and
 //! leases, which the gRPC layer observes.
 
+use super::clock::now_ms;
 use super::job::service::JobService;
-use super::state::now_ms;
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
 use prometheus_client::metrics::counter::ConstCounter;

@@ -10,6 +10,7 @@
 pub mod app;
 pub mod auth;
 pub mod bundle_stream;
+pub mod clock;
 pub mod config;
 pub mod conn;
 pub mod error;

@@ -1,6 +1,7 @@
 //! What the gRPC and REST layers share: the domain service and limits, the clock the pure job
 //! model is fed with, and how a synchronous service call runs off the async threads.
 
+pub use super::clock::now_ms;
 use super::error::{ApiError, ErrorCode};
 use super::job::model::LeaseRef;
 use super::job::service::{JobService, ServiceError};
@@ -49,19 +50,6 @@ impl AppState {
         }
         Ok(UploadSlot { state: self, lease: lease.clone() })
     }
-}
-
-/// Milliseconds since the Unix epoch, read once, then advanced by a monotonic clock: the clock
-/// the pure model is fed with. Lease deadlines and time budgets must not jump when the wall
-/// clock is stepped (NTP, an operator), and times stored for jobs stay close to wall time.
-pub fn now_ms() -> u64 {
-    use std::sync::OnceLock;
-    use std::time::{Instant, SystemTime, UNIX_EPOCH};
-    static ANCHOR: OnceLock<(Instant, u64)> = OnceLock::new();
-    let (start, wall) = ANCHOR.get_or_init(|| {
-        (Instant::now(), SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64))
-    });
-    wall + start.elapsed().as_millis() as u64
 }
 
 /// Runs a synchronous service call on a blocking thread.

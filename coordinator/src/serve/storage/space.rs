@@ -1,14 +1,13 @@
 //! Giving the database's space back after jobs are deleted. SQLite keeps freed pages in its
 //! file unless auto-vacuum is on; the database uses `auto_vacuum = INCREMENTAL`, so the pages
-//! are returned on request ([`Store::reclaim`], run after deletes) instead of on every commit,
+//! are returned on request ([`reclaim`], run by `Store::reclaim` after deletes) instead of on every commit,
 //! which would move pages around while uploads wait. A database made before this (mode NONE)
 //! is switched over with one `VACUUM` when it is opened.
 //!
-//! In WAL mode the file only shrinks when the log is checkpointed, so [`Store::reclaim`] also
+//! In WAL mode the file only shrinks when the log is checkpointed, so [`reclaim`] also
 //! checkpoints with `TRUNCATE`, which empties the `-wal` file as well
 //! (docs/decisions/0016-deleting-jobs.md has the measurement).
 
-use super::sqlite::{Store, StoreError};
 use rusqlite::Connection;
 
 /// `PRAGMA auto_vacuum` value of INCREMENTAL.
@@ -16,7 +15,7 @@ const INCREMENTAL: i64 = 2;
 
 /// Turns on incremental auto-vacuum: set before the first table exists it takes effect at once;
 /// an existing database needs a `VACUUM` (once, at start-up: it rewrites the whole file).
-pub(super) fn use_incremental_vacuum(conn: &Connection) -> Result<(), StoreError> {
+pub(super) fn use_incremental_vacuum(conn: &Connection) -> rusqlite::Result<()> {
     let mode: i64 = conn.pragma_query_value(None, "auto_vacuum", |r| r.get(0))?;
     if mode == INCREMENTAL {
         return Ok(());
@@ -30,20 +29,18 @@ pub(super) fn use_incremental_vacuum(conn: &Connection) -> Result<(), StoreError
     Ok(())
 }
 
-impl Store {
-    /// Returns the free pages to the file system and empties the write-ahead log; returns how
-    /// many pages were freed.
-    pub fn reclaim(&self) -> Result<u64, StoreError> {
-        let free: i64 = self.conn.pragma_query_value(None, "freelist_count", |r| r.get(0))?;
-        if free > 0 {
-            // each step frees one page and yields a row: run it to the end
-            let mut stmt = self.conn.prepare("PRAGMA incremental_vacuum")?;
-            let mut rows = stmt.query([])?;
-            while rows.next()?.is_some() {}
-        }
-        self.conn.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))?;
-        Ok(free.max(0) as u64)
+/// Returns the free pages to the file system and empties the write-ahead log; returns how many
+/// pages were freed.
+pub(super) fn reclaim(conn: &Connection) -> rusqlite::Result<u64> {
+    let free: i64 = conn.pragma_query_value(None, "freelist_count", |r| r.get(0))?;
+    if free > 0 {
+        // each step frees one page and yields a row: run it to the end
+        let mut stmt = conn.prepare("PRAGMA incremental_vacuum")?;
+        let mut rows = stmt.query([])?;
+        while rows.next()?.is_some() {}
     }
+    conn.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))?;
+    Ok(free.max(0) as u64)
 }
 
 #[cfg(test)]
@@ -51,7 +48,7 @@ mod tests {
     use super::*;
     use crate::serve::job::model::{Changes, JobSpec, JobsModel};
     use crate::serve::storage::Extra;
-    use crate::serve::storage::sqlite::Batch;
+    use crate::serve::storage::sqlite::{Batch, Store};
     use tessera_common::settings::IntegratorName;
 
     fn spec() -> JobSpec {

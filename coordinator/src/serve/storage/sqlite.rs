@@ -284,6 +284,12 @@ fn json<T: serde::Serialize>(v: &T) -> String {
 }
 
 impl Store {
+    /// Returns the free pages to the file system and empties the write-ahead log (see
+    /// `space.rs`); returns how many pages were freed.
+    pub fn reclaim(&self) -> Result<u64, StoreError> {
+        Ok(super::space::reclaim(&self.conn)?)
+    }
+
     /// Opens (creating) the database file.
     pub fn open(path: &Path) -> Result<Store, StoreError> {
         let conn = Connection::open(path)?;
