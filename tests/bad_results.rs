@@ -61,7 +61,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
         let mut sums = vec![[0.5f64; 3]; pixels];
         sums[7][1] = f64::NAN;
         let mut nan = Vec::new();
-        tessera_proto::payload::write_channels(&mut nan, &sums, None, None, &vec![1; pixels]).unwrap();
+        tessera_link::payload::write_channels(&mut nan, &sums, None, None, &vec![1; pixels]).unwrap();
         let e = upload(&mut client, &worker, &second, nan).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::InvalidArgument);
         assert!(e.message().contains("not finite"), "{}", e.message());
@@ -76,7 +76,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
         let rect = Rect { x0: r.x0, y0: r.y0, x1: r.x1, y1: r.y1 };
         let mut accum = TileAccum::new(rect, &scene.film);
         integrator.render_tile(&scene, &TileRequest::new(rect, 0..1, 6), &mut accum);
-        let payload = tessera_proto::payload::encode_tile(&accum);
+        let payload = tessera_link::payload::encode_tile(&accum);
         let ok = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();
         assert_eq!(ok.outcome, pb::UploadOutcome::Accepted as i32);
         let again = upload(&mut client, &worker, &third, payload.clone()).await.unwrap();

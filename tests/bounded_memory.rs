@@ -17,7 +17,7 @@ const MIB: usize = 1 << 20;
 fn streamed_parts(xml: Vec<u8>, big: usize) -> Vec<pb::SubmitJobPart> {
     let settings = RenderSettings { integrator: IntegratorName::Pt, spp: Some(1), ..Default::default() };
     let header = pb::SubmitJobRequest {
-        settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
+        settings: Some(tessera_link::convert::settings_to_pb(&settings)),
         bundle: Some(pb::SceneBundle { scene_path: "scene.xml".into(), files: vec![] }),
         priority: 0,
         name: "big".into(),
@@ -90,7 +90,7 @@ fn a_stalled_first_tile_holds_back_only_the_lease_window() {
     let full = Rect { x0: 0, y0: 0, x1: 1920, y1: 1080 };
     let mut frame = TileAccum::new(full, &film);
     frame.count.fill(1);
-    let payload = prost::bytes::Bytes::from(tessera_proto::payload::encode_tile(&frame));
+    let payload = prost::bytes::Bytes::from(tessera_link::payload::encode_tile(&frame));
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     let (held, peak_stalled) = rt.block_on(async {
         let client = WorkerServiceClient::connect(c.url.clone())

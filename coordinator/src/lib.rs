@@ -2,7 +2,8 @@
 //! visible from the tree:
 //!
 //! * [`cli`]: argument parsing and dispatch, `tessera render`, and the farm client commands
-//!   (`submit`, `status`, `cancel`), which reach a coordinator only through `tessera-proto`;
+//!   (`submit`, `status`, `cancel`), which reach a coordinator only through `tessera-proto`
+//!   and `tessera-link`;
 //! * [`serve`]: the coordinator service (`tessera serve`): job state machine, storage, gRPC,
 //!   REST; it imports neither `cli` nor `bench`;
 //! * [`bench`]: every `tessera bench …` measurement.

@@ -10,7 +10,7 @@ use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::{CandidateSet, EmisState, PilotData};
 use tessera_common::film::TileAccum;
 use tessera_fuzz::job::{self, Decoder};
-use tessera_proto::payload::encode_tile;
+use tessera_link::payload::encode_tile;
 
 fn main() {
     let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus");

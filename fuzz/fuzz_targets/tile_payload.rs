@@ -1,12 +1,12 @@
 //! Fuzzes the decoder of the sums a worker uploads for a tile,
-//! `tessera_proto::payload::decode_tile` and `decode_channels`. The first three bytes choose a
+//! `tessera_link::payload::decode_tile` and `decode_channels`. The first three bytes choose a
 //! film (1–8 × 1–8 pixels), its filter and one of its tiles (or the full frame, whose layout
 //! keeps splats apart), as the coordinator knows them from its lease (`tessera_fuzz::job`); the
 //! rest is the payload. What decodes must encode back to the same bytes.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tessera_proto::payload::{decode_channels, decode_tile, encode_tile, write_channels};
+use tessera_link::payload::{decode_channels, decode_tile, encode_tile, write_channels};
 
 fuzz_target!(|data: &[u8]| {
     let Some((head, payload)) = data.split_first_chunk::<3>() else { return };

@@ -5,11 +5,9 @@
 //! * [`v1::worker_service_server`] / [`v1::worker_service_client`]: render workers register,
 //!   heartbeat, lease tiles (long poll), upload tile sums and fetch scene bundles by digest.
 //!
-//! The crate holds generated code plus what both ends must agree on: payload layouts and
-//! constants here, conversions to the renderer's settings and rectangles in [`convert`], how
-//! clients reach a coordinator over `http://` or `https://` in [`connect`], and how the two
-//! long-running ends (`tessera serve`, `tessera-worker`) take their settings and log in
-//! [`settings`].
+//! The crate holds the generated code plus the constants both ends must agree on. It depends
+//! on nothing of Tessera's: conversions to the renderer's types, the payload and bundle codecs
+//! and connecting live in `tessera-link`, settings and logging in `tessera-config`.
 //!
 //! ```no_run
 //! use tessera_proto::v1::job_service_client::JobServiceClient;
@@ -21,12 +19,6 @@
 //! ```
 
 #![deny(missing_docs)]
-
-pub mod bundle;
-pub mod connect;
-pub mod convert;
-pub mod payload;
-pub mod settings;
 
 /// Generated `tessera.v1` messages, clients and servers.
 #[allow(missing_docs)]

@@ -14,7 +14,7 @@ pub struct Client {
 }
 
 impl Client {
-    /// Connects to the coordinator at `endpoint` (see [`tessera_proto::connect::endpoint`]).
+    /// Connects to the coordinator at `endpoint` (see [`tessera_link::connect::endpoint`]).
     pub async fn connect(endpoint: &Endpoint, token: Option<String>) -> Result<Client, tonic::transport::Error> {
         let channel = endpoint.clone().connect_timeout(Duration::from_secs(5)).tcp_nodelay(true).connect().await?;
         let inner = WorkerServiceClient::new(channel)

@@ -11,7 +11,7 @@
 //!
 //! Every flag can also be given as a `TESSERA_*` variable (`--token`'s is
 //! `TESSERA_WORKER_TOKEN`, the coordinator's name for the same secret) or in a `--config` TOML
-//! file ([`tessera_proto::settings`]).
+//! file ([`tessera_config`]).
 
 pub mod client;
 pub mod convert;
@@ -68,23 +68,23 @@ pub struct Args {
     pub max_tile_memory: Option<u64>,
     /// Log format.
     #[command(flatten)]
-    pub log: tessera_proto::settings::LogArgs,
+    pub log: tessera_config::LogArgs,
     /// `--config` and `--print-config`.
     #[command(flatten)]
-    pub config: tessera_proto::settings::ConfigArgs,
+    pub config: tessera_config::ConfigArgs,
 }
 
 /// Parses `argv` (program name first): flags, then `TESSERA_*` variables, then the `--config`
 /// file. Clap's errors (and `--help`, `--version`) exit here, as `Args::parse` would.
-pub fn parse_args<I, T>(argv: I) -> anyhow::Result<(Args, tessera_proto::settings::Parsed)>
+pub fn parse_args<I, T>(argv: I) -> anyhow::Result<(Args, tessera_config::Parsed)>
 where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString>,
 {
     use clap::{CommandFactory, FromArgMatches};
-    let parsed = match tessera_proto::settings::parse(Args::command(), None, argv) {
+    let parsed = match tessera_config::parse(Args::command(), None, argv) {
         Ok(p) => p,
-        Err(tessera_proto::settings::ParseError::Clap(e)) => e.exit(),
+        Err(tessera_config::ParseError::Clap(e)) => e.exit(),
         Err(e) => return Err(e.into()),
     };
     let args = Args::from_arg_matches(&parsed.matches).unwrap_or_else(|e| e.exit());
@@ -92,8 +92,8 @@ where
 }
 
 /// Installs the `tracing` subscriber (`RUST_LOG`, default: the worker's own events at `info`).
-pub fn init_logging(format: tessera_proto::settings::LogFormat) {
-    tessera_proto::settings::logging::init(format, "warn,tessera_worker=info");
+pub fn init_logging(format: tessera_config::LogFormat) {
+    tessera_config::logging::init(format, "warn,tessera_worker=info");
 }
 
 /// What a tile may ask of this worker: `--max-tile-memory` MiB, or the machine's memory (at
@@ -142,7 +142,7 @@ mod tests {
             ("max-tile-memory", "4096"),
             ("log-format", "\"json\""),
         ];
-        let keys = tessera_proto::settings::file_keys(&Args::command());
+        let keys = tessera_config::file_keys(&Args::command());
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("worker.toml");
         for key in &keys {

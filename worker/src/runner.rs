@@ -45,7 +45,7 @@ fn key(l: &pb::LeaseRef) -> (String, u32, u64) {
 /// Runs until drained.
 pub async fn run(args: Args) -> anyhow::Result<()> {
     // a bad URL or CA file is fatal at once; only connecting is retried
-    let endpoint = tessera_proto::connect::endpoint(&args.coordinator, args.ca_cert.as_deref())?;
+    let endpoint = tessera_link::connect::endpoint(&args.coordinator, args.ca_cert.as_deref())?;
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?);
     let cache_dir = args.cache_dir.clone().unwrap_or_else(|| std::env::temp_dir().join("tessera-worker-cache"));
@@ -281,7 +281,7 @@ async fn render_and_upload(
             render_seconds: seconds,
             pilot_bytes: pilot.len() as u64,
         };
-        let mut payload = tessera_proto::payload::encode_tile(&accum);
+        let mut payload = tessera_link::payload::encode_tile(&accum);
         payload.extend_from_slice(&pilot);
         upload(client, header, payload, &lease).await?;
         tracing::debug!(job_id = %lease.job_id, tile = lease.tile, seconds, non_finite = accum.non_finite, "tile uploaded");

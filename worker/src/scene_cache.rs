@@ -127,7 +127,7 @@ impl SceneCache {
             return Ok(dir.join(p));
         }
         let bytes = fetch_verified(client, digest).await?;
-        let bundle = tessera_proto::bundle::decode(&bytes)?;
+        let bundle = tessera_link::bundle::decode(&bytes)?;
         let (cache_dir, limit) = (self.dir.clone(), self.limit_bytes);
         let digest = digest.to_string();
         tokio::task::spawn_blocking(move || -> anyhow::Result<PathBuf> {

@@ -32,7 +32,7 @@ pub struct Client {
 impl Client {
     /// Connects to the coordinator.
     pub async fn connect(args: &ServerArgs) -> anyhow::Result<Client> {
-        let channel = tessera_proto::connect::endpoint(&args.server, args.ca_cert.as_deref())?
+        let channel = tessera_link::connect::endpoint(&args.server, args.ca_cert.as_deref())?
             .connect()
             .await
             .with_context(|| format!("cannot connect to {}", args.server))?;

@@ -44,7 +44,7 @@ pub fn healthcheck_command(args: &HealthcheckArgs) -> anyhow::Result<()> {
     let base = url.trim_end_matches('/');
     // the base URL names the server; a URL already ending in /healthz is taken as it is
     let base = base.strip_suffix("/healthz").unwrap_or(base);
-    let endpoint = tessera_proto::connect::endpoint(base, args.ca_cert.as_deref())?.connect_timeout(timeout);
+    let endpoint = tessera_link::connect::endpoint(base, args.ca_cert.as_deref())?.connect_timeout(timeout);
     let runtime = super::client::runtime()?;
     let status = runtime.block_on(async {
         tokio::time::timeout(timeout, async {

@@ -1,7 +1,7 @@
 //! The `tessera` command line: argument parsing and dispatch, `tessera render` (a local render
 //! with no setup) and the farm client commands `submit`, `status`, `cancel` and `delete`, which
-//! talk to a coordinator only through `tessera-proto`. `tessera serve` hands over to [`crate::serve`] and
-//! `tessera bench …` to [`crate::bench`].
+//! talk to a coordinator only through `tessera-proto` and `tessera-link`. `tessera serve` hands
+//! over to [`crate::serve`] and `tessera bench …` to [`crate::bench`].
 
 pub mod client;
 pub mod healthcheck;
@@ -44,15 +44,15 @@ pub enum Command {
 /// Parses `argv` (program name first): `tessera serve`'s settings also come from `TESSERA_*`
 /// variables and its `--config` file. Clap's errors (and `--help`, `--version`) exit here, as
 /// `Cli::parse` would.
-pub fn parse_from<I, T>(argv: I) -> anyhow::Result<(Cli, tessera_proto::settings::Parsed)>
+pub fn parse_from<I, T>(argv: I) -> anyhow::Result<(Cli, tessera_config::Parsed)>
 where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString>,
 {
     use clap::{CommandFactory, FromArgMatches};
-    let parsed = match tessera_proto::settings::parse(Cli::command(), Some("serve"), argv) {
+    let parsed = match tessera_config::parse(Cli::command(), Some("serve"), argv) {
         Ok(p) => p,
-        Err(tessera_proto::settings::ParseError::Clap(e)) => e.exit(),
+        Err(tessera_config::ParseError::Clap(e)) => e.exit(),
         Err(e) => return Err(e.into()),
     };
     let cli = Cli::from_arg_matches(&parsed.matches).unwrap_or_else(|e| e.exit());
@@ -69,7 +69,7 @@ pub fn run() -> anyhow::Result<()> {
             return Ok(());
         }
         Command::Serve(args) => telemetry::init(args.log.log_format, telemetry::SERVE_FILTER),
-        _ => telemetry::init(tessera_proto::settings::LogFormat::Text, telemetry::CLI_FILTER),
+        _ => telemetry::init(tessera_config::LogFormat::Text, telemetry::CLI_FILTER),
     }
     match cli.command {
         Command::Render(args) => render::render_command(&args),
@@ -127,7 +127,7 @@ mod tests {
             ("log-format", "\"json\""),
         ];
         let serve = Cli::command().find_subcommand("serve").unwrap().clone();
-        let keys = tessera_proto::settings::file_keys(&serve);
+        let keys = tessera_config::file_keys(&serve);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("serve.toml");
         for key in &keys {

@@ -47,7 +47,7 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
         let header = pb::SubmitJobRequest {
-            settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
+            settings: Some(tessera_link::convert::settings_to_pb(&settings)),
             bundle: Some(pb::SceneBundle { scene_path: bundle.scene_path.clone(), files: vec![] }),
             priority: args.priority,
             name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),

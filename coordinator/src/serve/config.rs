@@ -1,6 +1,6 @@
 //! The coordinator's configuration: the flags of `tessera serve` (each also read from its
 //! `TESSERA_*` environment variable and settable in the `--config` file, see
-//! [`tessera_proto::settings`]), checked and turned into the service's settings, the API tokens and the
+//! [`tessera_config`]), checked and turned into the service's settings, the API tokens and the
 //! TLS configuration.
 
 use super::auth::Tokens;
@@ -123,10 +123,10 @@ pub struct ServeArgs {
     pub min_free_space: u64,
     /// Log format.
     #[command(flatten)]
-    pub log: tessera_proto::settings::LogArgs,
+    pub log: tessera_config::LogArgs,
     /// `--config` and `--print-config`.
     #[command(flatten)]
-    pub config: tessera_proto::settings::ConfigArgs,
+    pub config: tessera_config::ConfigArgs,
 }
 
 /// The checked configuration.

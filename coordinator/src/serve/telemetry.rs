@@ -2,7 +2,7 @@
 //! events at `info` (as text or JSON lines, `--log-format`); the other commands only warnings
 //! and errors, so that command-line output stays clean.
 
-use tessera_proto::settings::LogFormat;
+use tessera_config::LogFormat;
 
 /// The filter of `tessera serve` unless `RUST_LOG` says otherwise: the coordinator's events
 /// (job lifecycle, workers) at `info`, libraries' at `warn`.
@@ -13,5 +13,5 @@ pub const CLI_FILTER: &str = "warn";
 
 /// Installs the global subscriber once.
 pub fn init(format: LogFormat, default_filter: &str) {
-    tessera_proto::settings::logging::init(format, default_filter);
+    tessera_config::logging::init(format, default_filter);
 }

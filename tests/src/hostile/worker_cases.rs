@@ -201,8 +201,7 @@ fn huge_sums(bins: &Bins, dir: &Path) -> Report {
             let pixels = ((r.x1 - r.x0) * (r.y1 - r.y0)) as usize;
             let mut payload = Vec::new();
             let counts = vec![tile.sample_end - tile.sample_begin; pixels];
-            tessera_proto::payload::write_channels(&mut payload, &vec![[1e300; 3]; pixels], None, None, &counts)
-                .ok()?;
+            tessera_link::payload::write_channels(&mut payload, &vec![[1e300; 3]; pixels], None, None, &counts).ok()?;
             let header = tessera_proto::result_header(&worker, &tile, 0, 0.0, 0);
             let parts = [Part::Header(header), Part::Data(payload.into())];
             let messages = parts.map(|p| pb::UploadResultRequest { part: Some(p) });

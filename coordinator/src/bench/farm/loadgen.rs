@@ -47,7 +47,7 @@ pub fn build_result(worker_id: &str, lease: &pb::TileLease) -> SimResult {
     }
     let count = vec![n; pixels];
     let mut payload = Vec::with_capacity(pixels * BOX_BYTES_PER_PIXEL);
-    tessera_proto::payload::write_channels(&mut payload, &sum, None, None, &count)
+    tessera_link::payload::write_channels(&mut payload, &sum, None, None, &count)
         .expect("invariant: writing into a Vec cannot fail");
     let pilot = pilot_data(lease, w, h, n);
     payload.extend_from_slice(&pilot);
@@ -66,7 +66,7 @@ fn pilot_data(lease: &pb::TileLease, width: u32, height: u32, iterations: u32) -
     if !lease.strategy.as_ref().is_some_and(collects) {
         return Vec::new();
     }
-    let Some(settings) = lease.settings.as_ref().and_then(|s| tessera_proto::convert::settings_from_pb(s).ok()) else {
+    let Some(settings) = lease.settings.as_ref().and_then(|s| tessera_link::convert::settings_from_pb(s).ok()) else {
         return Vec::new();
     };
     let candidates = settings.emis_config().candidates.candidates();

@@ -140,8 +140,8 @@ pub fn generated_job(
         files: vec![("scene.xml".into(), GENERATED_SCENE.as_bytes().to_vec())],
     };
     pb::SubmitJobRequest {
-        settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
-        bundle: Some(tessera_proto::bundle::to_pb(&bundle)),
+        settings: Some(tessera_link::convert::settings_to_pb(&settings)),
+        bundle: Some(tessera_link::bundle::to_pb(&bundle)),
         priority: 0,
         name: name.into(),
     }

@@ -80,8 +80,8 @@ pub fn scaling_command(args: &FarmArgs) -> anyhow::Result<()> {
             let cpu0 = serve.cpu_seconds()?;
             let t0 = Instant::now();
             let req = pb::SubmitJobRequest {
-                settings: Some(tessera_proto::convert::settings_to_pb(&settings)),
-                bundle: Some(tessera_proto::bundle::to_pb(&bundle)),
+                settings: Some(tessera_link::convert::settings_to_pb(&settings)),
+                bundle: Some(tessera_link::bundle::to_pb(&bundle)),
                 priority: 0,
                 name: format!("scaling {config}"),
             };

@@ -10,16 +10,16 @@ use tessera_common::settings::RenderSettings;
 use tessera_proto::v1 as pb;
 use tonic::Status;
 
-/// Wire settings → domain settings (`tessera_proto::convert` holds the rules).
+/// Wire settings → domain settings (`tessera_link::convert` holds the rules).
 pub fn settings_from_pb(s: Option<pb::RenderSettings>) -> Result<RenderSettings, Status> {
-    tessera_proto::convert::settings_from_pb(&s.unwrap_or_default()).map_err(Status::invalid_argument)
+    tessera_link::convert::settings_from_pb(&s.unwrap_or_default()).map_err(Status::invalid_argument)
 }
 
-pub use tessera_proto::convert::{rect_to_pb, settings_to_pb};
+pub use tessera_link::convert::{rect_to_pb, settings_to_pb};
 
 /// Wire rect → domain rect.
 pub fn rect_from_pb(r: Option<pb::Rect>) -> Result<Rect, Status> {
-    tessera_proto::convert::rect_from_pb(r.as_ref()).map_err(Status::invalid_argument)
+    tessera_link::convert::rect_from_pb(r.as_ref()).map_err(Status::invalid_argument)
 }
 
 /// Wire lease → domain lease.

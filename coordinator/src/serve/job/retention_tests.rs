@@ -59,7 +59,7 @@ fn upload_emis(svc: &JobService, scene: &Scene, worker: &str, g: &LeaseGrant, no
     let collect = s.collect.then_some(s.candidates);
     let (accum, pilot) = render_iterations(scene, settings, &config, &strategy, seed, g.tile.samples.clone(), collect);
     let pilot = pilot.map(|p| p.encode()).unwrap_or_default();
-    let mut payload = tessera_proto::payload::encode_tile(&accum);
+    let mut payload = tessera_link::payload::encode_tile(&accum);
     payload.extend_from_slice(&pilot);
     let claim = ResultClaim {
         rect: g.tile.rect,

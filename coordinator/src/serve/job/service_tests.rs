@@ -45,7 +45,7 @@ pub(super) fn upload(
     let Ok(Renderer::Tiles(integrator)) = settings.make_renderer(scene) else { panic!("a tile integrator") };
     let mut accum = TileAccum::new(tile.rect, &scene.film);
     integrator.render_tile(scene, &TileRequest::new(tile.rect, tile.samples.clone(), 3), &mut accum);
-    let payload = tessera_proto::payload::encode_tile(&accum);
+    let payload = tessera_link::payload::encode_tile(&accum);
     let claim = ResultClaim { rect: tile.rect, samples: tile.samples, non_finite: accum.non_finite, pilot_bytes: 0 };
     svc.upload(worker, lease, &claim, payload, now)
 }

@@ -35,8 +35,8 @@ pub fn validate_result(
     if claim.samples != tile.samples {
         return Err(format!("result samples {:?} do not match the tile's {:?}", claim.samples, tile.samples));
     }
-    let expected = tessera_proto::payload::payload_bytes(&layout).unwrap_or(usize::MAX);
-    let accum = tessera_proto::payload::decode_tile(payload, tile.rect, layout, claim.non_finite).ok_or_else(|| {
+    let expected = tessera_link::payload::payload_bytes(&layout).unwrap_or(usize::MAX);
+    let accum = tessera_link::payload::decode_tile(payload, tile.rect, layout, claim.non_finite).ok_or_else(|| {
         format!("result payload has {} bytes, expected {expected} for {:?}", payload.len(), layout.bounds)
     })?;
     if let Some(i) = accum.sum.iter().position(|s| !s.iter().all(|c| c.is_finite())) {
@@ -108,7 +108,7 @@ mod tests {
 
     fn payload(sum: &[[f64; 3]], weight: Option<&[f64]>, count: &[u32]) -> Vec<u8> {
         let mut out = Vec::new();
-        tessera_proto::payload::write_channels(&mut out, sum, weight, None, count).unwrap();
+        tessera_link::payload::write_channels(&mut out, sum, weight, None, count).unwrap();
         out
     }
 

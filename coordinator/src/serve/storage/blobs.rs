@@ -260,7 +260,7 @@ impl BlobStore {
     /// Writes a checkpoint of `film` holding `tiles[..merged]`, followed by `trailer` (an EMIS
     /// state, or nothing); returns its file name. The format: [`CHECKPOINT_MAGIC`], a version,
     /// flags (weights, splats), width, height, the non-finite count, then the film's channels
-    /// in the payload order (`tessera_proto::payload`), then the trailer.
+    /// in the payload order (`tessera_link::payload`), then the trailer.
     pub fn put_checkpoint(&self, job: &str, merged: usize, film: &Film, trailer: &[u8]) -> std::io::Result<String> {
         let name = format!("{job}.{merged}.film");
         // streamed: a 4K film is 230 MB or more, not worth copying in memory first
@@ -270,7 +270,7 @@ impl BlobStore {
                 w.write_all(&word.to_le_bytes())?;
             }
             w.write_all(&film.non_finite.to_le_bytes())?;
-            tessera_proto::payload::write_channels(
+            tessera_link::payload::write_channels(
                 w,
                 &film.sum,
                 film.weight.as_deref(),
@@ -294,7 +294,7 @@ impl BlobStore {
         let end = h.trailer().filter(|&n| n <= bytes.len()).ok_or_else(|| bad("too short for its size"))?;
         let pixels = h.width as usize * h.height as usize;
         let (sum, weight, splat, count) =
-            tessera_proto::payload::decode_channels(&bytes[h.at + 8..end], pixels, h.weights(), h.splats())
+            tessera_link::payload::decode_channels(&bytes[h.at + 8..end], pixels, h.weights(), h.splats())
                 .ok_or_else(|| bad("wrong size"))?;
         let (width, height) = (h.width, h.height);
         Ok((Film { width, height, sum, weight, splat, count, non_finite }, bytes[end..].to_vec()))

@@ -165,7 +165,7 @@ impl JobService {
         if matches!(&tile.state, TileState::Leased { worker: holder, .. } if holder != worker) {
             return None;
         }
-        let bytes = tessera_proto::payload::payload_bytes(&job.spec.layout(tile.spec.rect))?;
+        let bytes = tessera_link::payload::payload_bytes(&job.spec.layout(tile.spec.rect))?;
         Some((tile.spec.rect, bytes))
     }
 

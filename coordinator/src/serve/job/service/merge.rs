@@ -368,9 +368,9 @@ impl JobService {
             }
         };
         let layout = j.spec.layout(t.spec.rect);
-        let image_bytes = tessera_proto::payload::payload_bytes(&layout).ok_or_else(|| corrupt("too large"))?;
+        let image_bytes = tessera_link::payload::payload_bytes(&layout).ok_or_else(|| corrupt("too large"))?;
         let (image, pilot) = bytes.split_at_checked(image_bytes).ok_or_else(|| corrupt("too short"))?;
-        let accum = tessera_proto::payload::decode_tile(image, t.spec.rect, layout, non_finite)
+        let accum = tessera_link::payload::decode_tile(image, t.spec.rect, layout, non_finite)
             .ok_or_else(|| corrupt("wrong size"))?;
         let pilot = match inner.jobs.get(job).and_then(|r| r.emis.as_ref()) {
             Some(e) => e.decode_pilot(&t.spec, j.collects(i), pilot).map_err(|m| corrupt(&m))?,

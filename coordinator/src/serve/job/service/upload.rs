@@ -102,7 +102,7 @@ impl BundleUpload {
     }
 
     /// Closes the last file and writes the bundle's blob to `blob_path` (the encoding of
-    /// [`tessera_proto::bundle::encode`], hashed on the way); returns its digest.
+    /// [`tessera_link::bundle::encode`], hashed on the way); returns its digest.
     pub(super) fn finish(&mut self, scene_path: &str, blob_path: &Path) -> Result<String, ServiceError> {
         let invalid = ServiceError::InvalidArgument;
         self.close_current()?;
@@ -118,7 +118,7 @@ impl BundleUpload {
         };
         let open =
             |i: usize| File::open(self.dir.join(safe_relative_path(&self.files[i].0).expect("invariant: checked")));
-        tessera_proto::bundle::encode_to(scene_path, &self.files, open, &mut out)?;
+        tessera_link::bundle::encode_to(scene_path, &self.files, open, &mut out)?;
         out.inner.into_inner().map_err(|e| e.into_error())?.sync_all()?;
         use sha2::Digest;
         Ok(hex::encode(out.hash.finalize()))
@@ -212,8 +212,8 @@ mod tests {
             scene_path: "scene.xml".into(),
             files: vec![("empty.txt".into(), vec![]), bundle.files[0].clone()],
         };
-        let digest = tessera_proto::blob_digest(&tessera_proto::bundle::encode(&expected));
-        assert_eq!(svc.blobs.get(&digest).unwrap(), Some(tessera_proto::bundle::encode(&expected)), "{view:?}");
+        let digest = tessera_proto::blob_digest(&tessera_link::bundle::encode(&expected));
+        assert_eq!(svc.blobs.get(&digest).unwrap(), Some(tessera_link::bundle::encode(&expected)), "{view:?}");
         assert!(svc.scenes_dir.join(&digest).join("empty.txt").exists());
         let missing = svc.begin_upload(u64::MAX).unwrap();
         let e = svc.submit_upload(missing, "scene.xml", settings, 0, None, 1_000).unwrap_err();

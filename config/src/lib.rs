@@ -11,6 +11,8 @@
 //! before clap parses, which gives the precedence above without a second parser, and a value
 //! from the file is checked by the flag's own parser.
 
+#![deny(missing_docs)]
+
 mod file;
 mod layer;
 pub mod logging;

@@ -1,10 +1,10 @@
 //! Scene bundles on the wire and as blobs: a bundle travels as a `SceneBundle` message, and the
 //! coordinator stores that message's encoding as a content-addressed blob that workers fetch by
-//! its digest ([`crate::blob_digest`]).
+//! its digest ([`tessera_proto::blob_digest`]).
 
-use crate::v1 as pb;
 use prost::Message;
 use tessera_common::bundle::Bundle;
+use tessera_proto::v1 as pb;
 
 /// Bundle → wire message.
 pub fn to_pb(bundle: &Bundle) -> pb::SceneBundle {

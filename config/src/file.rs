@@ -2,7 +2,7 @@
 //! would carry on the command line (arrays into several values), each with the line of its
 //! key for error messages.
 
-use crate::settings::ConfigError;
+use crate::ConfigError;
 use std::path::{Path, PathBuf};
 use toml::de::{DeTable, DeValue};
 

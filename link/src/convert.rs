@@ -2,7 +2,6 @@
 //! and rectangles), so the coordinator and the worker cannot disagree on defaults. Errors name
 //! the field at fault.
 
-use crate::v1 as pb;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::denoise::ImageEstimate;
@@ -10,6 +9,7 @@ use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
+use tessera_proto::v1 as pb;
 
 fn parse_json_name<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> Result<T, String> {
     serde_json::from_value(serde_json::Value::String(value.to_string()))

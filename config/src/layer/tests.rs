@@ -2,7 +2,7 @@
 //! variables: those are tested on the real binaries, in child processes).
 
 use super::*;
-use crate::settings::ConfigArgs;
+use crate::ConfigArgs;
 use clap::{CommandFactory, FromArgMatches, Parser};
 
 #[derive(Parser, Debug)]
@@ -21,7 +21,7 @@ struct Toy {
     #[arg(long)]
     url: String,
     #[arg(long, value_enum, default_value = "text")]
-    format: crate::settings::LogFormat,
+    format: crate::LogFormat,
     #[command(flatten)]
     config: ConfigArgs,
 }
@@ -80,7 +80,7 @@ fn the_file_sets_what_flags_do_not() {
     assert!(t.insecure);
     assert_eq!(t.updates, [1, 4]);
     assert_eq!(t.url, "http://c", "a required flag may come from the file");
-    assert_eq!(t.format, crate::settings::LogFormat::Json);
+    assert_eq!(t.format, crate::LogFormat::Json);
     assert!(parsed.from_file("listen") && !parsed.from_file("timeout"));
     // without the file, the required flag is missing again
     assert!(matches!(toy(&[]), Err(ParseError::Clap(_))));

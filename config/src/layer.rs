@@ -3,8 +3,8 @@
 //! parser first, so a bad one is named with its file and line), and the effective settings
 //! can be printed back as TOML with where each came from.
 
-use crate::settings::file::SettingsFile;
-use crate::settings::{CONFIG_ARG, ConfigError, PRINT_CONFIG_ARG, ParseError};
+use crate::file::SettingsFile;
+use crate::{CONFIG_ARG, ConfigError, PRINT_CONFIG_ARG, ParseError};
 use clap::parser::ValueSource;
 use clap::{Arg, ArgAction, ArgMatches, Command};
 use std::any::TypeId;
@@ -110,7 +110,7 @@ fn config_path(argv: &[OsString], sub: Option<&str>) -> Option<PathBuf> {
             return Some(PathBuf::from(path));
         }
     }
-    std::env::var_os(crate::settings::layer::env_name("config")).filter(|p| !p.is_empty()).map(PathBuf::from)
+    std::env::var_os(crate::layer::env_name("config")).filter(|p| !p.is_empty()).map(PathBuf::from)
 }
 
 /// Makes the file's values the defaults of their arguments in `cmd`.

@@ -6,7 +6,7 @@
 //! ```no_run
 //! # async fn f() -> Result<(), Box<dyn std::error::Error>> {
 //! let ca = std::path::Path::new("farm-ca.pem");
-//! let channel = tessera_proto::connect::endpoint("https://farm:7878", Some(ca))?.connect().await?;
+//! let channel = tessera_link::connect::endpoint("https://farm:7878", Some(ca))?.connect().await?;
 //! # Ok(()) }
 //! ```
 
