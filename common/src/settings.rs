@@ -16,7 +16,6 @@
 
 use crate::emis::cost::CostModel;
 use crate::emis::denoise::ImageEstimate;
-use crate::emis::estimator::{MergeKernel, MergeRatio, MomentSettings};
 use crate::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use crate::emis::{EmisConfig, EmisMethod, PilotStart};
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
@@ -127,10 +126,6 @@ pub struct RenderSettings {
     pub defines: BTreeMap<String, String>,
     /// EMIS: optimise after these many iterations (increasing, above 0).
     pub emis_updates: Vec<u32>,
-    /// EMIS: count ratio of merge candidates in the moment estimator (docs/emis.md, decision 3a).
-    pub merge_ratio: MergeRatio,
-    /// EMIS: how merge samples enter the moments (docs/emis.md, decision 3b).
-    pub merge_kernel: MergeKernel,
     /// EMIS: the cost heuristic's constants (docs/emis.md, decision 8).
     pub cost_model: CostModel,
     /// EMIS: whether moments are made relative before or after the box filter.
@@ -159,8 +154,6 @@ impl Default for RenderSettings {
             correlation_aware: true,
             defines: BTreeMap::new(),
             emis_updates: EmisConfig::DEFAULT_UPDATES.to_vec(),
-            merge_ratio: MomentSettings::default().merge_ratio,
-            merge_kernel: MomentSettings::default().merge_kernel,
             cost_model: CostModel::default(),
             moment_filter: MomentFilter::default(),
             moment_outliers: OutlierStage::default(),
@@ -187,6 +180,29 @@ impl Renderer {
             Renderer::Emis(c, _) => c.name(),
         }
     }
+}
+
+/// Settings that were retired, each with the value it always had by default. Jobs stored before
+/// and older clients that still send one with that value are accepted; any other value is
+/// refused by name, since the variant it asked for no longer exists.
+pub const RETIRED: &[(&str, &str)] = &[("merge_ratio", "principled"), ("merge_kernel", "squared")];
+
+/// Removes the [`RETIRED`] settings from a settings object; the error names the first that
+/// asked for a retired variant (the others are removed all the same).
+pub fn strip_retired(settings: &mut serde_json::Map<String, serde_json::Value>) -> Result<(), SettingsError> {
+    let mut refused = None;
+    for (field, default) in RETIRED {
+        match settings.remove(*field) {
+            Some(serde_json::Value::String(v)) if v == *default => {}
+            Some(v) => {
+                refused.get_or_insert_with(|| {
+                    invalid(field, format!("{v} was retired; only {default:?}, what is always done now, is accepted"))
+                });
+            }
+            None => {}
+        }
+    }
+    refused.map_or(Ok(()), Err)
 }
 
 /// Settings that cannot work.
@@ -293,7 +309,6 @@ impl RenderSettings {
         let mut config = EmisConfig::new(self.integrator.emis_method().unwrap_or(EmisMethod::Vcm));
         config.updates = self.emis_updates.clone();
         config.correlation_aware = self.correlation_aware;
-        config.moments = MomentSettings { merge_ratio: self.merge_ratio, merge_kernel: self.merge_kernel };
         config.constants = self.cost_model.constants();
         config.measured_costs = self.cost_model == CostModel::Measured;
         config.filters.order = self.moment_filter;
@@ -326,7 +341,24 @@ mod tests {
         assert_eq!("emis-vcm".parse::<IntegratorName>().unwrap(), IntegratorName::EmisVcm);
         let s = RenderSettings { emis_updates: vec![4, 4], ..Default::default() };
         assert!(s.validate().unwrap_err().to_string().contains("emis_updates"));
-        let s: RenderSettings = serde_json::from_str(r#"{"integrator":"emis-vcm","merge_ratio":"reference"}"#).unwrap();
-        assert_eq!(s.emis_config().moments.merge_ratio, MergeRatio::Reference);
+        // retired settings are unknown to the settings themselves
+        let e = serde_json::from_str::<RenderSettings>(r#"{"integrator":"emis-vcm","merge_ratio":"principled"}"#);
+        assert!(e.unwrap_err().to_string().contains("merge_ratio"));
+    }
+
+    #[test]
+    fn retired_settings_are_stripped_with_their_old_default_and_refused_otherwise() {
+        let object = |text: &str| match serde_json::from_str(text).unwrap() {
+            serde_json::Value::Object(m) => m,
+            _ => unreachable!(),
+        };
+        let mut old = object(r#"{"integrator":"emis-vcm","merge_ratio":"principled","merge_kernel":"squared"}"#);
+        strip_retired(&mut old).unwrap();
+        let s: RenderSettings = serde_json::from_value(serde_json::Value::Object(old)).unwrap();
+        assert_eq!(s.integrator, IntegratorName::EmisVcm);
+        let mut variant = object(r#"{"merge_kernel":"reference"}"#);
+        let e = strip_retired(&mut variant).unwrap_err().to_string();
+        assert!(e.contains("\"merge_kernel\"") && e.contains("retired") && e.contains("squared"), "{e}");
+        assert!(variant.is_empty(), "removed all the same");
     }
 }

@@ -11,9 +11,9 @@
 //! prediction must agree with the measurement within [`Z_TILE`] (per tile) and [`Z_SQUARES`]
 //! (per χ) combined standard errors.
 //!
-//! ν ≠ 1 separates the merge ratio's two conventions (χ·ν against χ, docs/emis.md, decision
-//! 3a), the fractional χ exercises the 1/χ of merges in δ, and the direct renders' literal
-//! squares separate the kernel's (decision 3b). Cornell-box, because its per-tile sums are
+//! ν ≠ 1 tells the merge ratio χ·ν from the retired χ (decision 0001), the fractional χ
+//! exercises the 1/χ of merges in δ, and the direct renders' literal squares check the
+//! kernel's. Cornell-box, because its per-tile sums are
 //! well behaved (caustic-glass's rare caustic paths make 8×8 tiles too noisy to tell anything
 //! apart at this cost); Russian roulette is off, as in `emis_moments.rs`, since its survival
 //! probabilities are not part of the densities; paths end after 6 segments, which halves the
@@ -25,7 +25,7 @@ use common::{mean_and_standard_error, scene_path};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use tessera_common::emis::candidate::Candidate;
-use tessera_common::emis::estimator::{MergeRatio, MomentEstimator, MomentSettings};
+use tessera_common::emis::estimator::MomentEstimator;
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::observer::{SampleObserver, SampleRecord};
 use tessera_common::integrator::path::merge::{MergeConfig, MergeMask};
@@ -112,15 +112,20 @@ fn render_iteration(scene: &Scene, integrator: &impl Integrator, it: u32, seed: 
 /// Per iteration: per candidate (off, on), per tile, Σ y².
 type Sums = Vec<[Vec<f64>; 2]>;
 
-/// The pilot's predictions, one per estimator setting, all watching the same samples.
-fn predicted(settings: &[MomentSettings]) -> Vec<Sums> {
+/// The pilot's predictions of the merge-off and merge-on candidates at each of `nus` light
+/// paths per pixel, all watching the same samples.
+fn predicted(nus: &[f32]) -> Vec<Sums> {
     let (scene, path) = scene();
-    let candidates = [false, true].map(|merge| Candidate { nu: NU, connections: CONNECTIONS, merge });
     let mask = MergeMask::PerPixel(Arc::new(checkerboard()));
-    let mut out = vec![Vec::new(); settings.len()];
+    let mut out = vec![Vec::new(); nus.len()];
     for it in 0..iterations() {
-        let estimators: Vec<MomentEstimator> =
-            settings.iter().map(|&s| MomentEstimator::new(SIZE, SIZE, &candidates, s)).collect();
+        let estimators: Vec<MomentEstimator> = nus
+            .iter()
+            .map(|&nu| {
+                let candidates = [false, true].map(|merge| Candidate { nu, connections: CONNECTIONS, merge });
+                MomentEstimator::new(SIZE, SIZE, &candidates)
+            })
+            .collect();
         render_iteration(&scene, &vcm(path, mask.clone()).with_observer(&estimators[..]), it, 1);
         for (o, e) in out.iter_mut().zip(&estimators) {
             let (buffer, _) = e.snapshot();
@@ -187,12 +192,11 @@ fn disagreements(label: &str, pilot: &Sums, direct: &Sums) -> Vec<String> {
 
 #[test]
 fn merge_moments_per_tile_agree_with_direct_renders() {
-    let right = MomentSettings::default();
-    // the reference's merge ratio, which ignores ν: the test must tell it apart
-    let wrong = MomentSettings { merge_ratio: MergeRatio::Reference, ..right };
-    let pilots = predicted(&[right, wrong]);
+    // the candidates at twice the rendered ν (the error of the retired merge ratio χ, which
+    // ignored ν, in the other direction): the test must tell them apart
+    let pilots = predicted(&[NU, 2.0 * NU]);
     let direct = measured();
-    let failures = disagreements("default estimator", &pilots[0], &direct);
+    let failures = disagreements("estimator", &pilots[0], &direct);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
-    assert!(!disagreements("reference merge ratio", &pilots[1], &direct).is_empty(), "the comparison has power");
+    assert!(!disagreements("candidates at 2ν", &pilots[1], &direct).is_empty(), "the comparison has power");
 }

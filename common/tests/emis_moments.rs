@@ -15,7 +15,7 @@ mod common;
 
 use common::{mean_and_standard_error, scene_path};
 use tessera_common::emis::candidate::Candidate;
-use tessera_common::emis::estimator::{MomentEstimator, MomentSettings};
+use tessera_common::emis::estimator::MomentEstimator;
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::path::connections::Connections;
@@ -36,7 +36,7 @@ fn per_iteration_totals(scene: &Scene, pilot: (f32, u32), candidates: &[Candidat
     let settings = PathSettings { rr_depth: u32::MAX, ..PathSettings::from_scene(scene, None) };
     (0..iterations())
         .map(|it| {
-            let estimator = MomentEstimator::new(w, h, candidates, MomentSettings::default());
+            let estimator = MomentEstimator::new(w, h, candidates);
             let bidir = Bidir::bdpt(settings, pilot.0, pilot.1).with_observer(&estimator);
             let mut accum = TileAccum::new(Rect::full(w, h), &scene.film);
             bidir.render_tile(scene, &TileRequest::new(Rect::full(w, h), it..it + 1, seed), &mut accum);
@@ -89,7 +89,7 @@ fn moment_buffers_are_thread_count_independent_and_merge_like_one_run() {
     let candidates = tessera_common::emis::candidate::CandidateConfig::vcm().candidates();
     let settings = PathSettings::from_scene(&scene, None);
     let render = |iterations: std::ops::Range<u32>, threads: usize| -> MomentBuffer {
-        let estimator = MomentEstimator::new(w, h, &candidates, MomentSettings::default());
+        let estimator = MomentEstimator::new(w, h, &candidates);
         let merge = tessera_common::integrator::path::merge::MergeConfig {
             mask: tessera_common::integrator::path::merge::MergeMask::Constant(1.0),
             correlation_aware: true,

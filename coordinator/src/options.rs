@@ -9,7 +9,6 @@ use std::path::Path;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::denoise::ImageEstimate;
-use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings, Renderer, SettingsError};
@@ -89,12 +88,6 @@ pub struct IntegratorArgs {
     /// emis-*: optimise after these many iterations (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
     pub emis_updates: Vec<u32>,
-    /// emis-*: count ratio of merge candidates in the correction factor.
-    #[arg(long, value_enum, default_value = "principled")]
-    pub merge_ratio: MergeRatioArg,
-    /// emis-*: merge moments with the kernel squared or (as the reference) once.
-    #[arg(long, value_enum, default_value = "squared")]
-    pub merge_kernel: MergeKernelArg,
     /// The EMIS optimiser's model: cost constants, moment filter order, outlier rule.
     #[command(flatten)]
     pub model: EmisModelArgs,
@@ -316,36 +309,10 @@ impl IntegratorArgs {
         settings.merge = self.merge == Switch::On;
         settings.correlation_aware = self.correlation_aware == Switch::On;
         settings.emis_updates = self.emis_updates.clone();
-        settings.merge_ratio = match self.merge_ratio {
-            MergeRatioArg::Principled => MergeRatio::Principled,
-            MergeRatioArg::Reference => MergeRatio::Reference,
-        };
-        settings.merge_kernel = match self.merge_kernel {
-            MergeKernelArg::Squared => MergeKernel::Squared,
-            MergeKernelArg::Reference => MergeKernel::Reference,
-        };
         self.model.apply(settings);
         settings.emis_pilot = self.emis_pilot.into();
         settings.emis_connections = self.emis_connections.into();
     }
-}
-
-/// Count ratio of merge candidates in the EMIS correction factor (docs/emis.md, decision 3a).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MergeRatioArg {
-    /// χ·ν: merges scale with the light paths, as in the MIS weights.
-    Principled,
-    /// χ: the reference implementation.
-    Reference,
-}
-
-/// How merge samples enter the EMIS moments (docs/emis.md, decision 3b).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MergeKernelArg {
-    /// (contribution × kernel)².
-    Squared,
-    /// contribution² × kernel: the reference implementation.
-    Reference,
 }
 
 /// An on/off switch.

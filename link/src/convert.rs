@@ -5,7 +5,6 @@
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::denoise::ImageEstimate;
-use tessera_common::emis::estimator::{MergeKernel, MergeRatio};
 use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
 use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
@@ -27,6 +26,13 @@ fn json_name<T: serde::Serialize>(value: &T) -> String {
 /// names the field.
 pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String> {
     let d = RenderSettings::default();
+    let mut retired = serde_json::Map::new();
+    for (field, value) in [("merge_ratio", &s.merge_ratio), ("merge_kernel", &s.merge_kernel)] {
+        if let Some(v) = value {
+            retired.insert(field.into(), v.clone().into());
+        }
+    }
+    tessera_common::settings::strip_retired(&mut retired).map_err(|e| e.to_string())?;
     let integrator = if s.integrator.is_empty() {
         d.integrator
     } else {
@@ -44,14 +50,6 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
         correlation_aware: s.correlation_aware.unwrap_or(d.correlation_aware),
         defines: s.defines.clone().into_iter().collect(),
         emis_updates: s.emis_updates.as_ref().map_or(d.emis_updates, |u| u.iterations.clone()),
-        merge_ratio: match &s.merge_ratio {
-            Some(v) => parse_json_name::<MergeRatio>("merge_ratio", v)?,
-            None => d.merge_ratio,
-        },
-        merge_kernel: match &s.merge_kernel {
-            Some(v) => parse_json_name::<MergeKernel>("merge_kernel", v)?,
-            None => d.merge_kernel,
-        },
         cost_model: match &s.cost_model {
             Some(v) => parse_json_name::<CostModel>("cost_model", v)?,
             None => d.cost_model,
@@ -93,8 +91,8 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         correlation_aware: Some(s.correlation_aware),
         defines: s.defines.clone().into_iter().collect(),
         emis_updates: Some(pb::EmisUpdates { iterations: s.emis_updates.clone() }),
-        merge_ratio: Some(json_name(&s.merge_ratio)),
-        merge_kernel: Some(json_name(&s.merge_kernel)),
+        merge_ratio: None,
+        merge_kernel: None,
         cost_model: Some(json_name(&s.cost_model)),
         moment_filter: Some(json_name(&s.moment_filter)),
         moment_outliers: Some(json_name(&s.moment_outliers)),
@@ -129,7 +127,6 @@ mod tests {
             integrator: IntegratorName::EmisVcm,
             spp: Some(9),
             emis_updates: vec![2, 5],
-            merge_ratio: MergeRatio::Reference,
             cost_model: CostModel::Reference,
             emis_pilot: PilotStart::Bidirectional,
             emis_connections: ConnectionScope::PerPixel,
@@ -138,7 +135,12 @@ mod tests {
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);
         assert_eq!(settings_from_pb(&pb::RenderSettings::default()).unwrap(), RenderSettings::default());
-        let bad = pb::RenderSettings { merge_kernel: Some("cubic".into()), ..Default::default() };
-        assert!(settings_from_pb(&bad).unwrap_err().contains("merge_kernel"));
+        let bad = pb::RenderSettings { moment_filter: Some("cubic".into()), ..Default::default() };
+        assert!(settings_from_pb(&bad).unwrap_err().contains("moment_filter"));
+        // retired settings: what older clients send is accepted, a retired variant refused
+        let old = pb::RenderSettings { merge_kernel: Some("squared".into()), ..Default::default() };
+        assert_eq!(settings_from_pb(&old).unwrap(), RenderSettings::default());
+        let retired = pb::RenderSettings { merge_ratio: Some("reference".into()), ..Default::default() };
+        assert!(settings_from_pb(&retired).unwrap_err().contains("merge_ratio"));
     }
 }

@@ -12,14 +12,10 @@
 //! the density a candidate with c = 4 has whatever its N; so a candidate's connection ratio is
 //! exactly c/4. (The reference uses 4/L̄l, off by the emitter vertex, which cannot be chosen.)
 //!
-//! Two switches (docs/emis.md, decision 3), each settled by `tessera bench ground-truth`:
-//! * [`MergeRatio`]: a merge candidate's count ratio χ·ν (principled: merges use N light
-//!   paths) or χ (the reference code);
-//! * [`MergeKernel`]: merge moments (contribution × kernel)² (the literal squared estimate) or
-//!   contribution² × kernel (the reference code).
-//!
-//! The defaults (Principled, Squared) are the variants whose choices agreed best with the
-//! measured variances (docs/decisions/0001-estimator-switches.md).
+//! A merge candidate's count ratio is χ·ν (merges use N = ν·P light paths, as in their MIS
+//! weights), and merge moments are (contribution × kernel)², the square of what the image
+//! receives. Both agreed with the measured variances better than the reference code's χ and
+//! contribution² × kernel (docs/decisions/0001-estimator-switches.md), which are retired.
 //!
 //! Determinism: camera-path samples of a pixel come from one thread, in order, so they are
 //! added to the pixel's sums directly. Light-tracing samples land in arbitrary pixels from any
@@ -34,44 +30,8 @@ use super::proxy::proxy_weights;
 use crate::integrator::observer::{IterationStart, PathCounters, SampleObserver, SampleRecord};
 use crate::integrator::path::mis::{MergeCounts, SampleCounts, Technique};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
-
-/// The count ratio of merge candidates (docs/emis.md, decision 3a).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MergeRatio {
-    /// χ·ν: a merge candidate merges against N = ν·P light paths, like its MIS weights.
-    Principled,
-    /// χ: the reference implementation's ratio, which ignores ν.
-    Reference,
-}
-
-/// How merge samples enter the moments (docs/emis.md, decision 3b).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MergeKernel {
-    /// (contribution × kernel)², the square of what is added to the image.
-    Squared,
-    /// contribution² × kernel, as the reference implementation.
-    Reference,
-}
-
-/// The estimator's switches.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct MomentSettings {
-    /// The merge count ratio (docs/emis.md, decision 3a).
-    pub merge_ratio: MergeRatio,
-    /// The merge kernel (docs/emis.md, decision 3b).
-    pub merge_kernel: MergeKernel,
-}
-
-impl Default for MomentSettings {
-    fn default() -> Self {
-        MomentSettings { merge_ratio: MergeRatio::Principled, merge_kernel: MergeKernel::Squared }
-    }
-}
 
 /// Most candidates one estimator handles (the VCM set has 51).
 pub const MAX_CANDIDATES: usize = 64;
@@ -109,7 +69,6 @@ pub struct MomentEstimator {
     candidates: Ratios,
     width: u32,
     height: u32,
-    settings: MomentSettings,
     merging: bool,
     /// The proxy's connection density of the current iteration (f32 bits).
     proxy_connect: AtomicU32,
@@ -123,18 +82,14 @@ pub struct MomentEstimator {
 
 impl MomentEstimator {
     /// An estimator for `candidates` on a `width × height` image.
-    pub fn new(width: u32, height: u32, candidates: &[Candidate], settings: MomentSettings) -> Self {
+    pub fn new(width: u32, height: u32, candidates: &[Candidate]) -> Self {
         assert!(candidates.len() <= MAX_CANDIDATES, "invariant: at most {MAX_CANDIDATES} candidates");
         let mut ratios =
             Ratios { lt: [0.0; MAX_CANDIDATES], con: [0.0; MAX_CANDIDATES], vm: [0.0; MAX_CANDIDATES], len: 0 };
         for (i, c) in candidates.iter().enumerate() {
             ratios.lt[i] = c.nu;
             ratios.con[i] = c.connections as f32 / PROXY_CONNECTIONS;
-            ratios.vm[i] = match (c.merge, settings.merge_ratio) {
-                (false, _) => 0.0,
-                (true, MergeRatio::Principled) => c.nu,
-                (true, MergeRatio::Reference) => 1.0,
-            };
+            ratios.vm[i] = if c.merge { c.nu } else { 0.0 };
         }
         ratios.len = candidates.len();
         let n = width as usize * height as usize * candidates.len();
@@ -142,7 +97,6 @@ impl MomentEstimator {
             candidates: ratios,
             width,
             height,
-            settings,
             merging: candidates.iter().any(|c| c.merge),
             proxy_connect: AtomicU32::new((PROXY_CONNECTIONS / 5.0).to_bits()),
             // megabytes: zeroed (and their pages faulted in) by all threads
@@ -172,11 +126,7 @@ impl MomentEstimator {
 
     /// The pilot's ratios (pt, lt, con, vm) against the proxy.
     fn pilot_ratios(&self, counts: &SampleCounts, proxy: &SampleCounts) -> [f32; 4] {
-        let vm = match (&counts.merge, self.settings.merge_ratio) {
-            (Some(m), MergeRatio::Principled) => m.count / self.pixels(),
-            (Some(m), MergeRatio::Reference) if m.light_paths > 0.0 => m.count / m.light_paths,
-            _ => 0.0,
-        };
+        let vm = counts.merge.as_ref().map_or(0.0, |m| m.count / self.pixels());
         let con = if proxy.connect > 0.0 { counts.connect / proxy.connect } else { 0.0 };
         [
             counts.hit.max(counts.next_event),
@@ -268,14 +218,11 @@ fn candidates_avx2(r: &Ratios, w: [f32; 5], scale: f32, out: &mut [f32; MAX_CAND
     candidates_any(r, w, scale, out)
 }
 
-/// The channel mean of a contribution, squared; for merges per [`MergeKernel`].
+/// The channel mean of a contribution, squared.
 #[inline]
-fn squared_value(record: &SampleRecord, kernel: MergeKernel) -> f32 {
+fn squared_value(record: &SampleRecord) -> f32 {
     let y = (record.value.x + record.value.y + record.value.z) / 3.0;
-    match (record.technique, kernel) {
-        (Technique::Merge(_), MergeKernel::Reference) if record.kernel > 0.0 => y * y / record.kernel,
-        _ => y * y,
-    }
+    y * y
 }
 
 impl SampleObserver for MomentEstimator {
@@ -284,7 +231,7 @@ impl SampleObserver for MomentEstimator {
         let w: ProxyWeights = proxy_weights(record.pdfs, record.ratios, &proxy);
         let weights = [w.pt as f32, w.lt as f32, w.con as f32, w.vm as f32, w.vm_correlated as f32];
         let pilot = self.pilot_ratios(record.counts, &proxy);
-        let w2 = squared_value(record, self.settings.merge_kernel);
+        let w2 = squared_value(record);
         if !w2.is_finite() {
             return;
         }

@@ -38,7 +38,7 @@ use super::EmisState;
 use super::candidate::{Candidate, CandidateConfig};
 use super::cost::{CostConstants, StatisticsSums};
 use super::denoise::DenoiseSettings;
-use super::estimator::{MomentEstimator, MomentSettings};
+use super::estimator::MomentEstimator;
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
@@ -120,8 +120,6 @@ pub struct EmisConfig {
     pub updates: Vec<u32>,
     /// Correlation-aware merge weights (pilot and final).
     pub correlation_aware: bool,
-    /// The estimator's switches (docs/emis.md, decision 3).
-    pub moments: MomentSettings,
     /// Cost heuristic constants (docs/emis.md, decision 8).
     pub constants: CostConstants,
     /// Measure the constants per job from the pilot's work times, `constants` filling in what
@@ -173,7 +171,6 @@ impl EmisConfig {
             },
             updates: Self::DEFAULT_UPDATES.to_vec(),
             correlation_aware: true,
-            moments: MomentSettings::default(),
             constants: CostConstants::default(),
             measured_costs: false,
             filters: FilterSettings::default(),
@@ -339,7 +336,7 @@ pub fn render_iterations_until(
         return (accum, None);
     };
     let candidates = config.candidates_of(set);
-    let estimator = MomentEstimator::new(w, h, &candidates, config.moments);
+    let estimator = MomentEstimator::new(w, h, &candidates);
     let guided = if config.records_guides(set) {
         iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS)
     } else {

@@ -2,8 +2,7 @@
 //! moments choose what the true variances would choose?
 //!
 //! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--pilot`
-//! iterations) runs four moment estimators at once, one per setting of the two switches of
-//! decision 3. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
+//! iterations) runs the moment estimator. Then every candidate of a reduced set (ν ∈ {0.25, 1, 2} × c ∈ {0, 1, 4} × merging
 //! off / everywhere, plus path tracing: 19) renders K iterations itself, timed the way a final
 //! pass renders it (path tracing by the `pt` integrator).
 //!
@@ -19,7 +18,7 @@
 //! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
 //! and from the pilot.
 //!
-//! Reported per variant: the candidate it chooses and its **regret**, the true work-normalised
+//! Reported per prediction: the candidate it chooses and its **regret**, the true work-normalised
 //! error of that choice over the best candidate's (1 = perfect), plus how well its predictions
 //! correlate with the truth over all candidates (Spearman ρ). Each scene also ends with one
 //! `json:` line holding every figure, for analyses beyond the table.
@@ -29,7 +28,7 @@ use crate::options::{CostModelArg, MomentOutliersArg, scene_name};
 use std::path::Path;
 use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::cost::{CostModel, StatisticsSums, pixel_cost};
-use tessera_common::emis::estimator::{MergeKernel, MergeRatio, MomentEstimator, MomentSettings};
+use tessera_common::emis::estimator::MomentEstimator;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
 use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_each_outliers, remove_shared_outliers};
@@ -59,13 +58,6 @@ pub struct GroundTruthArgs {
     #[arg(long, value_enum, default_value = "shared")]
     pub moment_outliers: MomentOutliersArg,
 }
-
-const VARIANTS: [(MergeRatio, MergeKernel); 4] = [
-    (MergeRatio::Principled, MergeKernel::Squared),
-    (MergeRatio::Principled, MergeKernel::Reference),
-    (MergeRatio::Reference, MergeKernel::Squared),
-    (MergeRatio::Reference, MergeKernel::Reference),
-];
 
 fn reduced_candidates() -> Vec<Candidate> {
     let mut v = Vec::new();
@@ -152,31 +144,25 @@ impl Subject {
     }
 }
 
-/// The `vcm` pilot with one estimator per setting of [`VARIANTS`]: each one's moment buffer
-/// and path statistics.
+/// The `vcm` pilot's moment buffer and path statistics.
 fn pilot_moments(
     s: &Subject,
     candidates: &[Candidate],
     iterations: u32,
     pool: &rayon::ThreadPool,
-) -> Vec<(MomentBuffer, StatisticsSums)> {
+) -> (MomentBuffer, StatisticsSums) {
     let (w, h) = (s.scene.camera.width, s.scene.camera.height);
     let full = Rect::full(w, h);
-    let estimators: Vec<MomentEstimator> = VARIANTS
-        .iter()
-        .map(|&(merge_ratio, merge_kernel)| {
-            MomentEstimator::new(w, h, candidates, MomentSettings { merge_ratio, merge_kernel })
-        })
-        .collect();
+    let estimator = MomentEstimator::new(w, h, candidates);
     let pilot = Strategy::pilot(EmisMethod::Vcm).integrator(s.settings, s.config.correlation_aware);
     pool.install(|| {
-        pilot.with_observer(&estimators[..]).render_tile(
+        pilot.with_observer(&estimator).render_tile(
             &s.scene,
             &TileRequest::new(full, 0..iterations, 7),
             &mut TileAccum::new(full, &s.scene.film),
         )
     });
-    estimators.iter().map(|e| e.snapshot()).collect()
+    estimator.snapshot()
 }
 
 /// Every candidate rendered on its own: unscaled relMSE × K (all pixels, and with the top
@@ -194,7 +180,7 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
     let full = Rect::full(w as u32, h as u32);
     let mut m = Measured::default();
     for c in candidates {
-        let own = MomentEstimator::new(w as u32, h as u32, std::slice::from_ref(c), MomentSettings::default());
+        let own = MomentEstimator::new(w as u32, h as u32, std::slice::from_ref(c));
         let request = TileRequest::new(full, 1000..1000 + k, 11);
         let integrator = strategy_of(c).integrator(s.settings, s.config.correlation_aware);
         pool.install(|| {
@@ -256,24 +242,20 @@ fn argmin(v: &[f64]) -> usize {
 
 /// Regrets collected over the scenes, for the closing geometric means.
 struct Regrets {
-    /// Per estimator variant of [`VARIANTS`], relative filter order.
-    variants: Vec<Vec<f64>>,
     /// The candidates' own measured moments.
     direct: Vec<f64>,
-    /// Per filter order of [`MomentFilter::ALL`], the first variant.
+    /// Per filter order of [`MomentFilter::ALL`].
     orders: [Vec<f64>; 2],
 }
 
 /// The table of one scene, each prediction's choice and regret, and one JSON line with every
 /// figure.
-#[allow(clippy::too_many_arguments)]
 fn report_scene(
     name: &str,
     candidates: &[Candidate],
     costs: &[f64],
     m: &Measured,
     by_order: &[Vec<f64>],
-    by_variant: &[Vec<f64>],
     regrets: &mut Regrets,
     json: serde_json::Value,
 ) {
@@ -316,12 +298,9 @@ fn report_scene(
         );
     };
     for ((order, predicted), into) in MomentFilter::ALL.iter().zip(by_order).zip(&mut regrets.orders) {
-        verdict(format!("pilot moments (principled, squared), {order:?} filter order"), predicted, into);
+        verdict(format!("pilot moments, {order:?} filter order"), predicted, into);
     }
     verdict("measured second moments".into(), &direct, &mut regrets.direct);
-    for (((ratio, kernel), predicted), into) in VARIANTS.iter().zip(by_variant).zip(&mut regrets.variants) {
-        verdict(format!("pilot moments, ratio {ratio:?}, kernel {kernel:?}"), predicted, into);
-    }
     println!("json: {json}");
 }
 
@@ -338,22 +317,19 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
         args.pilot,
         candidates.len()
     );
-    let mut regrets =
-        Regrets { variants: vec![Vec::new(); VARIANTS.len()], direct: Vec::new(), orders: [Vec::new(), Vec::new()] };
+    let mut regrets = Regrets { direct: Vec::new(), orders: [Vec::new(), Vec::new()] };
     for path in &scenes {
         let s = Subject::load(path)?;
         let pixels = s.scene.camera.width * s.scene.camera.height;
-        let snapshots = pilot_moments(&s, &candidates, args.pilot, &pool);
-        let statistics = snapshots[0].1.statistics(pixels);
+        let (moments, statistics) = pilot_moments(&s, &candidates, args.pilot, &pool);
+        let statistics = statistics.statistics(pixels);
         let costs: Vec<f64> = candidates
             .iter()
             .map(|c| pixel_cost(&constants, &statistics, c, c.merge as u8 as f64, c.merge, pixels))
             .collect();
         let measured = measure_candidates(&s, &candidates, k, &pool);
         let by_order: Vec<Vec<f64>> =
-            MomentFilter::ALL.iter().map(|&order| predict(&s, &snapshots[0].0, &costs, order, outliers)).collect();
-        let by_variant: Vec<Vec<f64>> =
-            snapshots.iter().map(|(m, _)| predict(&s, m, &costs, MomentFilter::default(), outliers)).collect();
+            MomentFilter::ALL.iter().map(|&order| predict(&s, &moments, &costs, order, outliers)).collect();
         // everything as one JSON line, for analyses beyond the table
         let rows: Vec<serde_json::Value> = candidates
             .iter()
@@ -369,15 +345,12 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
             .collect();
         let json = serde_json::json!({"scene": scene_name(path), "k": k, "pilot": args.pilot,
             "statistics": statistics, "candidates": rows});
-        report_scene(&scene_name(path), &candidates, &costs, &measured, &by_order, &by_variant, &mut regrets, json);
+        report_scene(&scene_name(path), &candidates, &costs, &measured, &by_order, &mut regrets, json);
     }
     println!("\n### geometric-mean regret over {} scenes", scenes.len());
     println!("measured second moments: {:.3}x", geometric_mean(&regrets.direct));
     for (order, r) in MomentFilter::ALL.iter().zip(&regrets.orders) {
-        println!("filter order {order:?} (principled, squared): {:.3}x", geometric_mean(r));
-    }
-    for ((ratio, kernel), r) in VARIANTS.iter().zip(&regrets.variants) {
-        println!("ratio {ratio:?}, kernel {kernel:?}: {:.3}x", geometric_mean(r));
+        println!("filter order {order:?}: {:.3}x", geometric_mean(r));
     }
     Ok(())
 }

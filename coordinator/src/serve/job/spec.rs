@@ -37,6 +37,19 @@ fn box_filter() -> FilterKind {
 }
 
 impl JobSpec {
+    /// A job's spec as stored by the coordinator under `id`. Settings retired since it was
+    /// stored are dropped: a job that asked for a retired variant goes on with what is always
+    /// done now, and the log says so.
+    pub fn from_stored(id: &str, text: &str) -> serde_json::Result<JobSpec> {
+        let mut value: serde_json::Value = serde_json::from_str(text)?;
+        if let Some(settings) = value.get_mut("settings").and_then(|s| s.as_object_mut())
+            && let Err(e) = tessera_common::settings::strip_retired(settings)
+        {
+            tracing::warn!(job = id, "{e}: the job goes on without it");
+        }
+        serde_json::from_value(value)
+    }
+
     /// A job of `integrator` with `spp` samples over a `width`×`height` box-filtered film and a
     /// placeholder bundle: what tests build jobs from, and what is shown of a job whose stored
     /// description is lost.
@@ -73,5 +86,21 @@ impl TileSpec {
     /// Pixel samples the tile contributes.
     pub fn pixel_samples(&self) -> u64 {
         self.rect.area() as u64 * self.samples.len() as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stored_specs_with_retired_settings_still_load() {
+        let spec = JobSpec::bare("n", IntegratorName::EmisVcm, Some(4), 8, 8);
+        let mut stored = serde_json::to_value(&spec).unwrap();
+        for (field, value) in [("merge_ratio", "principled"), ("merge_kernel", "reference")] {
+            stored["settings"][field] = value.into();
+        }
+        assert!(serde_json::from_value::<JobSpec>(stored.clone()).is_err(), "unknown to the settings");
+        assert_eq!(JobSpec::from_stored("job", &stored.to_string()).unwrap(), spec);
     }
 }

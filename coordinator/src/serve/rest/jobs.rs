@@ -40,6 +40,7 @@ fn parse_settings(text: &str) -> Result<(RenderSettings, i32, Option<String>), A
             .ok_or_else(|| invalid("settings field \"priority\" must be an integer"))?,
     };
     let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
+    tessera_common::settings::strip_retired(obj).map_err(|e| invalid(e.to_string()))?;
     let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
     Ok((settings, priority, name))
 }

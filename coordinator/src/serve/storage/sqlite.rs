@@ -443,7 +443,7 @@ impl Store {
         {
             let (id, seq, spec, state, passes, failures, error, created, started, finished, merged, files) = row;
             let corrupt = |message: String| StoreError::Corrupt { job: id.clone(), message };
-            let spec: JobSpec = serde_json::from_str(&spec).map_err(|e| corrupt(format!("spec: {e}")))?;
+            let spec = JobSpec::from_stored(&id, &spec).map_err(|e| corrupt(format!("spec: {e}")))?;
             let state: JobState =
                 serde_json::from_value(serde_json::Value::String(state)).map_err(|e| corrupt(format!("state: {e}")))?;
             let passes: Vec<Pass> = serde_json::from_str(&passes).map_err(|e| corrupt(format!("passes: {e}")))?;
