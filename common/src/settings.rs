@@ -182,24 +182,47 @@ impl Renderer {
     }
 }
 
-/// Settings that were retired, each with the value it always had by default. Jobs stored before
-/// and older clients that still send one with that value are accepted; any other value is
-/// refused by name, since the variant it asked for no longer exists.
-pub const RETIRED: &[(&str, &str)] = &[("merge_ratio", "principled"), ("merge_kernel", "squared")];
+/// A setting that was retired, or one value of a setting that was.
+#[derive(Clone, Copy, Debug)]
+pub struct Retired {
+    /// The settings field.
+    pub field: &'static str,
+    /// The retired value; `None`: the whole field is retired.
+    pub value: Option<&'static str>,
+    /// What is always done now: the field's old default, or the value that replaces the
+    /// retired one.
+    pub now: &'static str,
+}
 
-/// Removes the [`RETIRED`] settings from a settings object; the error names the first that
-/// asked for a retired variant (the others are removed all the same).
+/// Every retired setting and value. Jobs stored before, and older clients that still send a
+/// retired field with its old default, are accepted; asking for a retired variant is refused
+/// by name, since it no longer exists.
+pub const RETIRED: &[Retired] = &[
+    Retired { field: "merge_ratio", value: None, now: "principled" },
+    Retired { field: "merge_kernel", value: None, now: "squared" },
+    Retired { field: "cost_model", value: Some("reference"), now: "calibrated" },
+];
+
+/// Rewrites a settings object without [`RETIRED`] settings: retired fields removed, retired
+/// values replaced by what is always done now. The error names the first that asked for a
+/// retired variant (the object is rewritten all the same, so a stored job can go on).
 pub fn strip_retired(settings: &mut serde_json::Map<String, serde_json::Value>) -> Result<(), SettingsError> {
     let mut refused = None;
-    for (field, default) in RETIRED {
-        match settings.remove(*field) {
-            Some(serde_json::Value::String(v)) if v == *default => {}
-            Some(v) => {
-                refused.get_or_insert_with(|| {
-                    invalid(field, format!("{v} was retired; only {default:?}, what is always done now, is accepted"))
-                });
-            }
-            None => {}
+    for r in RETIRED {
+        let asked = match (r.value, settings.get(r.field)) {
+            (_, None) => continue,
+            (None, Some(v)) => (*v != r.now).then(|| v.clone()),
+            (Some(retired), Some(v)) if *v == retired => Some(v.clone()),
+            (Some(_), Some(_)) => continue,
+        };
+        match r.value {
+            None => drop(settings.remove(r.field)),
+            Some(_) => drop(settings.insert(r.field.into(), r.now.into())),
+        }
+        if let Some(v) = asked {
+            refused.get_or_insert_with(|| {
+                invalid(r.field, format!("{v} was retired; {:?} is what is always done now", r.now))
+            });
         }
     }
     refused.map_or(Ok(()), Err)
@@ -360,5 +383,13 @@ mod tests {
         let e = strip_retired(&mut variant).unwrap_err().to_string();
         assert!(e.contains("\"merge_kernel\"") && e.contains("retired") && e.contains("squared"), "{e}");
         assert!(variant.is_empty(), "removed all the same");
+        // a retired value of a live field: replaced, and refused by name
+        let mut value = object(r#"{"cost_model":"reference"}"#);
+        let e = strip_retired(&mut value).unwrap_err().to_string();
+        assert!(e.contains("\"cost_model\"") && e.contains("calibrated"), "{e}");
+        assert_eq!(value["cost_model"], "calibrated");
+        let mut live = object(r#"{"cost_model":"measured"}"#);
+        strip_retired(&mut live).unwrap();
+        assert_eq!(live["cost_model"], "measured");
     }
 }

@@ -281,7 +281,6 @@ impl From<CostModelArg> for CostModel {
     fn from(arg: CostModelArg) -> CostModel {
         match arg {
             CostModelArg::Calibrated => CostModel::Calibrated,
-            CostModelArg::Reference => CostModel::Reference,
             CostModelArg::Measured => CostModel::Measured,
         }
     }
@@ -292,8 +291,6 @@ impl From<CostModelArg> for CostModel {
 pub enum CostModelArg {
     /// Fitted to this renderer's measured times (`tessera bench calibrate-costs`).
     Calibrated,
-    /// The reference implementation's constants (docs/emis.md §2).
-    Reference,
     /// Measured per job from the pilot's own work times on the machine that renders it, the
     /// calibrated constants filling in what cannot be measured; decisions then vary with
     /// timing from run to run.

@@ -26,8 +26,11 @@ fn json_name<T: serde::Serialize>(value: &T) -> String {
 /// names the field.
 pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String> {
     let d = RenderSettings::default();
+    // the fields with retired settings or values, checked as the JSON settings are
     let mut retired = serde_json::Map::new();
-    for (field, value) in [("merge_ratio", &s.merge_ratio), ("merge_kernel", &s.merge_kernel)] {
+    for (field, value) in
+        [("merge_ratio", &s.merge_ratio), ("merge_kernel", &s.merge_kernel), ("cost_model", &s.cost_model)]
+    {
         if let Some(v) = value {
             retired.insert(field.into(), v.clone().into());
         }
@@ -127,7 +130,7 @@ mod tests {
             integrator: IntegratorName::EmisVcm,
             spp: Some(9),
             emis_updates: vec![2, 5],
-            cost_model: CostModel::Reference,
+            cost_model: CostModel::Measured,
             emis_pilot: PilotStart::Bidirectional,
             emis_connections: ConnectionScope::PerPixel,
             emis_image: ImageEstimate::Guided,
@@ -142,5 +145,7 @@ mod tests {
         assert_eq!(settings_from_pb(&old).unwrap(), RenderSettings::default());
         let retired = pb::RenderSettings { merge_ratio: Some("reference".into()), ..Default::default() };
         assert!(settings_from_pb(&retired).unwrap_err().contains("merge_ratio"));
+        let retired = pb::RenderSettings { cost_model: Some("reference".into()), ..Default::default() };
+        assert!(settings_from_pb(&retired).unwrap_err().contains("cost_model"));
     }
 }

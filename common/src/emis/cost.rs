@@ -42,16 +42,14 @@ pub struct CostConstants {
 }
 
 /// Which constants the heuristic uses. The default is [`CostModel::Calibrated`] (see
-/// [`CostConstants::calibrated`] for why); [`CostModel::Reference`] reproduces the
-/// reference implementation.
+/// [`CostConstants::calibrated`] for why). The reference implementation's constants
+/// ([`CostConstants::reference`]) chose worse and were retired as a model (decision 0002).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CostModel {
     /// [`CostConstants::calibrated`]: fitted to this renderer's measured times.
     #[default]
     Calibrated,
-    /// [`CostConstants::reference`]: the reference implementation's constants (docs/emis.md §2).
-    Reference,
     /// Measured per job from the pilot's own work times ([`super::measured`]), with
     /// [`CostConstants::calibrated`] for what they cannot measure. Decisions then vary with
     /// the machine's timing from run to run, and a farm's with its workers'.
@@ -63,13 +61,14 @@ impl CostModel {
     pub fn constants(self) -> CostConstants {
         match self {
             CostModel::Calibrated | CostModel::Measured => CostConstants::calibrated(),
-            CostModel::Reference => CostConstants::reference(),
         }
     }
 }
 
 impl CostConstants {
-    /// The reference implementation's "current heuristic" constants (docs/emis.md §2).
+    /// The reference implementation's "current heuristic" constants (docs/emis.md §2): no
+    /// longer a model renders use, kept as the baseline `tessera bench calibrate-costs` and the
+    /// optimiser's tests compare against.
     pub fn reference() -> Self {
         CostConstants {
             camera_vertex: 1.0,

@@ -201,5 +201,10 @@ mod tests {
         assert!(e.message.contains("spq"), "{}", e.message);
         let e = parse_settings(r#"{"priority":"high"}"#).unwrap_err();
         assert!(e.message.contains("priority"));
+        // retired settings: their old default accepted, a retired variant refused by name
+        let (s, _, _) = parse_settings(r#"{"integrator":"emis-vcm","merge_ratio":"principled"}"#).unwrap();
+        assert_eq!(s.integrator, tessera_common::settings::IntegratorName::EmisVcm);
+        let e = parse_settings(r#"{"integrator":"emis-vcm","cost_model":"reference"}"#).unwrap_err();
+        assert!(e.message.contains("cost_model") && e.message.contains("retired"), "{}", e.message);
     }
 }
