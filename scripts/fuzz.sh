@@ -67,8 +67,10 @@ replay() {
     local t=$1 passed=0 failed=0 f
     for f in fuzz/regressions/"$t"/*; do
         [ -f "$f" ] || continue
-        # strict: a reproducer of a panic that the code catches fails too
-        if TESSERA_FUZZ_STRICT=1 TESSERA_FUZZ_SCRATCH="$scratch" nice -n 19 "$bin_dir/$t" -rss_limit_mb=1024 -timeout=10 "$f" \
+        # strict: a reproducer of a panic that the code catches fails too; at normal priority,
+        # so that other work on the machine cannot push a slow-input reproducer (a few seconds
+        # of CPU) past the timeout that fuzzing uses
+        if TESSERA_FUZZ_STRICT=1 TESSERA_FUZZ_SCRATCH="$scratch" "$bin_dir/$t" -rss_limit_mb=1024 -timeout=10 "$f" \
             >"$work/$t/replay.log" 2>&1; then
             passed=$((passed + 1))
         else

@@ -377,7 +377,7 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
     assert_eq!(status, 413);
     // cancel stops dispatch: a worker started afterwards gets nothing; DELETE refuses the
     // job while it is active
-    let (status, job) = rest::submit(&c.url, ct, ("scene.xml", xml), vec![], settings);
+    let (status, job) = rest::submit(&c.url, ct, ("scene.xml", xml.clone()), vec![], settings.clone());
     assert_eq!(status, 201, "{job}");
     let id = job["id"].as_str().unwrap();
     let (status, body) = rest::delete(&job_url(&c, id), ct);
@@ -391,7 +391,11 @@ fn tokens_bad_scenes_oversized_uploads_and_cancel_are_refused_or_obeyed() {
         (rest::get_json(&format!("{}/api/v1/workers", c.url), ct).1.as_array().map_or(0, |a| a.len()) == 1)
             .then_some(())
     });
-    std::thread::sleep(Duration::from_millis(500));
+    // a job submitted after it is rendered by that worker, which took nothing of the first
+    let (status, second) = rest::submit(&c.url, ct, ("scene.xml", xml), vec![], settings);
+    assert_eq!(status, 201, "{second}");
+    let second = wait_done(&c, second["id"].as_str().unwrap(), ct);
+    assert!(second["tiles_done"].as_u64() > Some(0), "{second}");
     let (_, job) = rest::get_json(&job_url(&c, id), ct);
     assert_eq!((job["state"].as_str(), job["tiles_done"].as_u64()), (Some("cancelled"), Some(0)), "{job}");
     let (_, metrics) = rest::get(&format!("{}/metrics", c.url), ct);

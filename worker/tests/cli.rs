@@ -43,10 +43,23 @@ fn sigterm_stops_a_worker_that_is_retrying_a_dead_coordinator() {
     let mut child = worker()
         .args(["--coordinator", &format!("http://127.0.0.1:{port}"), "--threads", "1", "--cache-dir"])
         .arg(cache.path())
-        .stderr(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(700));
+    // two failed attempts logged: it retried instead of giving up
+    let (tx, attempts) = std::sync::mpsc::channel();
+    let stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in stderr.lines().map_while(Result::ok) {
+            if line.contains("coordinator unavailable") {
+                let _ = tx.send(());
+            }
+        }
+    });
+    for _ in 0..2 {
+        attempts.recv_timeout(Duration::from_secs(20)).expect("the worker logged no attempt to reach the coordinator");
+    }
     assert!(child.try_wait().unwrap().is_none(), "the worker gave up instead of retrying");
     // SAFETY: sending a signal to our own child process
     unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
