@@ -226,12 +226,8 @@ mod tests {
         assert_eq!(config.alpn_protocols, [b"h2".to_vec(), b"http/1.1".to_vec()]);
     }
 
-    /// A TLS client trusting the certificate in `cert`, offering `alpn`.
-    async fn connect(
-        addr: std::net::SocketAddr,
-        cert: &Path,
-        alpn: &[&[u8]],
-    ) -> tokio_rustls::client::TlsStream<tokio::net::TcpStream> {
+    /// A TLS client configuration trusting the certificate in `cert`, offering `alpn`.
+    fn client_config(cert: &Path, alpn: &[&[u8]]) -> Arc<rustls::ClientConfig> {
         let mut roots = rustls::RootCertStore::empty();
         roots.add(CertificateDer::from_pem_file(cert).unwrap()).unwrap();
         let provider = Arc::new(rustls::crypto::ring::default_provider());
@@ -241,21 +237,37 @@ mod tests {
             .with_root_certificates(roots)
             .with_no_client_auth();
         config.alpn_protocols = alpn.iter().map(|p| p.to_vec()).collect();
+        Arc::new(config)
+    }
+
+    /// A TLS client trusting the certificate in `cert`, offering `alpn`.
+    async fn connect(
+        addr: std::net::SocketAddr,
+        cert: &Path,
+        alpn: &[&[u8]],
+    ) -> tokio_rustls::client::TlsStream<tokio::net::TcpStream> {
         let tcp = tokio::net::TcpStream::connect(addr).await.unwrap();
         let name = rustls_pki_types::ServerName::try_from("localhost").unwrap();
-        tokio_rustls::TlsConnector::from(Arc::new(config)).connect(name, tcp).await.unwrap()
+        tokio_rustls::TlsConnector::from(client_config(cert, alpn)).connect(name, tcp).await.unwrap()
+    }
+
+    /// A server answering "over tls" on `/` through a [`TlsListener`] with a new certificate;
+    /// its address, the certificate and the task serving.
+    async fn serve(dir: &Path) -> (std::net::SocketAddr, PathBuf, tokio::task::JoinHandle<std::io::Result<()>>) {
+        let (cert, key) = pair(dir);
+        let tcp = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = tcp.local_addr().unwrap();
+        let app = axum::Router::new().route("/", axum::routing::get(|| async { "over tls" }));
+        let server =
+            tokio::spawn(axum::serve(TlsListener::new(tcp, server_config(&cert, &key).unwrap()), app).into_future());
+        (addr, cert, server)
     }
 
     #[tokio::test]
     async fn tls_listener_serves_h2_and_http1_past_more_stalled_handshakes_than_slots() {
         use tokio::io::{AsyncReadExt, AsyncWriteExt};
         let dir = tempfile::tempdir().unwrap();
-        let (cert, key) = pair(dir.path());
-        let tcp = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = tcp.local_addr().unwrap();
-        let app = axum::Router::new().route("/", axum::routing::get(|| async { "over tls" }));
-        let server =
-            tokio::spawn(axum::serve(TlsListener::new(tcp, server_config(&cert, &key).unwrap()), app).into_future());
+        let (addr, cert, server) = serve(dir.path()).await;
         // clients that connect and never say hello, more than there are handshake slots, must
         // not hold up the others (refusing to accept while the slots were full did, for the
         // length of the timeout)
@@ -278,32 +290,28 @@ mod tests {
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_client_that_said_hello_outlasts_a_flood_of_silent_sockets() {
         let dir = tempfile::tempdir().unwrap();
-        let (cert, key) = pair(dir.path());
-        let tcp = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let addr = tcp.local_addr().unwrap();
-        let app = axum::Router::new().route("/", axum::routing::get(|| async { "over tls" }));
-        let server =
-            tokio::spawn(axum::serve(TlsListener::new(tcp, server_config(&cert, &key).unwrap()), app).into_future());
+        let (addr, cert, server) = serve(dir.path()).await;
         // a client slow to finish: its ClientHello is answered, then more silent sockets than
         // slots arrive before its next flight (dropping the oldest pending dropped it)
         let finished = tokio::task::spawn_blocking(move || {
-            let mut roots = rustls::RootCertStore::empty();
-            roots.add(CertificateDer::from_pem_file(&cert).unwrap()).unwrap();
-            let provider = Arc::new(rustls::crypto::ring::default_provider());
-            let config = rustls::ClientConfig::builder_with_provider(provider)
-                .with_safe_default_protocol_versions()
-                .unwrap()
-                .with_root_certificates(roots)
-                .with_no_client_auth();
             let name = rustls_pki_types::ServerName::try_from("localhost").unwrap();
-            let mut client = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
+            let mut client = rustls::ClientConnection::new(client_config(&cert, &[]), name).unwrap();
             let mut socket = std::net::TcpStream::connect(addr).unwrap();
             socket.set_read_timeout(Some(HANDSHAKE_TIMEOUT / 2)).unwrap();
             client.write_tls(&mut socket).unwrap();
             assert!(client.read_tls(&mut socket).unwrap() > 0, "the server answered the hello");
             let stalled: Vec<_> =
                 (0..MAX_PENDING_HANDSHAKES + 16).map(|_| std::net::TcpStream::connect(addr).unwrap()).collect();
-            std::thread::sleep(Duration::from_millis(200));
+            // 273 handshakes for 256 slots: 17 dropped, all of them silent ones
+            let closed = |s: &std::net::TcpStream| {
+                s.set_nonblocking(true).unwrap();
+                !matches!(s.peek(&mut [0u8; 1]), Err(e) if e.kind() == std::io::ErrorKind::WouldBlock)
+            };
+            let start = std::time::Instant::now();
+            while stalled.iter().filter(|s| closed(s)).count() < 17 {
+                assert!(start.elapsed() < HANDSHAKE_TIMEOUT / 2, "fewer than 17 silent handshakes were dropped");
+                std::thread::sleep(Duration::from_millis(10));
+            }
             let mut tls = rustls::Stream::new(&mut client, &mut socket);
             let request = b"GET / HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n";
             std::io::Write::write_all(&mut tls, request).expect("the handshake was dropped");
