@@ -16,7 +16,7 @@
 
 use crate::emis::cost::CostModel;
 use crate::emis::denoise::ImageEstimate;
-use crate::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
+use crate::emis::optimize::{ConnectionScope, OutlierStage};
 use crate::emis::{EmisConfig, EmisMethod, PilotStart};
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, LightTracer, PathSettings, PathTracer};
@@ -128,8 +128,6 @@ pub struct RenderSettings {
     pub emis_updates: Vec<u32>,
     /// EMIS: the cost heuristic's constants (docs/emis.md, decision 8).
     pub cost_model: CostModel,
-    /// EMIS: whether moments are made relative before or after the box filter.
-    pub moment_filter: MomentFilter,
     /// EMIS: the outlier rejection of the image-level sums.
     pub moment_outliers: OutlierStage,
     /// EMIS: the image estimate Ī that moments are made relative to.
@@ -155,7 +153,6 @@ impl Default for RenderSettings {
             defines: BTreeMap::new(),
             emis_updates: EmisConfig::DEFAULT_UPDATES.to_vec(),
             cost_model: CostModel::default(),
-            moment_filter: MomentFilter::default(),
             moment_outliers: OutlierStage::default(),
             emis_image: ImageEstimate::default(),
             emis_pilot: PilotStart::default(),
@@ -201,6 +198,7 @@ pub const RETIRED: &[Retired] = &[
     Retired { field: "merge_ratio", value: None, now: "principled" },
     Retired { field: "merge_kernel", value: None, now: "squared" },
     Retired { field: "cost_model", value: Some("reference"), now: "calibrated" },
+    Retired { field: "moment_filter", value: None, now: "relative" },
 ];
 
 /// Rewrites a settings object without [`RETIRED`] settings: retired fields removed, retired
@@ -334,7 +332,6 @@ impl RenderSettings {
         config.correlation_aware = self.correlation_aware;
         config.constants = self.cost_model.constants();
         config.measured_costs = self.cost_model == CostModel::Measured;
-        config.filters.order = self.moment_filter;
         config.filters.outliers = self.moment_outliers;
         config.denoise = self.emis_image.settings();
         config.pilot = self.emis_pilot;

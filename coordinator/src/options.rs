@@ -9,7 +9,7 @@ use std::path::Path;
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::denoise::ImageEstimate;
-use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
+use tessera_common::emis::optimize::{ConnectionScope, OutlierStage};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings, Renderer, SettingsError};
 
@@ -88,7 +88,7 @@ pub struct IntegratorArgs {
     /// emis-*: optimise after these many iterations (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
     pub emis_updates: Vec<u32>,
-    /// The EMIS optimiser's model: cost constants, moment filter order, outlier rule.
+    /// The EMIS optimiser's model: cost constants, outlier rule, image estimate.
     #[command(flatten)]
     pub model: EmisModelArgs,
     /// emis-*: the pilot, path tracing first, which switches to the full candidate set,
@@ -105,14 +105,9 @@ pub struct IntegratorArgs {
 /// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
 #[derive(clap::Args, Debug, Clone)]
 pub struct EmisModelArgs {
-    /// emis-*: cost heuristic constants: calibrated on this renderer, the reference's, or
-    /// measured per job.
+    /// emis-*: cost heuristic constants: calibrated on this renderer, or measured per job.
     #[arg(long, value_enum, default_value = "calibrated")]
     pub cost_model: CostModelArg,
-    /// emis-*: make moments relative to the image before the box filter, or after it (the
-    /// reference, which lets bright features spread into dark neighbours).
-    #[arg(long, value_enum, default_value = "relative")]
-    pub moment_filter: MomentFilterArg,
     /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
     /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
     /// candidate shares (rare samples no strategy can change), before the box filter spreads
@@ -130,7 +125,6 @@ impl EmisModelArgs {
     /// Sets these options in `settings`.
     pub fn apply(&self, settings: &mut RenderSettings) {
         settings.cost_model = self.cost_model.into();
-        settings.moment_filter = self.moment_filter.into();
         settings.moment_outliers = self.moment_outliers.into();
         settings.emis_image = self.emis_image.into();
     }
@@ -255,24 +249,6 @@ impl From<MomentOutliersArg> for OutlierStage {
             MomentOutliersArg::Filtered => OutlierStage::Filtered,
             MomentOutliersArg::Shared => OutlierStage::Shared,
             MomentOutliersArg::Each => OutlierStage::Each,
-        }
-    }
-}
-
-/// The order of the EMIS moment filter and the division by the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MomentFilterArg {
-    /// Per-pixel relative moments M/(Ī² + 1e-4), then the box filter.
-    Relative,
-    /// The reference: box filter on M, then divide by the filtered Ī² + 1e-4.
-    Absolute,
-}
-
-impl From<MomentFilterArg> for MomentFilter {
-    fn from(arg: MomentFilterArg) -> MomentFilter {
-        match arg {
-            MomentFilterArg::Relative => MomentFilter::Relative,
-            MomentFilterArg::Absolute => MomentFilter::Absolute,
         }
     }
 }

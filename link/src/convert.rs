@@ -5,7 +5,7 @@
 use tessera_common::emis::PilotStart;
 use tessera_common::emis::cost::CostModel;
 use tessera_common::emis::denoise::ImageEstimate;
-use tessera_common::emis::optimize::{ConnectionScope, MomentFilter, OutlierStage};
+use tessera_common::emis::optimize::{ConnectionScope, OutlierStage};
 use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
 use tessera_proto::v1 as pb;
@@ -28,9 +28,13 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
     let d = RenderSettings::default();
     // the fields with retired settings or values, checked as the JSON settings are
     let mut retired = serde_json::Map::new();
-    for (field, value) in
-        [("merge_ratio", &s.merge_ratio), ("merge_kernel", &s.merge_kernel), ("cost_model", &s.cost_model)]
-    {
+    let fields = [
+        ("merge_ratio", &s.merge_ratio),
+        ("merge_kernel", &s.merge_kernel),
+        ("cost_model", &s.cost_model),
+        ("moment_filter", &s.moment_filter),
+    ];
+    for (field, value) in fields {
         if let Some(v) = value {
             retired.insert(field.into(), v.clone().into());
         }
@@ -56,10 +60,6 @@ pub fn settings_from_pb(s: &pb::RenderSettings) -> Result<RenderSettings, String
         cost_model: match &s.cost_model {
             Some(v) => parse_json_name::<CostModel>("cost_model", v)?,
             None => d.cost_model,
-        },
-        moment_filter: match &s.moment_filter {
-            Some(v) => parse_json_name::<MomentFilter>("moment_filter", v)?,
-            None => d.moment_filter,
         },
         moment_outliers: match &s.moment_outliers {
             Some(v) => parse_json_name::<OutlierStage>("moment_outliers", v)?,
@@ -97,7 +97,7 @@ pub fn settings_to_pb(s: &RenderSettings) -> pb::RenderSettings {
         merge_ratio: None,
         merge_kernel: None,
         cost_model: Some(json_name(&s.cost_model)),
-        moment_filter: Some(json_name(&s.moment_filter)),
+        moment_filter: None,
         moment_outliers: Some(json_name(&s.moment_outliers)),
         emis_pilot: Some(json_name(&s.emis_pilot)),
         emis_connections: Some(json_name(&s.emis_connections)),
@@ -138,8 +138,8 @@ mod tests {
         };
         assert_eq!(settings_from_pb(&settings_to_pb(&s)).unwrap(), s);
         assert_eq!(settings_from_pb(&pb::RenderSettings::default()).unwrap(), RenderSettings::default());
-        let bad = pb::RenderSettings { moment_filter: Some("cubic".into()), ..Default::default() };
-        assert!(settings_from_pb(&bad).unwrap_err().contains("moment_filter"));
+        let bad = pb::RenderSettings { moment_outliers: Some("cubic".into()), ..Default::default() };
+        assert!(settings_from_pb(&bad).unwrap_err().contains("moment_outliers"));
         // retired settings: what older clients send is accepted, a retired variant refused
         let old = pb::RenderSettings { merge_kernel: Some("squared".into()), ..Default::default() };
         assert_eq!(settings_from_pb(&old).unwrap(), RenderSettings::default());
@@ -147,5 +147,7 @@ mod tests {
         assert!(settings_from_pb(&retired).unwrap_err().contains("merge_ratio"));
         let retired = pb::RenderSettings { cost_model: Some("reference".into()), ..Default::default() };
         assert!(settings_from_pb(&retired).unwrap_err().contains("cost_model"));
+        let retired = pb::RenderSettings { moment_filter: Some("absolute".into()), ..Default::default() };
+        assert!(settings_from_pb(&retired).unwrap_err().contains("moment_filter"));
     }
 }

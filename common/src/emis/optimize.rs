@@ -1,9 +1,9 @@
 //! The optimiser (docs/emis.md §6, checklist 11 and 12) as a pure function: filtered moments,
 //! costs and the denoised image in; ν, c and the per-pixel merge mask χ out.
 //!
-//! 0. Filtering: each candidate's moments become relative moments M_j / (Ī_j² + 1e-4) with a
-//!    radius-3 box filter, in the order [`MomentFilter`] says (default: per pixel first, then
-//!    the filter; the reference filters M and Ī separately and divides after).
+//! 0. Filtering: each candidate's moments become relative moments M_j / (Ī_j² + 1e-4) per pixel,
+//!    then a radius-3 box filter ([`filter_moments`]; the reference filtered M and Ī separately
+//!    and divided after).
 //! 1. Pixel level: per pixel, the candidate (ν, c, merge) minimising filtered M_j × C_j over
 //!    all candidates; its merge bit goes into a binary image that is dilated (radius 16) and
 //!    blurred (box radius 16) into χ, both radii for 640×480 and in proportion to the image's
@@ -65,8 +65,6 @@ pub struct FilterSettings {
     pub connection_box: usize,
     /// Quantile above which pixel moments are zeroed in the image-level sums.
     pub outlier_quantile: f64,
-    /// Whether moments are made relative before or after the box filter.
-    pub order: MomentFilter,
     /// The outlier rule of the image-level sums.
     pub outliers: OutlierStage,
 }
@@ -90,51 +88,17 @@ pub enum OutlierStage {
     Each,
 }
 
-/// The order of the moment filter and the division by the image (docs/emis.md §5.2; why the
-/// default: docs/decisions/0003-moment-filter-order.md).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum MomentFilter {
-    /// Box-filter M_j / (Ī_j² + 1e-4); the outlier quantile is taken on that image.
-    #[default]
-    Relative,
-    /// The reference: box-filter M, divide by Ī² + 1e-4 (Ī box-filtered too); the outlier
-    /// quantile is taken on the filtered M.
-    Absolute,
-}
-
-impl MomentFilter {
-    /// Every order, for benchmarks that compare them.
-    pub const ALL: [MomentFilter; 2] = [MomentFilter::Relative, MomentFilter::Absolute];
-
-    /// A candidate's filtered moment image in moment units: the relative order filters
-    /// M / `norm` (`norm` = Ī² + 1e-4 per pixel) and multiplies the result back by `norm`, so
-    /// both orders feed the same pixel- and image-level steps. [`MomentFilter::outlier_basis`]
-    /// says which value the outlier threshold applies to.
-    pub fn filter(self, moments: &Image, norm: &[f32], radius: usize) -> Image {
-        match self {
-            MomentFilter::Absolute => moments.box_blur(radius),
-            MomentFilter::Relative => {
-                let relative = Image::from_data(
-                    moments.width,
-                    moments.height,
-                    moments.data.iter().zip(norm).map(|(m, n)| m / n).collect(),
-                );
-                let mut filtered = relative.box_blur(radius);
-                filtered.data.iter_mut().zip(norm).for_each(|(v, n)| *v *= n);
-                filtered
-            }
-        }
-    }
-
-    /// The value of a filtered moment that is compared with the outlier threshold.
-    #[inline]
-    pub fn outlier_basis(self, filtered_moment: f32, norm: f32) -> f32 {
-        match self {
-            MomentFilter::Absolute => filtered_moment,
-            MomentFilter::Relative => filtered_moment / norm,
-        }
-    }
+/// A candidate's filtered moment image in moment units: M / `norm` (`norm` = Ī² + 1e-4 per
+/// pixel) box-filtered, then multiplied back by `norm`, so that a small bright feature's huge
+/// absolute moment does not spread into its dark neighbours as a halo of relative moment (the
+/// reference's order, filtering M and dividing after, lost and was retired: decision 0003).
+/// Its outlier threshold applies to the relative value, filtered moment / `norm`.
+pub fn filter_moments(moments: &Image, norm: &[f32], radius: usize) -> Image {
+    let relative =
+        Image::from_data(moments.width, moments.height, moments.data.iter().zip(norm).map(|(m, n)| m / n).collect());
+    let mut filtered = relative.box_blur(radius);
+    filtered.data.iter_mut().zip(norm).for_each(|(v, n)| *v *= n);
+    filtered
 }
 
 impl FilterSettings {
@@ -170,7 +134,6 @@ impl Default for FilterSettings {
             connection_dilate: 3,
             connection_box: 16,
             outlier_quantile: 0.999,
-            order: MomentFilter::Relative,
             outliers: OutlierStage::default(),
         }
     }
@@ -274,7 +237,6 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     let (w, h) = (m.width as usize, m.height as usize);
     let pixels = (w * h) as u32;
     // ---- filtered moments, one image per candidate ----
-    let order = input.filters.order;
     let norm: Vec<f32> = input.image.data.iter().map(|&i| i * i + 1e-4).collect();
     let quantile = input.filters.outlier_quantile;
     let shared = input.filters.outliers == OutlierStage::Shared;
@@ -285,7 +247,7 @@ pub fn optimize(input: &OptimizerInput) -> Decision {
     if input.filters.outliers == OutlierStage::Each {
         planes::remove_each_outliers_in(&mut filtered.slices_mut(), &norm, quantile);
     }
-    let thresholds = planes::filter_planes(&mut filtered, &norm, order, input.filters.moment_box, quantile);
+    let thresholds = planes::filter_planes(&mut filtered, &norm, input.filters.moment_box, quantile);
     let costs = CostTerms::of_candidates(&input.constants, &input.statistics, input.candidates, pixels);
     // ---- pixel level: the merge bit (and c) of the best full candidate ----
     let per_pixel_c = input.merge_scope == MergeScope::PerPixel && input.connection_scope == ConnectionScope::PerPixel;

@@ -11,8 +11,8 @@
 //! pixel dropped; the table also shows it with the top 0.1 % of pixel errors dropped, as the
 //! equal-time benchmark measures, which at small K hides rare large errors (caustics seen by
 //! path tracing) that a long render does not drop. Predictions are image-level relative
-//! moments the way the optimiser forms them (box radius 3, relative to the reference in the
-//! order of [`MomentFilter`], outliers above the 99.9 % quantile zeroed; with
+//! moments the way the optimiser forms them (relative to the reference, then box radius 3,
+//! outliers above the 99.9 % quantile zeroed; with
 //! `--moment-outliers shared`, the shared part's outliers first, as [`OutlierStage`] says, the
 //! shared part being the minimum over the reduced set; with `each`, each candidate's own),
 //! times the cost model of `--cost-model`: from the candidate's own samples (Σ y², "measured")
@@ -31,7 +31,7 @@ use tessera_common::emis::cost::{CostModel, StatisticsSums, pixel_cost};
 use tessera_common::emis::estimator::MomentEstimator;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::moments::MomentBuffer;
-use tessera_common::emis::optimize::{MomentFilter, OutlierStage, remove_each_outliers, remove_shared_outliers};
+use tessera_common::emis::optimize::{OutlierStage, filter_moments, remove_each_outliers, remove_shared_outliers};
 use tessera_common::emis::{EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::compare::{DROPPED_FRACTION, relmse};
 use tessera_common::film::{Film, Rect, TileAccum};
@@ -72,13 +72,13 @@ fn reduced_candidates() -> Vec<Candidate> {
     v
 }
 
-/// Image-level relative figure of a per-pixel moment, as the optimiser forms it: box 3 and
-/// / (ref² + 1e-4) in `order`, outliers above the 99.9 % quantile zeroed, mean over pixels
-/// with a non-zero reference.
-fn relative_mean(w: usize, h: usize, per_pixel: Vec<f32>, reference: &[f32], order: MomentFilter) -> f64 {
+/// Image-level relative figure of a per-pixel moment, as the optimiser forms it: / (ref² +
+/// 1e-4), then box 3, outliers above the 99.9 % quantile zeroed, mean over pixels with a
+/// non-zero reference.
+fn relative_mean(w: usize, h: usize, per_pixel: Vec<f32>, reference: &[f32]) -> f64 {
     let norm: Vec<f32> = reference.iter().map(|&r| r * r + 1e-4).collect();
-    let filtered = order.filter(&Image::from_data(w, h, per_pixel), &norm, 3);
-    let basis: Vec<f32> = filtered.data.iter().zip(&norm).map(|(&m, &n)| order.outlier_basis(m, n)).collect();
+    let filtered = filter_moments(&Image::from_data(w, h, per_pixel), &norm, 3);
+    let basis: Vec<f32> = filtered.data.iter().zip(&norm).map(|(&m, &n)| m / n).collect();
     let basis = Image::from_data(w, h, basis);
     let threshold = basis.histogram_quantile(0.999);
     (0..w * h)
@@ -199,20 +199,14 @@ fn measure_candidates(s: &Subject, candidates: &[Candidate], k: u32, pool: &rayo
         m.error.push(relmse(&image, &s.reference, 0.0) * k as f64);
         m.error_dropped.push(relmse(&image, &s.reference, DROPPED_FRACTION) * k as f64);
         let own_moments = moments_of(&own.snapshot().0, 0);
-        m.own_moment.push(relative_mean(w, h, own_moments, &s.ref_mean, MomentFilter::default()));
+        m.own_moment.push(relative_mean(w, h, own_moments, &s.ref_mean));
     }
     m
 }
 
 /// The image-level relative moment × cost each candidate gets from a pilot's moments, with the
-/// filter `order` and the outlier rule `outliers`.
-fn predict(
-    s: &Subject,
-    moments: &MomentBuffer,
-    costs: &[f64],
-    order: MomentFilter,
-    outliers: OutlierStage,
-) -> Vec<f64> {
+/// outlier rule `outliers`.
+fn predict(s: &Subject, moments: &MomentBuffer, costs: &[f64], outliers: OutlierStage) -> Vec<f64> {
     let (w, h) = s.size();
     let mut planes: Vec<Image> = (0..costs.len()).map(|c| Image::from_data(w, h, moments_of(moments, c))).collect();
     let norm: Vec<f32> = s.ref_mean.iter().map(|&r| r * r + 1e-4).collect();
@@ -221,11 +215,7 @@ fn predict(
         OutlierStage::Each => remove_each_outliers(&mut planes, &norm, 0.999),
         OutlierStage::Filtered => {}
     }
-    planes
-        .into_iter()
-        .enumerate()
-        .map(|(c, plane)| relative_mean(w, h, plane.data, &s.ref_mean, order) * costs[c])
-        .collect()
+    planes.into_iter().enumerate().map(|(c, plane)| relative_mean(w, h, plane.data, &s.ref_mean) * costs[c]).collect()
 }
 
 fn name_of(c: &Candidate) -> String {
@@ -244,8 +234,8 @@ fn argmin(v: &[f64]) -> usize {
 struct Regrets {
     /// The candidates' own measured moments.
     direct: Vec<f64>,
-    /// Per filter order of [`MomentFilter::ALL`].
-    orders: [Vec<f64>; 2],
+    /// The pilot's predictions.
+    pilot: Vec<f64>,
 }
 
 /// The table of one scene, each prediction's choice and regret, and one JSON line with every
@@ -255,7 +245,7 @@ fn report_scene(
     candidates: &[Candidate],
     costs: &[f64],
     m: &Measured,
-    by_order: &[Vec<f64>],
+    predicted: &[f64],
     regrets: &mut Regrets,
     json: serde_json::Value,
 ) {
@@ -270,12 +260,12 @@ fn report_scene(
     let timed_best = timed.iter().copied().fold(f64::INFINITY, f64::min);
     println!("\n### {name}: truth's choice {} ", name_of(&candidates[argmin(&timed)]));
     println!(
-        "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost, relative order | pilot-predicted × cost, absolute order |"
+        "| candidate | cost | measured cost | relMSE × K × cost | relMSE × K × measured cost | same, top 0.1 % dropped | measured moment × cost | pilot-predicted × cost |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for (i, c) in candidates.iter().enumerate() {
         println!(
-            "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
+            "| {} | {:.2} | {:.2} | {:.4e} | {:.4e} | {:.4e} | {:.4e} | {:.4e} |",
             name_of(c),
             costs[i],
             m.seconds[i] / unit,
@@ -283,8 +273,7 @@ fn report_scene(
             timed[i],
             variance_dropped[i],
             direct[i],
-            by_order[0][i],
-            by_order[1][i]
+            predicted[i]
         );
     }
     let verdict = |label: String, predicted: &[f64], into: &mut Vec<f64>| {
@@ -297,9 +286,7 @@ fn report_scene(
             spearman(predicted, &timed)
         );
     };
-    for ((order, predicted), into) in MomentFilter::ALL.iter().zip(by_order).zip(&mut regrets.orders) {
-        verdict(format!("pilot moments, {order:?} filter order"), predicted, into);
-    }
+    verdict("pilot moments".into(), predicted, &mut regrets.pilot);
     verdict("measured second moments".into(), &direct, &mut regrets.direct);
     println!("json: {json}");
 }
@@ -317,7 +304,7 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
         args.pilot,
         candidates.len()
     );
-    let mut regrets = Regrets { direct: Vec::new(), orders: [Vec::new(), Vec::new()] };
+    let mut regrets = Regrets { direct: Vec::new(), pilot: Vec::new() };
     for path in &scenes {
         let s = Subject::load(path)?;
         let pixels = s.scene.camera.width * s.scene.camera.height;
@@ -328,8 +315,7 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
             .map(|c| pixel_cost(&constants, &statistics, c, c.merge as u8 as f64, c.merge, pixels))
             .collect();
         let measured = measure_candidates(&s, &candidates, k, &pool);
-        let by_order: Vec<Vec<f64>> =
-            MomentFilter::ALL.iter().map(|&order| predict(&s, &moments, &costs, order, outliers)).collect();
+        let predicted = predict(&s, &moments, &costs, outliers);
         // everything as one JSON line, for analyses beyond the table
         let rows: Vec<serde_json::Value> = candidates
             .iter()
@@ -339,18 +325,16 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
                     "nu": c.nu, "connections": c.connections, "merge": c.merge,
                     "cost": costs[i], "seconds": measured.seconds[i],
                     "relmse_k": measured.error[i], "relmse_k_dropped": measured.error_dropped[i],
-                    "measured_moment": measured.own_moment[i], "predicted_moment": by_order[0][i] / costs[i],
+                    "measured_moment": measured.own_moment[i], "predicted_moment": predicted[i] / costs[i],
                 })
             })
             .collect();
         let json = serde_json::json!({"scene": scene_name(path), "k": k, "pilot": args.pilot,
             "statistics": statistics, "candidates": rows});
-        report_scene(&scene_name(path), &candidates, &costs, &measured, &by_order, &mut regrets, json);
+        report_scene(&scene_name(path), &candidates, &costs, &measured, &predicted, &mut regrets, json);
     }
     println!("\n### geometric-mean regret over {} scenes", scenes.len());
     println!("measured second moments: {:.3}x", geometric_mean(&regrets.direct));
-    for (order, r) in MomentFilter::ALL.iter().zip(&regrets.orders) {
-        println!("filter order {order:?}: {:.3}x", geometric_mean(r));
-    }
+    println!("pilot moments: {:.3}x", geometric_mean(&regrets.pilot));
     Ok(())
 }

@@ -96,7 +96,7 @@ fn per_pixel_classes_sum_as_their_definition_bit_for_bit() {
     let constants = CostConstants::default();
     let costs = CostTerms::of_candidates(&constants, &stats, &candidates, (w * h) as u32);
     let (filtered, _) = planes::moment_planes(&moments, false);
-    let thresholds = planes::thresholds(&filtered, &norm, MomentFilter::Relative, 0.999);
+    let thresholds = planes::thresholds(&filtered, &norm, 0.999);
     let mut s = crate::sampler::Sampler::for_pixel(9, 0, 0);
     let mask = Image::from_data(w, h, (0..w * h).map(|p| if p % 40 < 15 { 0.0 } else { 0.2 * s.next_1d() }).collect());
     let class_counts = connection_classes(&candidates);

@@ -191,7 +191,6 @@ fn group_sums(
     runs: &[Run],
 ) -> (f64, f64) {
     let pixels = weights.len() as f64;
-    let order = input.filters.order;
     // the map's build depends on ν only, so every class's merging variant prices it alike
     let shared_build = match (map_built, g.variant(true, 0)) {
         (true, Some(on)) if input.candidates[on].merge => costs[on].build(),
@@ -215,7 +214,7 @@ fn group_sums(
                 // outliers are zeroed, but an infinite moment (the candidate cannot sample this
                 // pixel's paths) stays infinite, so that candidate cannot win
                 // (docs/emis.md, decision 4)
-                let outlier = order.outlier_basis(moment, n) > threshold && moment.is_finite();
+                let outlier = moment / n > threshold && moment.is_finite();
                 let moment = if outlier { 0.0 } else { moment };
                 // black pixels carry no relative moment, so they are left out of the cost too;
                 // a pixel left out adds +0, which leaves a sum of non-negative terms as it is

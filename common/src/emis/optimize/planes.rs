@@ -1,6 +1,7 @@
 //! Step 0 of the optimiser (see [`super`]): the moment buffer's per-pixel sums as one image per
-//! candidate, the shared part's outliers taken out, each image box-filtered in the order
-//! [`MomentFilter`] says, and each candidate's outlier threshold for the image-level sums.
+//! candidate, the shared part's outliers taken out, each image box-filtered as relative
+//! moments ([`super::filter_moments`]), and each candidate's outlier threshold for the
+//! image-level sums.
 //!
 //! 51 candidates at 1920×1080 are 420 MB of moments, more than any cache, so each step is one
 //! pass over them that keeps its working set small: the transposition goes by tiles of pixels
@@ -10,7 +11,6 @@
 //! (docs/decisions/0021-optimiser-at-1080p.md). Every value is computed by the same float
 //! operations on the same operands as the definitions in [`super`]'s documentation.
 
-use super::MomentFilter;
 use crate::emis::filter::{Image, PassScratch, STRIP, histogram_quantile_by_counts};
 use crate::emis::moments::MomentBuffer;
 use crate::emis::quantile::{QuantileStream, histogram_keep, selection_keep};
@@ -211,22 +211,14 @@ fn relative_quantile(moments: &[f32], norm: &[f32], quantile: f64) -> f32 {
     })
 }
 
-/// Filters every plane in place ([`MomentFilter::filter`] with `radius`) and returns each
-/// one's outlier threshold: the histogram `quantile` of its [`MomentFilter::outlier_basis`].
-pub(super) fn filter_planes(
-    planes: &mut Planes,
-    norm: &[f32],
-    order: MomentFilter,
-    radius: usize,
-    quantile: f64,
-) -> Vec<f32> {
+/// Filters every plane in place ([`super::filter_moments`] with `radius`) and returns each
+/// one's outlier threshold: the histogram `quantile` of its relative moments.
+pub(super) fn filter_planes(planes: &mut Planes, norm: &[f32], radius: usize, quantile: f64) -> Vec<f32> {
     let size = (planes.width, planes.height);
     planes
         .slices_mut()
         .into_par_iter()
-        .map_init(PassScratch::default, |scratch, plane| {
-            filter_plane(plane, size, norm, order, radius, quantile, scratch)
-        })
+        .map_init(PassScratch::default, |scratch, plane| filter_plane(plane, size, norm, radius, quantile, scratch))
         .collect()
 }
 
@@ -234,34 +226,28 @@ fn filter_plane(
     plane: &mut [f32],
     (w, h): (usize, usize),
     norm: &[f32],
-    order: MomentFilter,
     radius: usize,
     quantile: f64,
     scratch: &mut PassScratch,
 ) -> f32 {
     let mut stream = QuantileStream::new(histogram_keep(quantile, w * h));
     let mut basis = [0.0f32; STRIP];
-    match order {
-        MomentFilter::Relative => scratch.box_blur_in_place(
-            plane,
-            (w, h),
-            radius,
-            |y, row| row.iter_mut().zip(&norm[y * w..]).for_each(|(v, &n)| *v /= n),
-            |y, x0, seg| {
-                let b = &mut basis[..seg.len()];
-                for ((v, b), &n) in seg.iter_mut().zip(b.iter_mut()).zip(&norm[y * w + x0..]) {
-                    *v *= n;
-                    *b = order.outlier_basis(*v, n);
-                }
-                stream.push_slice(b);
-            },
-        ),
-        MomentFilter::Absolute => {
-            scratch.box_blur_in_place(plane, (w, h), radius, |_, _| (), |_, _, seg| stream.push_slice(seg))
-        }
-    }
+    scratch.box_blur_in_place(
+        plane,
+        (w, h),
+        radius,
+        |y, row| row.iter_mut().zip(&norm[y * w..]).for_each(|(v, &n)| *v /= n),
+        |y, x0, seg| {
+            let b = &mut basis[..seg.len()];
+            for ((v, b), &n) in seg.iter_mut().zip(b.iter_mut()).zip(&norm[y * w + x0..]) {
+                *v *= n;
+                *b = *v / n;
+            }
+            stream.push_slice(b);
+        },
+    );
     stream.histogram_quantile(quantile).unwrap_or_else(|| {
-        let basis: Vec<f32> = plane.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+        let basis: Vec<f32> = plane.iter().zip(norm).map(|(&v, &n)| v / n).collect();
         histogram_quantile_by_counts(&basis, quantile)
     })
 }
@@ -269,12 +255,12 @@ fn filter_plane(
 /// The outlier thresholds of already filtered planes, by the definition (for tests of the
 /// image-level sums on planes of their own).
 #[cfg(test)]
-pub(super) fn thresholds(filtered: &Planes, norm: &[f32], order: MomentFilter, quantile: f64) -> Vec<f32> {
+pub(super) fn thresholds(filtered: &Planes, norm: &[f32], quantile: f64) -> Vec<f32> {
     filtered
         .slices()
         .into_iter()
         .map(|img| {
-            let basis: Vec<f32> = img.iter().zip(norm).map(|(&v, &n)| order.outlier_basis(v, n)).collect();
+            let basis: Vec<f32> = img.iter().zip(norm).map(|(&v, &n)| v / n).collect();
             histogram_quantile_by_counts(&basis, quantile)
         })
         .collect()
