@@ -1,6 +1,7 @@
 //! Command-line options shared by `tessera render`, `tessera submit` and the benchmarks: the
-//! integrator names, the path-length, sample-count, merging and EMIS switches (clap value
-//! types mapped onto the renderer's settings), `-D` definitions and scene names.
+//! path-length, sample-count, merging and EMIS switches (their values are the renderer's own
+//! setting enums, which derive `clap::ValueEnum` with `tessera-common`'s `clap` feature),
+//! `-D` definitions and scene names.
 
 use anyhow::{anyhow, bail};
 use clap::ValueEnum;
@@ -12,59 +13,6 @@ use tessera_common::emis::denoise::ImageEstimate;
 use tessera_common::emis::optimize::{ConnectionScope, OutlierStage};
 use tessera_common::scene::Scene;
 use tessera_common::settings::{IntegratorName, RenderSettings, Renderer, SettingsError};
-
-/// Rendering algorithms.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum IntegratorKind {
-    /// Path tracing with next-event estimation and MIS (Mitsuba's `path`).
-    Pt,
-    /// Light tracing (Mitsuba's `ptracer`): light paths connected to the camera. Cannot see
-    /// smooth glass or mirrors, or an environment, directly: those pixels stay dark.
-    Lt,
-    /// Bidirectional path tracing with a light-vertex cache: hits, next-event estimation,
-    /// c connections per camera vertex and light tracing, balance heuristic over sample counts.
-    Bdpt,
-    /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but
-    /// the first (fixed radius, so slightly biased).
-    Vcm,
-    /// Efficiency-aware MIS on bdpt: path tracing first (or, with `--emis-pilot
-    /// bidirectional`, a bdpt pilot with ν = 1, c = 1) estimates candidates' second moments;
-    /// after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are chosen and used
-    /// from then on.
-    EmisBdpt,
-    /// Efficiency-aware MIS on vcm: path tracing first (or, with `--emis-pilot bidirectional`,
-    /// a vcm pilot with ν = 1, c = 1, merging everywhere) picks ν, c and a per-pixel merge
-    /// mask; writes the mask, the relative moment, a strategy PNG and a JSON report of every
-    /// update beside the image.
-    EmisVcm,
-}
-
-impl IntegratorKind {
-    /// The name on the command line.
-    pub fn name(&self) -> &'static str {
-        match self {
-            IntegratorKind::Pt => "pt",
-            IntegratorKind::Lt => "lt",
-            IntegratorKind::Bdpt => "bdpt",
-            IntegratorKind::Vcm => "vcm",
-            IntegratorKind::EmisBdpt => "emis-bdpt",
-            IntegratorKind::EmisVcm => "emis-vcm",
-        }
-    }
-}
-
-impl From<IntegratorKind> for IntegratorName {
-    fn from(kind: IntegratorKind) -> IntegratorName {
-        match kind {
-            IntegratorKind::Pt => IntegratorName::Pt,
-            IntegratorKind::Lt => IntegratorName::Lt,
-            IntegratorKind::Bdpt => IntegratorName::Bdpt,
-            IntegratorKind::Vcm => IntegratorName::Vcm,
-            IntegratorKind::EmisBdpt => IntegratorName::EmisBdpt,
-            IntegratorKind::EmisVcm => IntegratorName::EmisVcm,
-        }
-    }
-}
 
 /// Path length, sample counts, merging and EMIS options, shared by `render` and `submit`.
 #[derive(clap::Args, Debug, Clone)]
@@ -95,11 +43,11 @@ pub struct IntegratorArgs {
     /// discarding the iterations so far, once a bidirectional strategy wins; or the method's
     /// own (N = P, c = 1).
     #[arg(long, value_enum, default_value = "path-tracing")]
-    pub emis_pilot: EmisPilotArg,
+    pub emis_pilot: PilotStart,
     /// emis-*: choose one connection count for the image, or one per pixel (filtered like the
     /// merge mask, with ν the only image-level choice).
     #[arg(long, value_enum, default_value = "image")]
-    pub emis_connections: EmisConnectionsArg,
+    pub emis_connections: ConnectionScope,
 }
 
 /// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
@@ -107,62 +55,26 @@ pub struct IntegratorArgs {
 pub struct EmisModelArgs {
     /// emis-*: cost heuristic constants: calibrated on this renderer, or measured per job.
     #[arg(long, value_enum, default_value = "calibrated")]
-    pub cost_model: CostModelArg,
+    pub cost_model: CostModel,
     /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
     /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
     /// candidate shares (rare samples no strategy can change), before the box filter spreads
     /// it over the neighbours; or apply the reference's rule alone.
     #[arg(long, value_enum, default_value = "shared")]
-    pub moment_outliers: MomentOutliersArg,
+    pub moment_outliers: OutlierStage,
     /// emis-*: the image estimate Ī the moments are made relative to: the pilot image (its
     /// channel mean and radius-3 box), or the pilot image denoised by the guided filter first.
     /// A path-tracing start's updates use the guided filter either way.
     #[arg(long, value_enum, default_value = "pilot")]
-    pub emis_image: EmisImageArg,
+    pub emis_image: ImageEstimate,
 }
 
 impl EmisModelArgs {
     /// Sets these options in `settings`.
     pub fn apply(&self, settings: &mut RenderSettings) {
-        settings.cost_model = self.cost_model.into();
-        settings.moment_outliers = self.moment_outliers.into();
-        settings.emis_image = self.emis_image.into();
-    }
-}
-
-/// Where the EMIS image estimate Ī comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum EmisImageArg {
-    /// The pilot image, not denoised: its channel mean and radius-3 box.
-    Pilot,
-    /// The pilot image denoised by the à-trous filter guided by albedo, normal and depth.
-    Guided,
-}
-
-impl From<EmisImageArg> for ImageEstimate {
-    fn from(arg: EmisImageArg) -> ImageEstimate {
-        match arg {
-            EmisImageArg::Pilot => ImageEstimate::Pilot,
-            EmisImageArg::Guided => ImageEstimate::Guided,
-        }
-    }
-}
-
-/// Where EMIS decides the connection count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum EmisConnectionsArg {
-    /// One count for the image, beside ν.
-    Image,
-    /// An expected count per pixel, rounded stochastically at each camera vertex.
-    PerPixel,
-}
-
-impl From<EmisConnectionsArg> for ConnectionScope {
-    fn from(arg: EmisConnectionsArg) -> ConnectionScope {
-        match arg {
-            EmisConnectionsArg::Image => ConnectionScope::Image,
-            EmisConnectionsArg::PerPixel => ConnectionScope::PerPixel,
-        }
+        settings.cost_model = self.cost_model;
+        settings.moment_outliers = self.moment_outliers;
+        settings.emis_image = self.emis_image;
     }
 }
 
@@ -171,7 +83,7 @@ impl From<EmisConnectionsArg> for ConnectionScope {
 pub struct JobArgs {
     /// Rendering algorithm.
     #[arg(long, value_enum, default_value = "pt")]
-    pub integrator: IntegratorKind,
+    pub integrator: IntegratorName,
     /// Samples per pixel; iterations for lt, bdpt and vcm [default: the scene's sampler sample_count].
     #[arg(long, conflicts_with = "time")]
     pub spp: Option<u32>,
@@ -199,7 +111,7 @@ impl JobArgs {
     /// not given: the scene supplies them).
     pub fn settings(&self) -> anyhow::Result<RenderSettings> {
         let mut settings = RenderSettings {
-            integrator: self.integrator.into(),
+            integrator: self.integrator,
             spp: self.spp,
             time_s: self.time,
             seed: self.seed,
@@ -212,67 +124,6 @@ impl JobArgs {
     }
 }
 
-impl From<EmisPilotArg> for PilotStart {
-    fn from(arg: EmisPilotArg) -> PilotStart {
-        match arg {
-            EmisPilotArg::Bidirectional => PilotStart::Bidirectional,
-            EmisPilotArg::PathTracing => PilotStart::PathTracing,
-        }
-    }
-}
-
-/// How an EMIS render starts (docs/emis.md, decision 5).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum EmisPilotArg {
-    /// The method's own pilot: VCM (BDPT) with N = P, c = 1 (χ = 1), kept in the image.
-    Bidirectional,
-    /// Path tracing, choosing from a reduced candidate set until a bidirectional one wins.
-    PathTracing,
-}
-
-/// Where the EMIS image-level sums reject outlier pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MomentOutliersArg {
-    /// First the outliers of the part every candidate shares, per pixel before the box
-    /// filter; then as `filtered`.
-    Shared,
-    /// The reference: each candidate's box-filtered moments above their 99.9 % quantile.
-    Filtered,
-    /// First each candidate's own per-pixel outliers before the box filter (as the error
-    /// metric drops each image's worst pixels); then as `filtered`.
-    Each,
-}
-
-impl From<MomentOutliersArg> for OutlierStage {
-    fn from(arg: MomentOutliersArg) -> OutlierStage {
-        match arg {
-            MomentOutliersArg::Filtered => OutlierStage::Filtered,
-            MomentOutliersArg::Shared => OutlierStage::Shared,
-            MomentOutliersArg::Each => OutlierStage::Each,
-        }
-    }
-}
-
-impl From<CostModelArg> for CostModel {
-    fn from(arg: CostModelArg) -> CostModel {
-        match arg {
-            CostModelArg::Calibrated => CostModel::Calibrated,
-            CostModelArg::Measured => CostModel::Measured,
-        }
-    }
-}
-
-/// The cost heuristic's constants (docs/emis.md, decision 8).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum CostModelArg {
-    /// Fitted to this renderer's measured times (`tessera bench calibrate-costs`).
-    Calibrated,
-    /// Measured per job from the pilot's own work times on the machine that renders it, the
-    /// calibrated constants filling in what cannot be measured; decisions then vary with
-    /// timing from run to run.
-    Measured,
-}
-
 impl IntegratorArgs {
     /// Sets these options in `settings`.
     pub fn apply(&self, settings: &mut RenderSettings) {
@@ -283,8 +134,8 @@ impl IntegratorArgs {
         settings.correlation_aware = self.correlation_aware == Switch::On;
         settings.emis_updates = self.emis_updates.clone();
         self.model.apply(settings);
-        settings.emis_pilot = self.emis_pilot.into();
-        settings.emis_connections = self.emis_connections.into();
+        settings.emis_pilot = self.emis_pilot;
+        settings.emis_connections = self.emis_connections;
     }
 }
 

@@ -46,13 +46,24 @@ pub struct CostConstants {
 /// ([`CostConstants::reference`]) chose worse and were retired as a model (decision 0002).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum CostModel {
     /// [`CostConstants::calibrated`]: fitted to this renderer's measured times.
     #[default]
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "Fitted to this renderer's measured times (`tessera bench calibrate-costs`)")
+    )]
     Calibrated,
     /// Measured per job from the pilot's own work times ([`super::measured`]), with
     /// [`CostConstants::calibrated`] for what they cannot measure. Decisions then vary with
     /// the machine's timing from run to run, and a farm's with its workers'.
+    #[cfg_attr(
+        feature = "clap",
+        value(
+            help = "Measured per job from the pilot's own work times on the machine that renders it, the calibrated constants filling in what cannot be measured; decisions then vary with timing from run to run"
+        )
+    )]
     Measured,
 }
 

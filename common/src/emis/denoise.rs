@@ -23,13 +23,19 @@ use serde::{Deserialize, Serialize};
 /// Where Ī comes from (decision 0028).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum ImageEstimate {
     /// The pilot image's channel mean and box, not denoised. A path-tracing start's updates
     /// still use the guided filter ([`super::render::EmisConfig::start_denoise`]).
     #[default]
+    #[cfg_attr(feature = "clap", value(help = "The pilot image, not denoised: its channel mean and radius-3 box"))]
     Pilot,
     /// The pilot image through the guided à-trous filter first (decision 7), on 2 × 2 blocks
     /// ([`DenoiseSettings::GUIDED_HALF`]).
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "The pilot image denoised by the guided filter (albedo, normal and depth guides) first")
+    )]
     Guided,
 }
 

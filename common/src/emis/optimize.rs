@@ -73,18 +73,35 @@ pub struct FilterSettings {
 /// docs/decisions/0008-shared-outliers-first.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum OutlierStage {
     /// The reference: per candidate, the box-filtered moments above their 99.9 % quantile
     /// (histogram).
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "The reference: each candidate's box-filtered moments above their 99.9 % quantile")
+    )]
     Filtered,
     /// First, before the box filter, the part of each pixel's relative moment that every
     /// candidate shares (their minimum), taken out of every candidate in the pixels where it
     /// is above its own 99.9 % quantile (exact); then as [`OutlierStage::Filtered`].
     #[default]
+    #[cfg_attr(
+        feature = "clap",
+        value(
+            help = "First the outliers of the part every candidate shares, per pixel before the box filter; then as `filtered`"
+        )
+    )]
     Shared,
     /// First, before the box filter, each candidate's own per-pixel relative moments above
     /// its 99.9 % quantile (exact) are zeroed, as the error metric drops the worst pixels of
     /// each image; then as [`OutlierStage::Filtered`].
+    #[cfg_attr(
+        feature = "clap",
+        value(
+            help = "First each candidate's own per-pixel outliers before the box filter (as the error metric drops each image's worst pixels); then as `filtered`"
+        )
+    )]
     Each,
 }
 
@@ -153,13 +170,19 @@ pub enum MergeScope {
 /// experimental per-pixel connections, §1.1 and §5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum ConnectionScope {
     /// One c for the image, an image-level parameter beside ν.
     #[default]
+    #[cfg_attr(feature = "clap", value(help = "One count for the image, beside ν"))]
     Image,
     /// An expected c per pixel from the pixel level, filtered like the merge mask and rounded
     /// stochastically at each camera vertex; the image level chooses ν alone. Only with
     /// per-pixel merge decisions ([`MergeScope::PerPixel`]).
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "An expected count per pixel, rounded stochastically at each camera vertex")
+    )]
     PerPixel,
 }
 

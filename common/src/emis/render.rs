@@ -86,8 +86,13 @@ pub enum EmisMethod {
 /// (docs/decisions/0033-sparser-recording-and-the-path-tracing-start.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum PilotStart {
     /// The method's own pilot: VCM (or BDPT) with N = P, c = 1 (and χ = 1), kept in the image.
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "The method's own pilot: VCM (BDPT) with N = P, c = 1 (χ = 1), kept in the image")
+    )]
     Bidirectional,
     /// Path tracing first (the reference's `OnDemandVcm`, docs/emis.md §1.2 and §4): updates
     /// choose from the reduced set ([`CandidateSet::Reduced`]) while path tracing wins. The
@@ -96,6 +101,10 @@ pub enum PilotStart {
     /// and the start rejoins the image by a weight the next update estimates) and switches to
     /// the full set for the updates that follow.
     #[default]
+    #[cfg_attr(
+        feature = "clap",
+        value(help = "Path tracing, choosing from a reduced candidate set until a bidirectional one wins")
+    )]
     PathTracing,
 }
 

@@ -11,10 +11,7 @@
 
 use super::chart::{Group, write_bar_chart};
 use super::{SceneArgs, geometric_mean};
-use crate::options::{
-    CostModelArg, EmisConnectionsArg, EmisImageArg, EmisModelArgs, EmisPilotArg, IntegratorKind, MomentOutliersArg,
-    make_renderer, scene_name,
-};
+use crate::options::{EmisModelArgs, make_renderer, scene_name};
 use clap::ValueEnum;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -37,7 +34,7 @@ pub struct EqualTimeArgs {
     pub scenes: SceneArgs,
     /// Integrators compared.
     #[arg(long, value_delimiter = ',', default_value = "pt,bdpt,vcm,emis-bdpt,emis-vcm")]
-    pub integrators: Vec<IntegratorKind>,
+    pub integrators: Vec<IntegratorName>,
     /// Render every cell once per seed; relMSE is the mean over seeds, and the floor is also
     /// reported per seed, so that a verdict shows the run-to-run spread.
     #[arg(long, value_delimiter = ',', default_value = "1")]
@@ -52,23 +49,23 @@ pub struct EqualTimeArgs {
     pub model: EmisModelArgs,
     /// The pilots each `emis-*` integrator runs with (each a column).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "path-tracing")]
-    pub emis_pilot: Vec<EmisPilotArg>,
+    pub emis_pilot: Vec<PilotStart>,
     /// The connection scopes each `emis-*` integrator runs with (each a column; per pixel is
     /// named `emis-vcm/c-pixel`).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "image")]
-    pub emis_connections: Vec<EmisConnectionsArg>,
+    pub emis_connections: Vec<ConnectionScope>,
     /// Cost models besides `--cost-model` each `emis-*` column also runs with (a column each,
     /// named `emis-vcm/k-measured`).
     #[arg(long, value_enum, value_delimiter = ',')]
-    pub compare_cost_models: Vec<CostModelArg>,
+    pub compare_cost_models: Vec<CostModel>,
     /// Outlier rules besides `--moment-outliers` each `emis-*` column also runs with (a column
     /// each, named `emis-vcm/o-each`).
     #[arg(long, value_enum, value_delimiter = ',')]
-    pub compare_moment_outliers: Vec<MomentOutliersArg>,
+    pub compare_moment_outliers: Vec<OutlierStage>,
     /// Image estimates besides `--emis-image` each `emis-*` column also runs with (a column
     /// each, named `emis-vcm/i-guided`).
     #[arg(long, value_enum, value_delimiter = ',')]
-    pub compare_emis_image: Vec<EmisImageArg>,
+    pub compare_emis_image: Vec<ImageEstimate>,
     /// Also draw the speed-ups as an SVG bar chart, one file per duration (NAME-20s.svg ...).
     #[arg(long)]
     pub chart: Option<PathBuf>,
@@ -129,7 +126,7 @@ struct Variant {
 
 /// One column: an integrator, for `emis-*` with a pilot and a connection scope.
 struct Column {
-    kind: IntegratorKind,
+    kind: IntegratorName,
     pilot: PilotStart,
     connections: ConnectionScope,
     /// Another cost model or outlier rule than the model arguments'.
@@ -144,14 +141,14 @@ struct Column {
 fn columns(args: &EqualTimeArgs) -> Vec<Column> {
     let mut out = Vec::new();
     for &kind in &args.integrators {
-        if IntegratorName::from(kind).emis_method().is_none() {
+        if kind.emis_method().is_none() {
             let (pilot, connections) = (PilotStart::default(), ConnectionScope::default());
-            out.push(Column { kind, pilot, connections, variant: Variant::default(), name: kind.name().to_string() });
+            out.push(Column { kind, pilot, connections, variant: Variant::default(), name: kind.as_str().to_string() });
             continue;
         }
-        for pilot in args.emis_pilot.iter().map(|&p| PilotStart::from(p)) {
-            for connections in args.emis_connections.iter().map(|&c| ConnectionScope::from(c)) {
-                let mut name = kind.name().to_string();
+        for &pilot in &args.emis_pilot {
+            for &connections in &args.emis_connections {
+                let mut name = kind.as_str().to_string();
                 if pilot == PilotStart::Bidirectional {
                     name.push_str("/own-pilot");
                 }
@@ -176,8 +173,7 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
                                 r.to_possible_value().expect("no skipped values").get_name()
                             ));
                         }
-                        let variant =
-                            Variant { cost: model.map(|&m| m.into()), outliers: rule.map(|&r| r.into()), image: None };
+                        let variant = Variant { cost: model.copied(), outliers: rule.copied(), image: None };
                         out.push(Column { kind, pilot, connections, variant, name });
                     }
                 }
@@ -185,7 +181,7 @@ fn columns(args: &EqualTimeArgs) -> Vec<Column> {
                 for image in &args.compare_emis_image {
                     let suffix = image.to_possible_value().expect("no skipped values");
                     let name = format!("{name}/i-{}", suffix.get_name());
-                    let variant = Variant { image: Some((*image).into()), ..Variant::default() };
+                    let variant = Variant { image: Some(*image), ..Variant::default() };
                     out.push(Column { kind, pilot, connections, variant, name });
                 }
             }
@@ -206,7 +202,7 @@ fn equal_time_scene(args: &EqualTimeArgs, path: &Path, seconds: f64) -> anyhow::
     let mut rows = Vec::new();
     for Column { kind, pilot, connections, variant, name } in columns(args) {
         let mut settings = RenderSettings {
-            integrator: kind.into(),
+            integrator: kind,
             emis_pilot: pilot,
             emis_connections: connections,
             ..RenderSettings::default()

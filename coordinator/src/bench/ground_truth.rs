@@ -24,7 +24,7 @@
 //! `json:` line holding every figure, for analyses beyond the table.
 
 use super::{SceneArgs, cpu_seconds, geometric_mean};
-use crate::options::{CostModelArg, MomentOutliersArg, scene_name};
+use crate::options::scene_name;
 use std::path::Path;
 use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::cost::{CostModel, StatisticsSums, pixel_cost};
@@ -53,10 +53,10 @@ pub struct GroundTruthArgs {
     pub pilot: u32,
     /// The cost heuristic's constants.
     #[arg(long, value_enum, default_value = "calibrated")]
-    pub cost_model: CostModelArg,
+    pub cost_model: CostModel,
     /// The outlier rejection of the predicted moments.
     #[arg(long, value_enum, default_value = "shared")]
-    pub moment_outliers: MomentOutliersArg,
+    pub moment_outliers: OutlierStage,
 }
 
 fn reduced_candidates() -> Vec<Candidate> {
@@ -297,8 +297,8 @@ pub fn run(args: &GroundTruthArgs) -> anyhow::Result<()> {
     let scenes = args.scenes.scenes()?;
     let (k, pool) = (args.iterations, args.scenes.pool()?);
     let candidates = reduced_candidates();
-    let outliers: OutlierStage = args.moment_outliers.into();
-    let constants = CostModel::from(args.cost_model).constants();
+    let outliers = args.moment_outliers;
+    let constants = args.cost_model.constants();
     println!(
         "ground truth: pilot {} vcm iterations; {} candidates × {k} iterations each",
         args.pilot,

@@ -5,13 +5,13 @@
 //! what to compare on a shared, noisy machine.
 
 use super::{SceneArgs, cpu_seconds};
-use crate::options::{IntegratorKind, make_renderer, scene_name};
+use crate::options::{make_renderer, scene_name};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 use std::process::Command;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
-use tessera_common::settings::RenderSettings;
+use tessera_common::settings::{IntegratorName, RenderSettings};
 
 /// Arguments of `tessera bench speed`.
 #[derive(clap::Args, Debug, Clone)]
@@ -21,7 +21,7 @@ pub struct SpeedArgs {
     pub scenes: SceneArgs,
     /// Algorithm to measure.
     #[arg(long, value_enum, default_value = "pt")]
-    pub integrator: IntegratorKind,
+    pub integrator: IntegratorName,
     /// Samples per pixel per run.
     #[arg(long, default_value_t = 16)]
     pub spp: u32,
@@ -49,8 +49,7 @@ struct Timing {
 }
 
 fn time_tessera(args: &SpeedArgs, scene: &Scene) -> anyhow::Result<Timing> {
-    let renderer =
-        make_renderer(&RenderSettings { integrator: args.integrator.into(), ..RenderSettings::default() }, scene)?;
+    let renderer = make_renderer(&RenderSettings { integrator: args.integrator, ..RenderSettings::default() }, scene)?;
     let opts = RenderOptions {
         budget: Budget::Samples(args.spp),
         seed: 1,
@@ -137,7 +136,7 @@ pub fn run(args: &SpeedArgs) -> anyhow::Result<()> {
                 mitsuba.iter().map(|(v, t)| (v.clone(), serde_json::json!(t))).collect();
             println!(
                 "{}",
-                serde_json::json!({"scene": name, "integrator": args.integrator.name(), "spp": args.spp, "tessera": ours, "mitsuba": m})
+                serde_json::json!({"scene": name, "integrator": args.integrator.as_str(), "spp": args.spp, "tessera": ours, "mitsuba": m})
             );
         } else {
             let mut row = format!("{:<24} {:>14.0} {:>14.0}", name, ours.samples_per_s, ours.samples_per_cpu_s);
