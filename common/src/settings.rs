@@ -27,54 +27,31 @@ use std::collections::{BTreeMap, HashMap};
 mod limits;
 pub use limits::{DEFAULT_MAX_TILE_BYTES, MAX_SPP, WorkLimits};
 
-/// The rendering algorithms a job can ask for.
+/// The rendering algorithms a job can ask for (each one's text is also its command-line help).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum IntegratorName {
-    /// Path tracing.
+    /// Path tracing with next-event estimation and MIS (Mitsuba's `path`).
     #[default]
-    #[cfg_attr(feature = "clap", value(help = "Path tracing with next-event estimation and MIS (Mitsuba's `path`)"))]
     Pt,
-    /// Light tracing.
-    #[cfg_attr(
-        feature = "clap",
-        value(
-            help = "Light tracing (Mitsuba's `ptracer`): light paths connected to the camera. Cannot see smooth glass or mirrors, or an environment, directly: those pixels stay dark"
-        )
-    )]
+    /// Light tracing (Mitsuba's `ptracer`): light paths connected to the camera. Cannot see smooth
+    /// glass or mirrors, or an environment, directly: those pixels stay dark.
     Lt,
-    /// Bidirectional path tracing.
-    #[cfg_attr(
-        feature = "clap",
-        value(
-            help = "Bidirectional path tracing with a light-vertex cache: hits, next-event estimation, c connections per camera vertex and light tracing, balance heuristic over sample counts"
-        )
-    )]
+    /// Bidirectional path tracing with a light-vertex cache: hits, next-event estimation, c
+    /// connections per camera vertex and light tracing, balance heuristic over sample counts.
     Bdpt,
-    /// Vertex connection and merging.
-    #[cfg_attr(
-        feature = "clap",
-        value(
-            help = "Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but the first (fixed radius, so slightly biased)"
-        )
-    )]
+    /// Vertex connection and merging: bdpt plus photon-map merging at every camera vertex but the
+    /// first (fixed radius, so slightly biased).
     Vcm,
-    /// Efficiency-aware MIS over bidirectional path tracing.
-    #[cfg_attr(
-        feature = "clap",
-        value(
-            help = "Efficiency-aware MIS on bdpt: path tracing first (or, with `--emis-pilot bidirectional`, a bdpt pilot with ν = 1, c = 1) estimates candidates' second moments; after iterations 1, 4, 16, 64 the best ν and c (by moment × cost) are chosen and used from then on"
-        )
-    )]
+    /// Efficiency-aware MIS on bdpt: path tracing first (or, with `--emis-pilot bidirectional`, a
+    /// bdpt pilot with ν = 1, c = 1) estimates candidates' second moments; after iterations 1, 4,
+    /// 16, 64 the best ν and c (by moment × cost) are chosen and used from then on.
     EmisBdpt,
-    /// Efficiency-aware MIS over vertex connection and merging.
-    #[cfg_attr(
-        feature = "clap",
-        value(
-            help = "Efficiency-aware MIS on vcm: path tracing first (or, with `--emis-pilot bidirectional`, a vcm pilot with ν = 1, c = 1, merging everywhere) picks ν, c and a per-pixel merge mask; writes the mask, the relative moment, a strategy PNG and a JSON report of every update beside the image"
-        )
-    )]
+    /// Efficiency-aware MIS on vcm: path tracing first (or, with `--emis-pilot bidirectional`, a
+    /// vcm pilot with ν = 1, c = 1, merging everywhere) picks ν, c and a per-pixel merge mask;
+    /// writes the mask, the relative moment, a strategy PNG and a JSON report of every update
+    /// beside the image.
     EmisVcm,
 }
 
