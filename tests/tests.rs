@@ -1,7 +1,8 @@
 //! Farm integration tests: the real `tessera serve` coordinator and `tessera-worker` processes
 //! on loopback ports. Every finished image is compared **bit for bit** with `tessera render` on
 //! the same scene, integrator, spp and seed: the farm cuts work and merges it in the same
-//! canonical order as local rendering (see `coordinator/src/job/plan.rs`).
+//! canonical order as local rendering, since both run the same job driver
+//! (`common/src/driver/`).
 
 use serde_json::{Value, json};
 use std::path::Path;

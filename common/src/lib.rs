@@ -15,6 +15,7 @@ pub mod bsdf;
 pub mod bundle;
 pub mod camera;
 pub mod cpu;
+pub mod driver;
 pub mod emis;
 pub mod film;
 pub mod geometry;

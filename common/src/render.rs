@@ -1,23 +1,18 @@
-//! Local rendering: splits the image into tiles, renders them on a rayon pool in passes of
-//! sample ranges, and merges their sums into a [`Film`] in a fixed order, so the result is
-//! bit-identical for any thread count.
+//! Local rendering: runs a job's [`Driver`] on a rayon pool, rendering each pass's tiles and
+//! merging their sums into a [`Film`] in the driver's order, so the result is bit-identical
+//! for any thread count and to a farm's.
 
 use crate::emis::{EmisState, render_emis};
-use crate::film::{Film, Rect, TileAccum};
+use crate::driver::{Driver, Shape, Step, TileSpec};
+use crate::film::{Film, TileAccum};
 use crate::integrator::{Integrator, TileRequest};
 use crate::scene::Scene;
 use crate::settings::Renderer;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-/// How much to render.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Budget {
-    /// Exactly this many samples per pixel.
-    Samples(u32),
-    /// Passes until this much wall time is used (at least one sample per pixel).
-    Time(Duration),
-}
+pub use crate::driver::Budget;
 
 /// Options of a local render.
 #[derive(Clone, Debug)]
@@ -84,8 +79,22 @@ impl Renderer {
     }
 }
 
-/// Renders `scene` with `integrator`. `progress(done, total)` is called after each tile, in
-/// units of pixel-samples (`total` is an estimate under a time budget).
+/// The driver's shape of a local render of `scene` with `opts`: image tiles of
+/// `opts.tile_size` for integrators that have them, else full-frame iterations.
+pub fn shape(scene: &Scene, opts: &RenderOptions, full_frame: bool) -> Shape {
+    let (width, height) = (scene.camera.width, scene.camera.height);
+    Shape { width, height, budget: opts.budget, tile: (!full_frame).then_some(opts.tile_size), emis: None }
+}
+
+/// Milliseconds since `start`, the driver's clock for a local render.
+pub(crate) fn ms_since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+/// Renders `scene` with `integrator`, running the job [`Driver`] on the pool: a pass's image
+/// tiles in parallel, full-frame tiles one after another (parallel inside), merged in pass
+/// order. `progress(done, total)` is called after each tile, in units of pixel-samples
+/// (`total` is an estimate under a time budget).
 pub fn render(
     scene: &Scene,
     integrator: &dyn Integrator,
@@ -93,63 +102,38 @@ pub fn render(
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<RenderOutput, RenderError> {
     let pool = thread_pool(opts.threads)?;
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    // image-level integrators render the full frame, one iteration per tile, parallel inside
-    let tiles = if integrator.full_frame() { vec![Rect::full(w, h)] } else { Rect::tiles(w, h, opts.tile_size) };
-    let max_pass = if integrator.full_frame() { 1 } else { u32::MAX };
+    let full_frame = integrator.full_frame();
+    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
     let mut film = Film::new(&scene.film);
     let start = Instant::now();
-    let pixels = w as u64 * h as u64;
-    let done = std::sync::atomic::AtomicU64::new(0);
-    let mut spp_done = 0u32;
-    let total_estimate = |spp_done: u32, per_spp: Option<f64>| -> u64 {
-        match (opts.budget, per_spp) {
-            (Budget::Samples(n), _) => n as u64 * pixels,
-            (Budget::Time(t), Some(s)) => ((t.as_secs_f64() / s).max(spp_done as f64) as u64).max(1) * pixels,
-            (Budget::Time(_), None) => pixels,
-        }
-    };
+    let (mut driver, mut tiles) = Driver::new(shape(scene, opts, full_frame));
+    driver.start(0.0);
+    let done = AtomicU64::new(0);
     loop {
-        let per_spp = (spp_done > 0).then(|| start.elapsed().as_secs_f64() / spp_done as f64);
-        let pass = match opts.budget {
-            Budget::Samples(n) => (n - spp_done).min(max_pass),
-            Budget::Time(t) => {
-                let remaining = t.as_secs_f64() - start.elapsed().as_secs_f64();
-                match per_spp {
-                    None => 1,
-                    Some(_) if remaining <= 0.0 => 0,
-                    // aim for passes of about a tenth of the budget, never past the deadline
-                    Some(s) => ((remaining / s).floor() as u32).min(((t.as_secs_f64() * 0.1 / s) as u32).max(1)),
-                }
-                .min(max_pass)
-                .min(crate::settings::MAX_SPP.saturating_sub(spp_done))
-            }
+        let spp_before = tiles.first().map_or(0, |t| t.samples.start);
+        let total = driver.expected_total(spp_before, ms_since(start)) as u64 * pixels;
+        let render = |tile: &TileSpec| {
+            let mut accum = TileAccum::new(tile.rect, &scene.film);
+            integrator.render_tile(scene, &TileRequest::new(tile.rect, tile.samples.clone(), opts.seed), &mut accum);
+            let n = done.fetch_add(tile.pixel_samples(), Ordering::Relaxed) + tile.pixel_samples();
+            progress(n, total.max(n));
+            accum
         };
-        if pass == 0 {
-            break;
+        if full_frame {
+            // one full frame at a time: a pass may hold hundreds of iterations
+            for tile in &tiles {
+                let accum = pool.install(|| render(tile));
+                film.merge_tile(&accum);
+            }
+        } else {
+            let results: Vec<TileAccum> = pool.install(|| tiles.par_iter().map(render).collect());
+            results.iter().for_each(|t| film.merge_tile(t));
         }
-        let samples = spp_done..spp_done + pass;
-        let total = total_estimate(spp_done, per_spp);
-        let results: Vec<TileAccum> = pool.install(|| {
-            tiles
-                .par_iter()
-                .map(|rect| {
-                    let mut accum = TileAccum::new(*rect, &scene.film);
-                    integrator.render_tile(scene, &TileRequest::new(*rect, samples.clone(), opts.seed), &mut accum);
-                    let n = done.fetch_add(rect.area() as u64 * pass as u64, std::sync::atomic::Ordering::Relaxed)
-                        + rect.area() as u64 * pass as u64;
-                    progress(n, total.max(n));
-                    accum
-                })
-                .collect()
-        });
-        for t in &results {
-            film.merge_tile(t);
-        }
-        spp_done += pass;
-        if matches!(opts.budget, Budget::Samples(n) if spp_done >= n) {
-            break;
-        }
+        tiles = match driver.barrier(ms_since(start)) {
+            Step::Render(next) => next,
+            Step::Finish => break,
+            Step::Update(_) => unreachable!("invariant: only EMIS jobs update"),
+        };
     }
-    Ok(RenderOutput { film, elapsed: start.elapsed(), spp: spp_done })
+    Ok(RenderOutput { film, elapsed: start.elapsed(), spp: driver.planned() })
 }

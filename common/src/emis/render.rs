@@ -29,10 +29,9 @@
 //!
 //! The pieces are split so that a farm can run them apart: [`render_iterations`] renders a
 //! full-frame iteration range with a [`Strategy`] on any worker; [`EmisState`] (in `state`)
-//! merges what workers return and runs the update at each barrier. [`render_emis`] is the
-//! local loop over both. Farm and local cut the iterations into the same calls
-//! ([`collecting_call`] while collecting, [`final_call`] after that), so they
-//! sum the same numbers in the same order and their images are bit-identical.
+//! merges what workers return and runs the update at each barrier. When is decided by the job
+//! driver (`crate::driver`), which [`render_emis`] runs locally and the coordinator on the
+//! farm, so both sum the same numbers in the same order and their images are bit-identical.
 
 use super::EmisState;
 use super::candidate::{Candidate, CandidateConfig};
@@ -42,16 +41,14 @@ use super::estimator::MomentEstimator;
 use super::guides::{GuideBuffer, GuideCollector};
 use super::moments::MomentBuffer;
 use super::optimize::{ConnectionScope, FilterSettings};
-use super::schedule::{
-    RestartTotal, collecting_call, collects_moments, final_call, iterations_at_pace, seconds_per_iteration,
-    traced_together, update_pays,
-};
+use super::schedule::{collects_moments, traced_together};
+use crate::driver::{Driver, EmisSchedule, Shape, Step};
 use crate::film::{Film, Rect, TileAccum};
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::light_cache::CacheMemory;
 use crate::integrator::path::merge::{MergeConfig, MergeMask};
 use crate::integrator::{Bidir, Integrator, PathSettings, PathTracer, Stop, TileRequest};
-use crate::render::{Budget, RenderError, RenderOptions, RenderOutput};
+use crate::render::{RenderError, RenderOptions, RenderOutput, ms_since};
 use crate::scene::Scene;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -411,10 +408,17 @@ pub struct EmisOutput {
     pub state: EmisState,
 }
 
-/// Renders `scene` locally with `emis-*` on the caller's pool (`opts.threads`): collecting
-/// iterations in the calls of [`collecting_call`], updates at the configured barriers, then
-/// the rest in the calls of [`final_call`] (path tracing's several at a time, see
-/// [`traced_together`]). `progress(done, total)` counts pixel-iterations.
+/// The driver's shape of a local `emis-*` render of `scene` with `opts`.
+pub fn shape(scene: &Scene, config: &EmisConfig, opts: &RenderOptions) -> Shape {
+    let initial_nu = Strategy::initial(config.method, config.pilot).nu;
+    let emis = Some(EmisSchedule { updates: config.updates.clone(), initial_nu });
+    Shape { width: scene.camera.width, height: scene.camera.height, budget: opts.budget, tile: None, emis }
+}
+
+/// Renders `scene` locally with `emis-*` on the caller's pool (`opts.threads`), running the
+/// job [`Driver`]: each pass's calls in order (path tracing's several at a time once it
+/// collects no moments, see [`traced_together`]), the updates it asks for at its barriers.
+/// `progress(done, total)` counts pixel-iterations.
 pub fn render_emis(
     scene: &Scene,
     settings: PathSettings,
@@ -429,100 +433,51 @@ pub fn render_emis(
     let mut film = Film::new(&scene.film);
     let (stop, memory) = (Stop::default(), Arc::<CacheMemory>::default());
     let start = Instant::now();
-    let mut done = 0u32;
-    // seconds per iteration of the last call: a strategy change (a restart from path tracing
-    // above all) makes iterations several times dearer than the average so far
-    let mut last_rate = 0.0f64;
-    // an update ran since the last call: its strategy's iterations may cost more again
-    let mut updated = false;
-    // the seconds an iteration is expected to take from now on (unknown before the first)
-    let rate = |done: u32, last_rate: f64| seconds_per_iteration(start.elapsed().as_secs_f64(), done, last_rate);
-    // iterations the budget allows at that rate; a sample budget counts the iterations the
-    // film holds, from `kept_from` (after a path-tracing start was set aside) on
-    let expected_total = |done: u32, kept_from: u32, last_rate: f64| match opts.budget {
-        Budget::Samples(n) => kept_from + n,
-        Budget::Time(_) if done == 0 => u32::MAX,
-        Budget::Time(t) => {
-            iterations_at_pace(t.as_secs_f64(), start.elapsed().as_secs_f64(), done, rate(done, last_rate))
-        }
-    };
+    let (mut driver, mut tiles) = Driver::new(shape(scene, config, opts));
+    driver.start(0.0);
     loop {
-        let more = match opts.budget {
-            Budget::Samples(n) => done < state.kept_from + n,
-            Budget::Time(t) => {
-                done == 0
-                    || (done < crate::settings::MAX_SPP
-                        && start.elapsed().as_secs_f64() + rate(done, last_rate) <= t.as_secs_f64())
+        let collect = driver.passes().last().is_some_and(|p| p.collect).then_some(state.candidate_set);
+        let calls: Vec<Range<u32>> = tiles.iter().map(|t| t.samples.clone()).collect();
+        let mut next = 0;
+        while next < calls.len() {
+            let done = calls[next].start;
+            next += if collect.is_none() && state.strategy.nu == 0.0 {
+                // path tracing has settled: trace a pixel's iterations of several calls in a
+                // row, each call still summed alone and added in order, as a farm adds them
+                let tenth = driver.expected_total(done, ms_since(start)).saturating_sub(driver.kept_from()) / 10;
+                let group = traced_together(done..calls[calls.len() - 1].end, pixels, tenth);
+                debug_assert_eq!(group[..], calls[next..next + group.len()], "the driver's cut");
+                pool.install(|| path_trace(scene, settings, opts.seed, &group, &stop, |a| film.merge_tile(&a)));
+                group.len()
+            } else {
+                let (accum, pilot) = pool.install(|| {
+                    let (strategy, call) = (&state.strategy, calls[next].clone());
+                    render_iterations_until(scene, settings, config, strategy, opts.seed, call, collect, &stop, &memory)
+                });
+                film.merge_tile(&accum);
+                if let Some(p) = pilot {
+                    state.absorb(&p).expect("invariant: a local pilot has the state's shape");
+                }
+                1
+            };
+            let done = calls[next - 1].end;
+            progress(done as u64 * pixels, driver.expected_total(done, ms_since(start)).max(done) as u64 * pixels);
+        }
+        tiles = match driver.barrier(ms_since(start)) {
+            Step::Render(next) => next,
+            Step::Finish => break,
+            Step::Update(restart_total) => {
+                let done = driver.planned();
+                let restarted = pool.install(|| state.update(&film.average(), done, restart_total)).restarted;
+                if restarted {
+                    film = Film::new(&scene.film);
+                }
+                driver.updated(restarted, state.strategy.nu, state.collecting(), ms_since(start))
             }
         };
-        if !more {
-            break;
-        }
-        // moments are only worth collecting while another update can still come and pay
-        let timed = matches!(opts.budget, Budget::Time(_));
-        if state.next_update().is_none_or(|u| !update_pays(u, expected_total(done, state.kept_from, last_rate), timed))
-        {
-            state.stop_collecting();
-        }
-        let collect = state.collecting().then_some(state.candidate_set);
-        let left = match opts.budget {
-            Budget::Samples(n) => state.kept_from + n - done,
-            Budget::Time(_) if done == 0 => 1,
-            Budget::Time(t) => {
-                // the first call after an update renders one iteration, which measures the new
-                // strategy's pace: after a restart, a call of eight VCM iterations planned at
-                // pt's pace could overrun the budget
-                let fit = ((t.as_secs_f64() - start.elapsed().as_secs_f64()) / rate(done, last_rate)).floor();
-                if updated { 1 } else { (fit.max(1.0) as u32).min(crate::settings::MAX_SPP - done) }
-            }
-        };
-        updated = false;
-        let count = match state.next_update().filter(|_| collect.is_some()) {
-            // a collecting pass ends at the next update, which is within a sample budget
-            Some(update) => collecting_call(done..update.max(done + 1), state.strategy.nu).len() as u32,
-            None => final_call(done..done + left, state.strategy.nu, pixels).len() as u32,
-        }
-        .min(left);
-        let call_start = Instant::now();
-        let count = if collect.is_none() && state.strategy.nu == 0.0 {
-            // path tracing has settled: trace a pixel's iterations of several calls in a row,
-            // each call still summed alone and added in order, as a farm adds them
-            let tenth = expected_total(done, state.kept_from, last_rate).saturating_sub(state.kept_from) / 10;
-            let group = traced_together(done..done + left, pixels, tenth);
-            pool.install(|| path_trace(scene, settings, opts.seed, &group, &stop, |a| film.merge_tile(&a)));
-            group.last().map_or(0, |call| call.end - done)
-        } else {
-            let (accum, pilot) = pool.install(|| {
-                let iterations = done..done + count;
-                let strategy = &state.strategy;
-                render_iterations_until(
-                    scene, settings, config, strategy, opts.seed, iterations, collect, &stop, &memory,
-                )
-            });
-            film.merge_tile(&accum);
-            if let Some(p) = pilot {
-                state.absorb(&p).expect("invariant: a local pilot has the state's shape");
-            }
-            count
-        };
-        done += count;
-        last_rate = call_start.elapsed().as_secs_f64() / count as f64;
-        let total = expected_total(done, state.kept_from, last_rate);
-        progress(done as u64 * pixels, total as u64 * pixels);
-        // an update is only worth it if iterations remain to use it
-        // a restart now would render a sample budget's N iterations after the ones so far
-        let restart_total = match opts.budget {
-            Budget::Samples(n) => RestartTotal::Samples(done.saturating_add(n)),
-            Budget::Time(_) => RestartTotal::Time(total),
-        };
-        if state.update_due(done) && done < total {
-            updated = true;
-            if pool.install(|| state.update(&film.average(), done, restart_total)).restarted {
-                film = Film::new(&scene.film);
-            }
-        }
     }
-    Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp: done - state.kept_from }, state })
+    let spp = driver.planned() - driver.kept_from();
+    Ok(EmisOutput { render: RenderOutput { film, elapsed: start.elapsed(), spp }, state })
 }
 
 #[cfg(test)]

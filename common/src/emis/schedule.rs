@@ -1,7 +1,6 @@
 //! How an `emis-*` render's iterations are cut into calls (farm tiles) and which of them
-//! record moments: pure functions of iteration numbers, the strategy's ν and the budget, so
-//! that `render_emis` and a farm's plan cut a job the same way and sum the same numbers in the
-//! same order.
+//! record moments: pure functions of iteration numbers, the strategy's ν and the budget, which
+//! the job driver (`crate::driver`) cuts passes with.
 
 use std::ops::Range;
 

@@ -96,11 +96,11 @@ impl JobsModel {
             touch(&mut changes, &id, Some(i));
         }
         if job.state == JobState::Queued {
-            job.state = match job.passes.last().map(|p| p.kind) {
+            job.state = match job.passes().last().map(|p| p.kind) {
                 Some(PassKind::Pilot) => JobState::Pilot,
                 _ => JobState::Final,
             };
-            job.started_ms = Some(now_ms);
+            job.driver.start(now_ms as f64);
             touch(&mut changes, &id, None);
         }
         (leases, changes)

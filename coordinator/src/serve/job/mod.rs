@@ -1,12 +1,12 @@
-//! Jobs: what a job renders ([`spec`]), the pure state machine ([`model`]), how jobs are cut into tiles and passes
-//! ([`plan`]), result validation ([`validate`]), the EMIS state and updates ([`emis`]), removal
+//! Jobs: what a job renders ([`spec`]), the pure state machine ([`model`]) that wraps the job
+//! driver of `tessera_common::driver` (which cuts jobs into passes of tiles) with leases,
+//! result validation ([`validate`]), the EMIS state and updates ([`emis`]), removal
 //! of ended jobs ([`retention`]) and the service that wraps them with storage and
 //! notifications ([`service`]).
 
 pub mod emis;
 pub mod leasing;
 pub mod model;
-pub mod plan;
 pub mod retention;
 pub mod service;
 pub mod spec;

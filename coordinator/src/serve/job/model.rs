@@ -1,12 +1,13 @@
-//! The pure, synchronous job state machine: jobs, their passes and tiles, leases with epochs,
-//! exactly-once acceptance of results and the canonical merge order. No IO and no clock: every
-//! method that depends on time takes `now_ms`. The service layer (`service.rs`) persists the
+//! The pure, synchronous job state machine: jobs, each wrapping the job driver that
+//! `tessera render` runs (`tessera_common::driver`: passes, barriers, pacing, EMIS updates),
+//! with its tiles, leases with epochs, exactly-once acceptance of results and the canonical
+//! merge order. No IO and no clock: every method that depends on time takes `now_ms`. The service layer (`service.rs`) persists the
 //! [`Changes`] each call reports before it answers anyone.
 //!
 //! Tile life: `Queued → Leased{worker, deadline} → Accepted → Merged`. A lease that expires,
 //! a refused (invalid) result or a reported failure send the tile back to `Queued` with its
 //! epoch + 1, so a late answer to the old lease is recognised as stale. Accepted results are
-//! merged in tile-index order only (see `plan.rs` for why), so `tiles[..merged]` is exactly the
+//! merged in tile-index order only (the driver's order, see `tessera_common::driver`), so `tiles[..merged]` is exactly the
 //! set of tiles in the film.
 //!
 //! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`, then
@@ -15,13 +16,14 @@
 mod failures;
 
 pub use super::leasing::TileIndex;
-use super::plan::{self, BarrierAction, PassPlan};
 pub use super::spec::{JobSpec, TileSpec};
+pub use tessera_common::driver::{Pass, PassKind};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
 pub(super) use failures::{fail_tile, host_of};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
+use tessera_common::driver::{Driver, Step};
 use tessera_common::emis::RestartTotal;
 
 /// A tile that failed this many times fails its job.
@@ -65,41 +67,6 @@ impl JobState {
             JobState::Cancelled => "cancelled",
         }
     }
-}
-
-/// The kind of a pass.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PassKind {
-    /// EMIS pilot: fixed strategy, moments on.
-    Pilot,
-    /// The chosen strategy.
-    Final,
-}
-
-/// A pass: a contiguous range of tile indices that ends at a barrier.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Pass {
-    /// Pilot or final.
-    pub kind: PassKind,
-    /// Its tiles.
-    pub tiles: Range<usize>,
-    /// EMIS: its tiles collect moments for an update at its end.
-    #[serde(default)]
-    pub collect: bool,
-    /// EMIS: the film was cleared before this pass (a path-tracing start ended), so the
-    /// image keeps only the iterations from here on.
-    #[serde(default)]
-    pub restart: bool,
-    /// EMIS: light paths per pixel of the strategy its tiles render (the cut of a collecting
-    /// pass depends on it; 0 in rows written before it was kept, which planned that cut).
-    #[serde(default)]
-    pub nu: f32,
-    /// When it was planned at the barrier of the pass before it (`None` for a job's first
-    /// pass, and in rows written before it was kept): a time budget plans the next pass by
-    /// this pass's pace too.
-    #[serde(default)]
-    pub planned_ms: Option<u64>,
 }
 
 /// Where a tile is.
@@ -147,8 +114,9 @@ pub struct Job {
     pub spec: JobSpec,
     /// Lifecycle state.
     pub state: JobState,
-    /// Planned passes, in order; their tile ranges tile `tiles` without gaps.
-    pub passes: Vec<Pass>,
+    /// Its passes, barriers and pacing, as `tessera render` runs them; the passes' tile
+    /// ranges tile `tiles` without gaps.
+    pub driver: Driver,
     /// All planned tiles, in merge order.
     pub tiles: Vec<Tile>,
     /// `tiles[..merged]` are in the film.
@@ -162,8 +130,6 @@ pub struct Job {
     pub error: Option<String>,
     /// Submission time.
     pub created_ms: u64,
-    /// First lease.
-    pub started_ms: Option<u64>,
     /// Reaching a terminal state.
     pub finished_ms: Option<u64>,
     /// The slowest rate any accepted result of this job was rendered at, from lease to
@@ -185,7 +151,7 @@ impl Job {
     /// that collects them), at least [`MIN_LEASE_WINDOW`].
     pub fn leasable(&self) -> Range<usize> {
         let Some(next) = self.tiles.get(self.merged) else { return self.merged..self.merged };
-        let collect = self.passes.iter().any(|p| p.collect && p.tiles.contains(&self.merged));
+        let collect = self.driver.collects(self.merged);
         let per_pixel = 32 + if collect { tessera_proto::MAX_PILOT_BYTES_PER_PIXEL } else { 0 };
         let bytes = (next.spec.rect.area() as u64).max(1) * per_pixel;
         let window = ((HELD_RESULTS_BYTES / bytes) as usize).max(MIN_LEASE_WINDOW);
@@ -208,19 +174,19 @@ impl Job {
         self.tiles[..self.merged].iter().map(|t| t.spec.samples.end).max().unwrap_or(0)
     }
 
-    /// EMIS: light paths per pixel of the current strategy (the last pass's).
-    pub fn nu(&self) -> f32 {
-        self.passes.last().map_or(0.0, |p| p.nu)
+    /// The planned passes, in order.
+    pub fn passes(&self) -> &[Pass] {
+        self.driver.passes()
     }
 
-    /// The first iteration the film keeps: where the last restarting pass begins (0 if none).
+    /// The first lease (the driver's clock starts there).
+    pub fn started_ms(&self) -> Option<u64> {
+        self.driver.started_ms().map(|t| t as u64)
+    }
+
+    /// The first iteration the film keeps (see [`Driver::kept_from`]).
     pub fn kept_from(&self) -> u32 {
-        self.passes
-            .iter()
-            .rev()
-            .find(|p| p.restart)
-            .and_then(|p| self.tiles.get(p.tiles.start))
-            .map_or(0, |t| t.spec.samples.start)
+        self.driver.kept_from()
     }
 
     /// Tiles accepted or merged.
@@ -228,53 +194,18 @@ impl Job {
         self.tiles.len() - self.index.queued.len() - self.index.leased.len()
     }
 
-    /// The pass `tile` belongs to.
-    pub fn pass_of(&self, tile: usize) -> Option<usize> {
-        self.passes.iter().position(|p| p.tiles.contains(&tile))
-    }
-
     /// Whether tile `tile` collects EMIS moments.
     pub fn collects(&self, tile: usize) -> bool {
-        self.pass_of(tile).is_some_and(|p| self.passes[p].collect)
+        self.driver.collects(tile)
     }
 
-    /// How long the job has rendered at `now_ms`, and the pace of its last pass if that pass
-    /// was planned at a barrier and is merged.
-    pub(super) fn clock(&self, now_ms: u64) -> plan::Clock {
-        let elapsed_s = now_ms.saturating_sub(self.started_ms.unwrap_or(now_ms)) as f64 / 1000.0;
-        let last_pass_s = self
-            .passes
-            .last()
-            .filter(|p| p.tiles.end <= self.merged)
-            .and_then(|p| {
-                let tiles = &self.tiles[p.tiles.clone()];
-                let begin = tiles.iter().map(|t| t.spec.samples.start).min()?;
-                let end = tiles.iter().map(|t| t.spec.samples.end).max()?;
-                let seconds = now_ms.saturating_sub(p.planned_ms?) as f64 / 1000.0;
-                Some(seconds / end.saturating_sub(begin).max(1) as f64)
-            })
-            .unwrap_or(0.0);
-        plan::Clock { elapsed_s, last_pass_s }
-    }
-
-    fn append_pass(
-        &mut self,
-        kind: PassKind,
-        plan: PassPlan,
-        restart: bool,
-        nu: f32,
-        now_ms: Option<u64>,
-    ) -> Range<usize> {
+    /// Queues the tiles of a pass the driver planned.
+    fn add_tiles(&mut self, specs: Vec<TileSpec>) -> Range<usize> {
         let start = self.tiles.len();
-        self.tiles.extend(plan.tiles.into_iter().map(|spec| Tile {
-            spec,
-            epoch: 0,
-            state: TileState::Queued,
-            failures: 0,
-        }));
+        self.tiles.extend(specs.into_iter().map(|spec| Tile { spec, epoch: 0, state: TileState::Queued, failures: 0 }));
         let range = start..self.tiles.len();
+        debug_assert_eq!(range.end, self.driver.tiles(), "invariant: the model holds the driver's tiles");
         self.index.queued.extend(range.clone());
-        self.passes.push(Pass { kind, tiles: range.clone(), collect: plan.collect, restart, nu, planned_ms: now_ms });
         range
     }
 
@@ -293,6 +224,18 @@ pub(super) fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
     if let Some(t) = tile {
         set.insert(t);
     }
+}
+
+/// What a job's barrier did (see [`JobsModel::merged`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BarrierAction {
+    /// It planned the next pass.
+    NextPass,
+    /// EMIS: an update is due. The service runs the optimiser on the merged image and
+    /// moments, then calls [`JobsModel::optimized`].
+    Optimize,
+    /// Nothing left: the job is done.
+    Finish,
 }
 
 /// Identifies a lease: a tile of a job at an epoch.
@@ -359,27 +302,24 @@ impl JobsModel {
             return Err(TransitionError::DuplicateJob(id.to_string()));
         }
         let seq = self.jobs.values().map(|j| j.seq + 1).max().unwrap_or(0);
-        let first = plan::first_pass(&spec);
+        let (driver, first) = Driver::new(spec.shape());
         let mut job = Job {
             id: id.to_string(),
             seq,
             spec,
             state: JobState::Queued,
-            passes: Vec::new(),
+            driver,
             tiles: Vec::new(),
             merged: 0,
             worker_failures: BTreeMap::new(),
             last_failure: None,
             error: None,
             created_ms: now_ms,
-            started_ms: None,
             finished_ms: None,
             slowest_ms_per_sample: None,
             index: TileIndex::default(),
         };
-        let kind = if job.spec.settings.integrator.emis_method().is_some() { PassKind::Pilot } else { PassKind::Final };
-        let nu = plan::initial_nu(&job.spec);
-        let range = job.append_pass(kind, first, false, nu, None);
+        let range = job.add_tiles(first);
         self.jobs.insert(id.to_string(), job);
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
@@ -462,26 +402,16 @@ impl JobsModel {
         j.merged..end
     }
 
-    /// The iterations `job` would run in all if its EMIS update at `now_ms` restarted it (as
-    /// `render_emis`): a sample budget's N after those merged, else what the budget expects
-    /// (`u32::MAX` while unknown).
+    /// The iterations `job` would run in all if its EMIS update at `now_ms` restarted it (see
+    /// [`Driver::restart_total`]).
     pub fn restart_total(&self, job: &str, now_ms: u64) -> RestartTotal {
-        let Some(j) = self.jobs.get(job) else { return RestartTotal::Time(u32::MAX) };
-        if let Some(n) = j.spec.settings.spp {
-            return RestartTotal::Samples(j.spp_merged().saturating_add(n));
-        }
-        RestartTotal::Time(plan::expected_total(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms)))
+        self.jobs.get(job).map_or(RestartTotal::Time(u32::MAX), |j| j.driver.restart_total(now_ms as f64))
     }
 
     /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
     pub fn merge_finishes(&self, job: &str, upto: usize, now_ms: u64) -> bool {
         let Some(j) = self.jobs.get(job) else { return false };
-        if j.state.is_terminal() || upto < j.tiles.len() {
-            return false;
-        }
-        let spp = j.tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
-        let collected = j.passes.last().is_some_and(|p| p.collect);
-        plan::after_pass(&j.spec, spp, j.kept_from(), j.clock(now_ms), collected, j.nu()) == BarrierAction::Finish
+        !j.state.is_terminal() && upto >= j.tiles.len() && j.driver.finishes(now_ms as f64)
     }
 
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
@@ -500,17 +430,21 @@ impl JobsModel {
             return (None, changes);
         }
         // every planned tile is merged: the last pass's barrier
-        let collected = j.passes.last().is_some_and(|p| p.collect);
-        let nu = j.nu();
-        let action = plan::after_pass(&j.spec, j.spp_merged(), j.kept_from(), j.clock(now_ms), collected, nu);
-        match &action {
-            BarrierAction::NextPass(plan) => {
-                let range = j.append_pass(PassKind::Final, plan.clone(), false, nu, Some(now_ms));
+        let action = match j.driver.barrier(now_ms as f64) {
+            Step::Render(tiles) => {
+                let range = j.add_tiles(tiles);
                 changes.entry(job.to_string()).or_default().extend(range);
+                BarrierAction::NextPass
             }
-            BarrierAction::Optimize => j.state = JobState::Optimizing,
-            BarrierAction::Finish => j.finish(JobState::Done, now_ms),
-        }
+            Step::Update(_) => {
+                j.state = JobState::Optimizing;
+                BarrierAction::Optimize
+            }
+            Step::Finish => {
+                j.finish(JobState::Done, now_ms);
+                BarrierAction::Finish
+            }
+        };
         (Some(action), changes)
     }
 
@@ -531,10 +465,8 @@ impl JobsModel {
             return Err(TransitionError::NotOptimizing(job.to_string()));
         }
         j.state = JobState::Final;
-        let spp = j.spp_merged();
-        let kept_from = if restart { spp } else { j.kept_from() };
-        let plan = plan::pass_after_update(&j.spec, spp, kept_from, j.clock(now_ms), nu, collect);
-        let range = j.append_pass(PassKind::Final, plan, restart, nu, Some(now_ms));
+        let tiles = j.driver.updated(restart, nu, collect, now_ms as f64);
+        let range = j.add_tiles(tiles);
         let mut changes = Changes::new();
         changes.insert(job.to_string(), range.collect());
         Ok(changes)

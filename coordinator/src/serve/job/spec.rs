@@ -1,12 +1,19 @@
-//! What a job is asked to render, fixed at submission: its description ([`JobSpec`]) and the
-//! work unit it is cut into ([`TileSpec`], an image rectangle × a range of iterations). The
-//! state machine ([`super::model`]) and the planner ([`super::plan`]) both build on these.
+//! What a job is asked to render, fixed at submission: its description ([`JobSpec`]), the
+//! [`Shape`] the job driver cuts into passes of [`TileSpec`]s (an image rectangle × a range of
+//! iterations), on which the state machine ([`super::model`]) builds.
 
 use serde::{Deserialize, Serialize};
-use std::ops::Range;
+use std::time::Duration;
+use tessera_common::driver::{Budget, EmisSchedule, Shape};
+pub use tessera_common::driver::TileSpec;
+use tessera_common::emis::Strategy;
 use tessera_common::film::filter::{Filter, FilterKind};
 use tessera_common::film::{Layout, Rect};
 use tessera_common::settings::{IntegratorName, RenderSettings};
+
+/// Edge of the rectangles of image-tile integrators on the farm. Any edge gives the same bits:
+/// an image tile holds a pixel's whole sample range of its pass.
+pub const TILE_SIZE: u32 = 64;
 
 /// The immutable description of a job, fixed at submission.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -67,25 +74,26 @@ impl JobSpec {
         }
     }
 
+    /// What the job driver cuts into passes: image tiles of [`TILE_SIZE`] or full frames, the
+    /// budget, and EMIS's updates.
+    pub fn shape(&self) -> Shape {
+        let s = &self.settings;
+        let budget = match (s.spp, s.time_s) {
+            (Some(n), _) => Budget::Samples(n),
+            // validated finite and positive; a budget past `Duration`'s range is forever
+            (None, Some(t)) => Budget::Time(Duration::try_from_secs_f64(t).unwrap_or(Duration::MAX)),
+            (None, None) => Budget::Samples(1),
+        };
+        let emis = s.integrator.emis_method().map(|m| EmisSchedule {
+            updates: s.emis_updates.clone(),
+            initial_nu: Strategy::initial(m, s.emis_pilot).nu,
+        });
+        Shape { width: self.width, height: self.height, budget, tile: (!self.full_frame).then_some(TILE_SIZE), emis }
+    }
+
     /// The channels and pixels of the sums of a tile over `rect`.
     pub fn layout(&self, rect: Rect) -> Layout {
         Layout::of(rect, self.width, self.height, &Filter::new(self.filter))
-    }
-}
-
-/// What a tile renders.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TileSpec {
-    /// Pixels.
-    pub rect: Rect,
-    /// Sample (iteration) indices.
-    pub samples: Range<u32>,
-}
-
-impl TileSpec {
-    /// Pixel samples the tile contributes.
-    pub fn pixel_samples(&self) -> u64 {
-        self.rect.area() as u64 * self.samples.len() as u64
     }
 }
 

@@ -83,7 +83,7 @@ pub struct JobView {
 fn sample_progress(job: &Job) -> f64 {
     let pixels = job.spec.width as u64 * job.spec.height as u64;
     let target = job.spec.settings.spp.map_or(0, |n| n as u64 * pixels);
-    let kept_from = job.passes.iter().rev().find(|p| p.restart).map_or(0, |p| p.tiles.start);
+    let kept_from = job.passes().iter().rev().find(|p| p.restart).map_or(0, |p| p.tiles.start);
     let discarded: u64 = job.tiles[..kept_from].iter().map(|t| t.spec.pixel_samples()).sum();
     let before = discarded as f64 / discarded.max(target).max(1) as f64;
     let kept_merged = job.samples_merged().saturating_sub(discarded);
@@ -94,7 +94,7 @@ fn sample_progress(job: &Job) -> f64 {
 impl JobView {
     /// The view of `job` at `now_ms`.
     pub fn of(job: &Job, now_ms: u64) -> JobView {
-        let elapsed_s = job.started_ms.map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
+        let elapsed_s = job.started_ms().map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
         let progress = match (job.state, job.spec.settings.time_s) {
             (JobState::Done, _) => 1.0,
             (_, Some(budget)) => (elapsed_s.unwrap_or(0.0) / budget).clamp(0.0, 0.99),
@@ -105,12 +105,12 @@ impl JobView {
             _ => None,
         };
         let current_pass =
-            job.passes.iter().position(|p| p.tiles.end > job.merged).unwrap_or(job.passes.len().max(1) - 1);
+            job.passes().iter().position(|p| p.tiles.end > job.merged).unwrap_or(job.passes().len().max(1) - 1);
         let phase = match job.state {
             JobState::Queued | JobState::Done | JobState::Failed | JobState::Cancelled => {
                 job.state.as_str().to_string()
             }
-            s => format!("{} pass {}/{}", s.as_str(), current_pass + 1, job.passes.len()),
+            s => format!("{} pass {}/{}", s.as_str(), current_pass + 1, job.passes().len()),
         };
         JobView {
             id: job.id.clone(),

@@ -19,6 +19,7 @@ use crate::serve::job::model::{Changes, Job, JobSpec, JobState, JobsModel, Pass,
 use rusqlite::{Connection, OptionalExtension, params};
 use std::path::Path;
 use tessera_common::film::Rect;
+use tessera_common::driver::Driver;
 
 /// Storage failed.
 #[derive(Debug, thiserror::Error)]
@@ -212,11 +213,11 @@ impl Batch {
                 seq: job.seq as i64,
                 spec: json(&job.spec),
                 state: job.state.as_str(),
-                passes: json(&job.passes),
+                passes: json(&job.passes()),
                 worker_failures: json(&job.worker_failures),
                 error: job.error.clone(),
                 created_ms: job.created_ms as i64,
-                started_ms: job.started_ms.map(|t| t as i64),
+                started_ms: job.started_ms().map(|t| t as i64),
                 finished_ms: job.finished_ms.map(|t| t as i64),
             });
             for &i in tiles {
@@ -450,22 +451,31 @@ impl Store {
             let worker_failures =
                 serde_json::from_str(&failures).map_err(|e| corrupt(format!("worker_failures: {e}")))?;
             let tiles = self.load_tiles(&id, merged as usize, deadline_ms)?;
-            if passes.last().map_or(0, |p| p.tiles.end) != tiles.len() || merged as usize > tiles.len() {
+            let gapless = passes.iter().scan(0, |end, p| Some(std::mem::replace(end, p.tiles.end) == p.tiles.start));
+            if passes.last().map_or(0, |p| p.tiles.end) != tiles.len()
+                || merged as usize > tiles.len()
+                || !gapless.clone().all(|ok| ok)
+                || passes.iter().any(|p| p.tiles.is_empty())
+            {
                 return Err(corrupt("tiles do not match passes".into()));
             }
+            let iterations = |range: std::ops::Range<usize>| {
+                let specs = || tiles[range.clone()].iter().map(|t| &t.spec.samples);
+                specs().map(|s| s.start).min().unwrap_or(0)..specs().map(|s| s.end).max().unwrap_or(0)
+            };
+            let driver = Driver::restore(spec.shape(), passes, started.map(|t| t as f64), iterations);
             let job = Job {
                 id: id.clone(),
                 seq: seq as u64,
                 spec,
                 state,
-                passes,
+                driver,
                 tiles,
                 merged: merged as usize,
                 worker_failures,
                 last_failure: None,
                 error,
                 created_ms: created as u64,
-                started_ms: started.map(|t| t as u64),
                 finished_ms: finished.map(|t| t as u64),
                 slowest_ms_per_sample: None,
                 index: Default::default(),

@@ -14,13 +14,13 @@ use tessera_common::emis::UpdateReport;
 /// The last planned pass of `job`: its index, kind, tiles and sample range.
 pub(super) fn pass_planned(model: &JobsModel, job: &str) {
     let Some(j) = model.jobs.get(job) else { return };
-    let Some(pass) = j.passes.last() else { return };
+    let Some(pass) = j.passes().last() else { return };
     let tiles = &j.tiles[pass.tiles.clone()];
     let first = tiles.iter().map(|t| t.spec.samples.start).min().unwrap_or(0);
     let end = tiles.iter().map(|t| t.spec.samples.end).max().unwrap_or(0);
     tracing::info!(
         job_id = %job,
-        pass = j.passes.len() - 1,
+        pass = j.passes().len() - 1,
         kind = match pass.kind {
             PassKind::Pilot => "pilot",
             PassKind::Final => "final",

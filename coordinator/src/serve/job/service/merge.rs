@@ -7,8 +7,7 @@ use super::runtime::{CheckpointState, HeldResult};
 use super::{Inner, JobService, ServiceError};
 use crate::output::{Outputs, PngEffort, Provenance};
 use crate::serve::job::emis::EmisJob;
-use crate::serve::job::model::{Changes, JobSpec, TileSpec};
-use crate::serve::job::plan::BarrierAction;
+use crate::serve::job::model::{BarrierAction, Changes, JobSpec, TileSpec};
 use crate::serve::job::validate::{ResultClaim, validate_result};
 use crate::serve::storage::{Extra, OutputDigests};
 use tessera_common::film::Film;
@@ -202,7 +201,7 @@ impl JobService {
         match action {
             // `merge_finishes` answered this before the merge was committed
             Some(BarrierAction::Finish) => unreachable!("invariant: a finishing merge returns before its barrier"),
-            Some(BarrierAction::NextPass(_)) => {
+            Some(BarrierAction::NextPass) => {
                 super::events::pass_planned(&inner.model, job);
                 self.checkpoint(inner, job, upto, changes, extras, now_ms)?;
                 self.work.notify_waiters();

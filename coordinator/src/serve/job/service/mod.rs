@@ -414,19 +414,19 @@ impl JobService {
 
 /// What is shown of a job whose rows do not decode: its id, failed, with the error.
 fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
+    let spec = JobSpec::bare(id, Default::default(), None, 0, 0);
     super::model::Job {
         id: id.to_string(),
         seq: 0,
-        spec: JobSpec::bare(id, Default::default(), None, 0, 0),
+        driver: tessera_common::driver::Driver::restore(spec.shape(), Vec::new(), None, |_| 0..0),
+        spec,
         state: JobState::Failed,
-        passes: Vec::new(),
         tiles: Vec::new(),
         merged: 0,
         worker_failures: BTreeMap::new(),
         last_failure: None,
         error: Some(error),
         created_ms: now_ms,
-        started_ms: None,
         finished_ms: Some(now_ms),
         slowest_ms_per_sample: None,
         index: Default::default(),

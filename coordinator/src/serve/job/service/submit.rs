@@ -5,7 +5,7 @@
 use super::upload::BundleUpload;
 use super::{Bundle, JobService, ServiceError};
 use crate::serve::job::model::JobSpec;
-use crate::serve::job::plan::TILE_SIZE;
+use crate::serve::job::spec::TILE_SIZE;
 use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::scene::{LoadOptions, Scene};
