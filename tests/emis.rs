@@ -143,7 +143,7 @@ fn rest_submit_emis_with_per_pixel_connections_equals_local_render() {
         assert_eq!(status, 200, "{name}: {}", String::from_utf8_lossy(&bytes));
         std::fs::write(out.with_extension(name), &bytes).unwrap();
     }
-    let more = ["--emis-updates", "1,4", "--emis-connections", "per-pixel", "--emis-pilot", "bidirectional"];
+    let more = ["--emis-updates", "1,4", "--emis-experiment", "connections=per-pixel", "--emis-pilot", "bidirectional"];
     let local = local_render_with(dir.path(), &scene("indirect-room"), "emis-bdpt", 12, 3, &more);
     assert_same_image(&out, &local);
     let (farm_c, local_c) = (read_layer(&out, "connections").unwrap(), read_layer(&local, "connections").unwrap());

@@ -208,6 +208,7 @@ pub const RETIRED: &[Retired] = &[
     Retired { field: "merge_kernel", value: None, now: "squared" },
     Retired { field: "cost_model", value: Some("reference"), now: "calibrated" },
     Retired { field: "moment_filter", value: None, now: "relative" },
+    Retired { field: "moment_outliers", value: Some("filtered"), now: "shared" },
 ];
 
 /// Rewrites a settings object without [`RETIRED`] settings: retired fields removed, retired
@@ -394,6 +395,9 @@ mod tests {
         let e = strip_retired(&mut value).unwrap_err().to_string();
         assert!(e.contains("\"cost_model\"") && e.contains("calibrated"), "{e}");
         assert_eq!(value["cost_model"], "calibrated");
+        let mut value = object(r#"{"moment_outliers":"filtered"}"#);
+        assert!(strip_retired(&mut value).unwrap_err().to_string().contains("\"moment_outliers\""));
+        assert_eq!(value["moment_outliers"], "shared");
         let mut live = object(r#"{"cost_model":"measured"}"#);
         strip_retired(&mut live).unwrap();
         assert_eq!(live["cost_model"], "measured");

@@ -1,7 +1,8 @@
 //! Command-line options shared by `tessera render`, `tessera submit` and the benchmarks: the
 //! path-length, sample-count, merging and EMIS switches (their values are the renderer's own
 //! setting enums, which derive `clap::ValueEnum` with `tessera-common`'s `clap` feature),
-//! `-D` definitions and scene names.
+//! `-D` definitions and scene names. Of EMIS, when to update and which pilot are a user's choice;
+//! the optimiser's research variants are one `--emis-experiment KEY=VALUE`.
 
 use anyhow::{anyhow, bail};
 use clap::ValueEnum;
@@ -36,46 +37,60 @@ pub struct IntegratorArgs {
     /// emis-*: optimise after these many iterations (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "1,4,16,64")]
     pub emis_updates: Vec<u32>,
-    /// The EMIS optimiser's model: cost constants, outlier rule, image estimate.
-    #[command(flatten)]
-    pub model: EmisModelArgs,
     /// emis-*: the pilot, path tracing first, which switches to the full candidate set,
     /// discarding the iterations so far, once a bidirectional strategy wins; or the method's
     /// own (N = P, c = 1).
     #[arg(long, value_enum, default_value = "path-tracing")]
     pub emis_pilot: PilotStart,
-    /// emis-*: choose one connection count for the image, or one per pixel (filtered like the
-    /// merge mask, with ν the only image-level choice).
-    #[arg(long, value_enum, default_value = "image")]
-    pub emis_connections: ConnectionScope,
+    /// emis-*: a research variant of the optimiser, as `tessera bench equal-time` compares
+    /// them (repeatable): cost-model=measured, moment-outliers=each, image=guided,
+    /// connections=per-pixel. The defaults are the ones the measurements support.
+    #[arg(long, value_name = "KEY=VALUE", value_parser = parse_experiment)]
+    pub emis_experiment: Vec<Experiment>,
 }
 
-/// The EMIS optimiser's model, shared by the render settings and the equal-time benchmark.
-#[derive(clap::Args, Debug, Clone)]
-pub struct EmisModelArgs {
-    /// emis-*: cost heuristic constants: calibrated on this renderer, or measured per job.
-    #[arg(long, value_enum, default_value = "calibrated")]
-    pub cost_model: CostModel,
-    /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
-    /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
-    /// candidate shares (rare samples no strategy can change), before the box filter spreads
-    /// it over the neighbours; or apply the reference's rule alone.
-    #[arg(long, value_enum, default_value = "shared")]
-    pub moment_outliers: OutlierStage,
-    /// emis-*: the image estimate Ī the moments are made relative to: the pilot image (its
-    /// channel mean and radius-3 box), or the pilot image denoised by the guided filter first.
-    /// A path-tracing start's updates use the guided filter either way.
-    #[arg(long, value_enum, default_value = "pilot")]
-    pub emis_image: ImageEstimate,
+/// A research variant of the EMIS optimiser (`--emis-experiment KEY=VALUE`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Experiment {
+    /// `cost-model=`: the cost constants.
+    CostModel(CostModel),
+    /// `moment-outliers=`: the outlier rule.
+    MomentOutliers(OutlierStage),
+    /// `image=`: the image estimate the moments are relative to.
+    Image(ImageEstimate),
+    /// `connections=`: one connection count for the image, or one per pixel.
+    Connections(ConnectionScope),
 }
 
-impl EmisModelArgs {
-    /// Sets these options in `settings`.
-    pub fn apply(&self, settings: &mut RenderSettings) {
-        settings.cost_model = self.cost_model;
-        settings.moment_outliers = self.moment_outliers;
-        settings.emis_image = self.emis_image;
+impl Experiment {
+    /// Sets this variant in `settings`.
+    pub fn apply(self, settings: &mut RenderSettings) {
+        match self {
+            Experiment::CostModel(v) => settings.cost_model = v,
+            Experiment::MomentOutliers(v) => settings.moment_outliers = v,
+            Experiment::Image(v) => settings.emis_image = v,
+            Experiment::Connections(v) => settings.emis_connections = v,
+        }
     }
+}
+
+/// Parses `KEY=VALUE` of `--emis-experiment`; the error lists the keys or the key's values.
+fn parse_experiment(s: &str) -> Result<Experiment, String> {
+    fn value<T: ValueEnum>(key: &str, v: &str) -> Result<T, String> {
+        T::from_str(v, false).map_err(|_| {
+            let names: Vec<String> =
+                T::value_variants().iter().filter_map(|x| Some(x.to_possible_value()?.get_name().to_string())).collect();
+            format!("{key}={v}: expected one of {}", names.join(", "))
+        })
+    }
+    let (key, v) = s.split_once('=').ok_or_else(|| format!("\"{s}\": expected KEY=VALUE"))?;
+    Ok(match key {
+        "cost-model" => Experiment::CostModel(value(key, v)?),
+        "moment-outliers" => Experiment::MomentOutliers(value(key, v)?),
+        "image" => Experiment::Image(value(key, v)?),
+        "connections" => Experiment::Connections(value(key, v)?),
+        _ => return Err(format!("unknown key \"{key}\": expected cost-model, moment-outliers, image or connections")),
+    })
 }
 
 /// What to render with what, shared by `tessera render` and `tessera submit`.
@@ -133,9 +148,10 @@ impl IntegratorArgs {
         settings.merge = self.merge == Switch::On;
         settings.correlation_aware = self.correlation_aware == Switch::On;
         settings.emis_updates = self.emis_updates.clone();
-        self.model.apply(settings);
         settings.emis_pilot = self.emis_pilot;
-        settings.emis_connections = self.emis_connections;
+        for experiment in &self.emis_experiment {
+            experiment.apply(settings);
+        }
     }
 }
 
@@ -191,5 +207,28 @@ fn flag_error(e: SettingsError) -> String {
             format!("--{} {message}", if field == "time_s" { "time".into() } else { field.replace('_', "-") })
         }
         other => other.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--emis-experiment` sets the variant its key names, and names the keys or values it
+    /// knows when it does not know what it is given.
+    #[test]
+    fn an_experiment_sets_its_setting_and_refuses_what_it_does_not_know() {
+        let mut settings = RenderSettings::default();
+        for arg in ["cost-model=measured", "moment-outliers=each", "image=guided", "connections=per-pixel"] {
+            parse_experiment(arg).unwrap().apply(&mut settings);
+        }
+        assert_eq!(settings.cost_model, CostModel::Measured);
+        assert_eq!(settings.moment_outliers, OutlierStage::Each);
+        assert_eq!(settings.emis_image, ImageEstimate::Guided);
+        assert_eq!(settings.emis_connections, ConnectionScope::PerPixel);
+        let e = parse_experiment("moment-outliers=filtered").unwrap_err();
+        assert!(e.contains("shared, each"), "{e}");
+        assert!(parse_experiment("merge-ratio=reference").unwrap_err().contains("cost-model, moment-outliers"));
+        assert!(parse_experiment("cost-model").unwrap_err().contains("KEY=VALUE"));
     }
 }

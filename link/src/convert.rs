@@ -149,5 +149,7 @@ mod tests {
         assert!(settings_from_pb(&retired).unwrap_err().contains("cost_model"));
         let retired = pb::RenderSettings { moment_filter: Some("absolute".into()), ..Default::default() };
         assert!(settings_from_pb(&retired).unwrap_err().contains("moment_filter"));
+        let retired = pb::RenderSettings { moment_outliers: Some("filtered".into()), ..Default::default() };
+        assert!(settings_from_pb(&retired).unwrap_err().contains("moment_outliers"));
     }
 }

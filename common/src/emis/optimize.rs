@@ -75,31 +75,31 @@ pub struct FilterSettings {
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum OutlierStage {
-    /// The reference: per candidate, the box-filtered moments above their 99.9 % quantile
-    /// (histogram).
-    #[cfg_attr(
-        feature = "clap",
-        value(help = "The reference: each candidate's box-filtered moments above their 99.9 % quantile")
-    )]
+    /// The reference's rule alone: per candidate, the box-filtered moments above their 99.9 %
+    /// quantile (histogram), which every stage ends with. Retired as a setting (rare samples
+    /// every candidate shares then decide, docs/decisions/0008-shared-outliers-first.md); the
+    /// tests keep it as the baseline that shows why.
+    #[cfg(test)]
     Filtered,
     /// First, before the box filter, the part of each pixel's relative moment that every
     /// candidate shares (their minimum), taken out of every candidate in the pixels where it
-    /// is above its own 99.9 % quantile (exact); then as [`OutlierStage::Filtered`].
+    /// is above its own 99.9 % quantile (exact); then the reference's rule: each candidate's
+    /// box-filtered moments above their 99.9 % quantile.
     #[default]
     #[cfg_attr(
         feature = "clap",
         value(
-            help = "First the outliers of the part every candidate shares, per pixel before the box filter; then as `filtered`"
+            help = "First the outliers of the part every candidate shares, per pixel before the box filter; then the reference's rule"
         )
     )]
     Shared,
     /// First, before the box filter, each candidate's own per-pixel relative moments above
     /// its 99.9 % quantile (exact) are zeroed, as the error metric drops the worst pixels of
-    /// each image; then as [`OutlierStage::Filtered`].
+    /// each image; then the reference's rule.
     #[cfg_attr(
         feature = "clap",
         value(
-            help = "First each candidate's own per-pixel outliers before the box filter (as the error metric drops each image's worst pixels); then as `filtered`"
+            help = "First each candidate's own per-pixel outliers before the box filter (as the error metric drops each image's worst pixels); then the reference's rule"
         )
     )]
     Each,

@@ -10,8 +10,8 @@
 //! bar chart per duration.
 
 use super::chart::{Group, write_bar_chart};
-use super::{SceneArgs, geometric_mean};
-use crate::options::{EmisModelArgs, make_renderer, scene_name};
+use super::{EmisModelArgs, SceneArgs, geometric_mean};
+use crate::options::{make_renderer, scene_name};
 use clap::ValueEnum;
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -213,7 +213,6 @@ fn predict(s: &Subject, moments: &MomentBuffer, costs: &[f64], outliers: Outlier
     match outliers {
         OutlierStage::Shared => remove_shared_outliers(&mut planes, &norm, 0.999),
         OutlierStage::Each => remove_each_outliers(&mut planes, &norm, 0.999),
-        OutlierStage::Filtered => {}
     }
     planes.into_iter().enumerate().map(|(c, plane)| relative_mean(w, h, plane.data, &s.ref_mean) * costs[c]).collect()
 }

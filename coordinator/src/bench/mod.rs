@@ -17,6 +17,10 @@ pub mod speed;
 use anyhow::Context;
 use clap::Subcommand;
 use std::path::PathBuf;
+use tessera_common::emis::cost::CostModel;
+use tessera_common::emis::denoise::ImageEstimate;
+use tessera_common::emis::optimize::OutlierStage;
+use tessera_common::settings::RenderSettings;
 
 /// The measurements.
 #[derive(Subcommand, Debug)]
@@ -56,6 +60,35 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<()> {
         BenchCommand::PhotonMap(args) => photon_map::run(args),
         BenchCommand::Envmap(args) => envmap::run(args),
         BenchCommand::Farm(args) => farm::run(args),
+    }
+}
+
+/// The EMIS optimiser's model variants, experiments `tessera bench` compares (`tessera render`
+/// and farm jobs use the defaults).
+#[derive(clap::Args, Debug, Clone)]
+pub struct EmisModelArgs {
+    /// emis-*: cost heuristic constants: calibrated on this renderer, or measured per job.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub cost_model: CostModel,
+    /// emis-*: before the image-level sums reject each candidate's outliers (the reference's
+    /// rule), first take out, where it is an outlier, the part of a pixel's moment that every
+    /// candidate shares (rare samples no strategy can change), before the box filter spreads
+    /// it over the neighbours; or apply the reference's rule alone.
+    #[arg(long, value_enum, default_value = "shared")]
+    pub moment_outliers: OutlierStage,
+    /// emis-*: the image estimate Ī the moments are made relative to: the pilot image (its
+    /// channel mean and radius-3 box), or the pilot image denoised by the guided filter first.
+    /// A path-tracing start's updates use the guided filter either way.
+    #[arg(long, value_enum, default_value = "pilot")]
+    pub emis_image: ImageEstimate,
+}
+
+impl EmisModelArgs {
+    /// Sets these options in `settings`.
+    pub fn apply(&self, settings: &mut RenderSettings) {
+        settings.cost_model = self.cost_model;
+        settings.moment_outliers = self.moment_outliers;
+        settings.emis_image = self.emis_image;
     }
 }
 
