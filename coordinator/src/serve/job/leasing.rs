@@ -3,8 +3,6 @@
 //! and its lifetime (heartbeats that go on without a result, bounded by what the job's tiles
 //! measurably take), plus the postponement of every lease when the coordinator stalled.
 
-use std::collections::BTreeSet;
-
 use super::model::{
     BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, host_of,
     touch,
@@ -29,43 +27,6 @@ impl LeaseLifetime {
         let expected = job.slowest_ms_per_sample.map_or(0.0, |r| r * tile.spec.pixel_samples() as f64);
         let base = (self.factor * expected).min(u64::MAX as f64 / 64.0) as u64;
         base.max(self.floor_ms).saturating_mul(1 << tile.failures.min(20))
-    }
-}
-
-/// Which tiles of a job are queued and which leased: what leasing, expiry and the workers'
-/// status read, so that none of them scans a job's tiles. Derived from the tiles' states
-/// (never stored): kept by [`Job::set_tile_state`], rebuilt by [`Job::reindex`].
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TileIndex {
-    /// Tiles waiting for a worker.
-    pub queued: BTreeSet<usize>,
-    /// Tiles held by a worker.
-    pub leased: BTreeSet<usize>,
-}
-
-impl Job {
-    /// Sets tile `i`'s state, keeping the index.
-    pub fn set_tile_state(&mut self, i: usize, state: TileState) {
-        self.index.queued.remove(&i);
-        self.index.leased.remove(&i);
-        match state {
-            TileState::Queued => self.index.queued.insert(i),
-            TileState::Leased { .. } => self.index.leased.insert(i),
-            TileState::Accepted | TileState::Merged => false,
-        };
-        self.tiles[i].state = state;
-    }
-
-    /// Rebuilds the index from the tiles (after loading them).
-    pub fn reindex(&mut self) {
-        self.index = TileIndex::default();
-        for (i, t) in self.tiles.iter().enumerate() {
-            match t.state {
-                TileState::Queued => self.index.queued.insert(i),
-                TileState::Leased { .. } => self.index.leased.insert(i),
-                _ => false,
-            };
-        }
     }
 }
 

@@ -14,8 +14,9 @@
 //! removed (by a client or the retention sweep, see `retention.rs`).
 
 mod failures;
+mod index;
 
-pub use super::leasing::TileIndex;
+pub use index::TileIndex;
 pub use super::spec::{JobSpec, TileSpec};
 pub use tessera_common::driver::{Pass, PassKind};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
