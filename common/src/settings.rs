@@ -135,7 +135,7 @@ pub struct RenderSettings {
     pub defines: BTreeMap<String, String>,
     /// EMIS: optimise after these many iterations (increasing, above 0).
     pub emis_updates: Vec<u32>,
-    /// EMIS: the cost heuristic's constants (docs/emis.md, decision 8).
+    /// EMIS: the cost heuristic's constants (docs/emis.md, D8).
     pub cost_model: CostModel,
     /// EMIS: the outlier rejection of the image-level sums.
     pub moment_outliers: OutlierStage,

@@ -25,7 +25,7 @@
 mod common;
 
 use common::scene_path;
-use tessera_common::emis::decision_truth::{DecisionTruth, SceneTruth};
+use tessera_testing::decision_truth::{DecisionTruth, SceneTruth};
 use tessera_common::emis::{EmisConfig, EmisMethod, UpdateReport, render_emis};
 use tessera_common::integrator::PathSettings;
 use tessera_common::render::{Budget, RenderOptions};

@@ -9,7 +9,7 @@
 //! their means must agree within 4 combined standard errors (per-iteration spread, 10
 //! iterations each, more with `EMIS_IT`). Merging is left out here: the merge kernel's two
 //! moment conventions are compared with measured variances by `tessera bench ground-truth`
-//! (docs/emis.md, decision 3).
+//! (docs/emis.md, D3).
 
 mod common;
 

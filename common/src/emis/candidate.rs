@@ -1,4 +1,4 @@
-//! Candidate strategies (docs/emis.md, decision 1): image level ν ∈ {0.25, 0.5, 0.75, 1, 2}
+//! Candidate strategies (docs/emis.md, D1): image level ν ∈ {0.25, 0.5, 0.75, 1, 2}
 //! light paths per pixel and c ∈ {0, 1, 2, 4, 8} connections per camera vertex; pixel level
 //! merging on or off; plus pure path tracing. 51 candidates for VCM, 26 for BDPT. The sets are
 //! configuration, not constants.
@@ -43,12 +43,12 @@ pub struct CandidateConfig {
 }
 
 impl CandidateConfig {
-    /// The VCM set of docs/emis.md, decision 1.
+    /// The VCM set of docs/emis.md, D1.
     pub fn vcm() -> Self {
         CandidateConfig { nu: vec![0.25, 0.5, 0.75, 1.0, 2.0], connections: vec![0, 1, 2, 4, 8], merging: true }
     }
 
-    /// The BDPT set of docs/emis.md, decision 1.
+    /// The BDPT set of docs/emis.md, D1.
     pub fn bdpt() -> Self {
         CandidateConfig { merging: false, ..Self::vcm() }
     }

@@ -7,7 +7,7 @@
 //! B = k_build·L̄l·ν·ln(N·L̄l), Q = k_query·L̄c·ln(N·L̄l) (both 0 when N·L̄l ≤ 1) and
 //! S = k_shade·φ·L̄c·N; pure path tracing costs L̄c·k_pt.
 //!
-//! The two walk terms and k_pt go beyond the reference (docs/emis.md, decision 8): Tessera
+//! The two walk terms and k_pt go beyond the reference (docs/emis.md, D8): Tessera
 //! computes MIS weights by walking the path's full pdf arrays, so every light-tracing splat
 //! costs in proportion to the light path's length and every connection to the whole path's;
 //! and when path tracing wins it is rendered by the `pt` integrator, cheaper per camera vertex
@@ -94,7 +94,7 @@ impl CostConstants {
         }
     }
 
-    /// Constants fitted to this renderer (docs/emis.md, decision 8) by
+    /// Constants fitted to this renderer (docs/emis.md, D8) by
     /// `tessera bench calibrate-costs`. The build and query terms fit to 0: their cost is
     /// absorbed by the per-photon term. Why they are the default: on this renderer the
     /// reference constants price merging too high and connections too low, and these choose

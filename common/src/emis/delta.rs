@@ -5,7 +5,7 @@
 //! S(k) = Σ_t (k_t/a_t)·w̄_t, T(k) = Σ_t (k_t/a_t)·c_t·w̄_t, δ = S(m)²·T(n) / (S(n)²·T(m)).
 //!
 //! With c ≡ 1 (no correlation-aware factor) δ = S(m) / S(n). A candidate that cannot sample
-//! the path (S(n) = 0) gets an infinite moment, flagged, never NaN (docs/emis.md, decision 4).
+//! the path (S(n) = 0) gets an infinite moment, flagged, never NaN (docs/emis.md, D4).
 
 use super::proxy::ProxyWeights;
 
@@ -18,7 +18,7 @@ pub struct CountRatios {
     pub lt: f64,
     /// Connections: c/4 against the proxy's 4.
     pub con: f64,
-    /// Merges: χ (the reference code) or χ·ν (principled; docs/emis.md, decision 3a).
+    /// Merges: χ (the reference code) or χ·ν (principled; docs/emis.md, D3a).
     pub vm: f64,
 }
 

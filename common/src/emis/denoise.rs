@@ -1,4 +1,4 @@
-//! DENOISEIMAGE (docs/emis.md §5.4, decision 7 and checklist 10): the pilot image Ī the
+//! DENOISEIMAGE (docs/emis.md §5.4, D7 and checklist 10): the pilot image Ī the
 //! relative moments are normalised by. Intel OIDN is not installable here, so this is an
 //! edge-avoiding à-trous wavelet filter (Dammertz et al. 2010) guided by the pilot's albedo,
 //! normal and depth AOVs, on the albedo-demodulated image, followed by the reference's channel
@@ -30,7 +30,7 @@ pub enum ImageEstimate {
     #[default]
     #[cfg_attr(feature = "clap", value(help = "The pilot image, not denoised: its channel mean and radius-3 box"))]
     Pilot,
-    /// The pilot image through the guided à-trous filter first (decision 7), on 2 × 2 blocks
+    /// The pilot image through the guided à-trous filter first (docs/emis.md, D7), on 2 × 2 blocks
     /// ([`DenoiseSettings::GUIDED_HALF`]).
     #[cfg_attr(
         feature = "clap",
@@ -70,7 +70,7 @@ pub struct DenoiseSettings {
 }
 
 impl DenoiseSettings {
-    /// The guided à-trous filter of decision 7, five levels.
+    /// The guided à-trous filter of docs/emis.md, D7, five levels.
     pub const GUIDED: DenoiseSettings = DenoiseSettings {
         levels: 5,
         normal_power: 64,

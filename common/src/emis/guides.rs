@@ -1,4 +1,4 @@
-//! Denoiser guides (docs/emis.md §5.4 and decision 7): per pixel, the albedo and shading normal
+//! Denoiser guides (docs/emis.md §5.4 and D7): per pixel, the albedo and shading normal
 //! at the primary hit and its distance, averaged over the pilot iterations. Albedo is a
 //! one-sample estimate of the directional albedo (the weight of one BSDF sample), which works
 //! for every material, delta lobes included. The pilot's own camera paths supply them through

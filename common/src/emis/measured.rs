@@ -1,4 +1,4 @@
-//! Cost constants measured per job (docs/emis.md, decision 8; issue 21, item 6): the work
+//! Cost constants measured per job (docs/emis.md, D8; issue 21, item 6): the work
 //! times the pilot's own iterations record ([`WorkTimes`], on the machine that renders them,
 //! the observer's time left out) turned into the heuristic's constants, in units of that
 //! machine's camera vertex, so that decisions rest on what this scene costs here rather than

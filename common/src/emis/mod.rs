@@ -3,11 +3,11 @@
 //! The optimisation, pure and free of rendering and IO so that a coordinator can run it
 //! between passes: the candidate strategies ([`candidate`]), the proxy weights and correction
 //! factor that re-weight a pilot sample for every candidate ([`proxy`], [`delta`]), the moment
-//! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic, its
-//! calibration and its constants measured per job ([`cost`], [`calibrate`], [`measured`]),
-//! the image filters, quantiles and denoiser ([`filter`], `quantile`, [`denoise`]) and the
-//! optimiser ([`optimize`]), plus the cached brute-force truth its decisions are tested
-//! against ([`decision_truth`]).
+//! estimator and its buffers ([`estimator`], [`moments`]), the cost heuristic and its
+//! constants measured per job ([`cost`], [`measured`]; `tessera bench calibrate-costs` fits
+//! the calibrated ones), the image filters, quantiles and denoiser ([`filter`], `quantile`,
+//! [`denoise`]) and the optimiser ([`optimize`]). The brute-force truth its decisions are
+//! tested against is in the `tessera-testing` crate.
 //!
 //! The driver, which renders with the bidirectional integrators: strategies and iteration
 //! ranges ([`render`]), the denoiser's guides ([`guides`]), the merged state and its updates
@@ -16,10 +16,8 @@
 //! The direction of use is one way: this module uses the integrators and the MIS weights; they
 //! know nothing of it (they report samples through [`crate::integrator::observer`]).
 
-pub mod calibrate;
 pub mod candidate;
 pub mod cost;
-pub mod decision_truth;
 pub mod delta;
 pub mod denoise;
 pub mod estimator;

@@ -1,4 +1,4 @@
-//! Moment buffers (docs/emis.md, decision 2): per pixel × candidate, the sum of δ·w2 over all
+//! Moment buffers (docs/emis.md, D2): per pixel × candidate, the sum of δ·w2 over all
 //! pilot samples, kept as an unnormalised sum with an iteration count, so that buffers from
 //! different workers add up. A candidate that cannot sample a pixel's path is flagged by an
 //! infinite sum: every term is non-negative, so a flag stays infinite through any merge and

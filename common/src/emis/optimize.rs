@@ -50,7 +50,7 @@ use image_level::{class_of, connection_classes, image_level_groups, image_level_
 use planes::Planes;
 pub use planes::{remove_each_outliers, remove_shared_outliers};
 
-/// Filter radii (docs/emis.md, decision 6).
+/// Filter radii (docs/emis.md, D6).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FilterSettings {
     /// Box passes on each candidate's moments.
@@ -159,14 +159,14 @@ impl Default for FilterSettings {
 /// Where the merge decision is made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MergeScope {
-    /// Per pixel: the merge mask χ of the pixel level (docs/emis.md, decision 1).
+    /// Per pixel: the merge mask χ of the pixel level (docs/emis.md, D1).
     PerPixel,
     /// For the whole image: merging everywhere and nowhere are separate image-level
     /// candidates (the path-tracing start's reduced set).
     Global,
 }
 
-/// Where the connection count is decided (docs/emis.md, decision 1; the reference's
+/// Where the connection count is decided (docs/emis.md, D1; the reference's
 /// experimental per-pixel connections, §1.1 and §5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]

@@ -2,7 +2,7 @@
 //! docs/emis.md) on the bidirectional engine.
 //!
 //! [`PilotStart::Bidirectional`], the paper's pilot, renders with a fixed strategy
-//! (docs/emis.md, decision 5: `emis-vcm` VCM with N = P, c = 1, χ = 1 and correlation-aware
+//! (docs/emis.md, D5: `emis-vcm` VCM with N = P, c = 1, χ = 1 and correlation-aware
 //! weights; `emis-bdpt` BDPT with N = P, c = 1) while a [`MomentEstimator`] records every
 //! candidate's second moment per pixel. After iterations 1, 4, 16 and 64 (configurable) the
 //! optimiser picks ν, c and the per-pixel merge mask χ from the merged moments, the denoised
@@ -14,7 +14,7 @@
 //! the remaining iterations are rendered by `pt` itself (same integral, faster estimator).
 //!
 //! [`PilotStart::PathTracing`], the default, starts with path tracing instead (the
-//! reference's `OnDemandVcm`; docs/emis.md, decision 5 and checklist 13): its updates choose
+//! reference's `OnDemandVcm`; docs/emis.md, D5 and checklist 13): its updates choose
 //! from a reduced set (ν ∈ {0.5, 1}, c ∈ {0, 1}, merging everywhere or nowhere, pt) while pt
 //! wins. The first update a bidirectional candidate wins starts a new image, keeping the
 //! old one aside (`EmisState::start`, combined by the weight the next update estimates),
@@ -77,10 +77,10 @@ pub enum EmisMethod {
     Vcm,
 }
 
-/// How an `emis-*` render starts (docs/emis.md, decision 5). The default, which
+/// How an `emis-*` render starts (docs/emis.md, D5). The default, which
 /// `RenderSettings` and so `tessera render` and farm jobs carry, is path tracing first: on the
 /// nine bench scenes it beat the method's own pilot on every one
-/// (docs/decisions/0033-sparser-recording-and-the-path-tracing-start.md).
+/// (docs/decisions/0032-light-probe-and-restart-share.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -108,7 +108,7 @@ pub enum PilotStart {
 /// Which candidates moments are recorded for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CandidateSet {
-    /// The method's full set (docs/emis.md, decision 1): 51 for VCM, 26 for BDPT.
+    /// The method's full set (docs/emis.md, D1): 51 for VCM, 26 for BDPT.
     Full,
     /// The path-tracing start's reduced set (see `CandidateConfig::reduced`), decided with
     /// global merging.
@@ -120,20 +120,20 @@ pub enum CandidateSet {
 pub struct EmisConfig {
     /// BDPT or VCM.
     pub method: EmisMethod,
-    /// The candidate set (docs/emis.md, decision 1).
+    /// The candidate set (docs/emis.md, D1).
     pub candidates: CandidateConfig,
-    /// Optimise after these many iterations (docs/emis.md, decision 5).
+    /// Optimise after these many iterations (docs/emis.md, D5).
     pub updates: Vec<u32>,
     /// Correlation-aware merge weights (pilot and final).
     pub correlation_aware: bool,
-    /// Cost heuristic constants (docs/emis.md, decision 8).
+    /// Cost heuristic constants (docs/emis.md, D8).
     pub constants: CostConstants,
     /// Measure the constants per job from the pilot's work times, `constants` filling in what
     /// they cannot measure.
     pub measured_costs: bool,
-    /// Filter radii (docs/emis.md, decision 6).
+    /// Filter radii (docs/emis.md, D6).
     pub filters: FilterSettings,
-    /// The denoiser (docs/emis.md, decision 7).
+    /// The denoiser (docs/emis.md, D7).
     pub denoise: DenoiseSettings,
     /// The denoiser while a path-tracing start is still path tracing: its image is black on
     /// caustics, which only the guided filter's spreading lets speak (decision 0029).
@@ -154,7 +154,7 @@ pub struct EmisConfig {
 }
 
 impl EmisConfig {
-    /// The update schedule of docs/emis.md, decision 5.
+    /// The update schedule of docs/emis.md, D5.
     pub const DEFAULT_UPDATES: [u32; 4] = [1, 4, 16, 64];
 
     /// The default [`EmisConfig::settle_margin`]: where path tracing won after 1 and 4
@@ -260,7 +260,7 @@ impl Strategy {
         }
     }
 
-    /// The pilot strategy of docs/emis.md, decision 5 ([`PilotStart::Bidirectional`]).
+    /// The pilot strategy of docs/emis.md, D5 ([`PilotStart::Bidirectional`]).
     pub fn pilot(method: EmisMethod) -> Self {
         Strategy {
             nu: 1.0,

@@ -8,7 +8,7 @@ use std::ops::Range;
 /// renders once moments are no longer collected, with a bidirectional strategy, and the fewest
 /// [`final_call`] gives path tracing. Why eight: a call is a barrier at which the threads wait for each other; eight
 /// make that wait small while a farm still gets one tile per worker out of a pass of a few
-/// dozen iterations (docs/decisions/0004-final-iterations-per-call.md).
+/// dozen iterations (docs/decisions/0004-calls-and-recording-of-an-emis-render.md).
 pub const FINAL_ITERATIONS_PER_CALL: u32 = 8;
 
 /// The most iterations [`final_call`] gives path tracing in one call.
@@ -25,7 +25,7 @@ const FINAL_PT_SAMPLES: u64 = 1 << 23;
 ///   and [`FINAL_PT_ITERATIONS_MAX`] (and [`FINAL_PT_SAMPLES`]). `pt` renders a pixel's
 ///   iterations of a call one after the other, and more of them in a row run faster;
 ///   shrinking calls keep sixteen farm tiles in every remaining stretch and a short tail
-///   (docs/decisions/0034-longer-path-tracing-calls.md).
+///   (docs/decisions/0004-calls-and-recording-of-an-emis-render.md).
 ///
 /// Like [`collecting_call`], it depends on iteration numbers, the strategy and the image
 /// only, so a farm cutting a pass and a local render cutting what is left add the same calls.
@@ -49,7 +49,7 @@ const TRACED_TOGETHER_PIXELS: u64 = 1 << 22;
 /// render traces together, a pixel's iterations of all of them in a row: at least one call,
 /// then as many as fit in `target` iterations and [`TRACED_TOGETHER_PIXELS`]. Short calls
 /// traced alone give a pixel few samples in a row, which runs slower than `pt`'s passes
-/// (docs/decisions/0064-path-tracing-calls-traced-together.md); grouping them keeps the cut,
+/// (docs/decisions/0004-calls-and-recording-of-an-emis-render.md); grouping them keeps the cut,
 /// so a farm's tiles still sum the same numbers.
 pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<Range<u32>> {
     let most = (TRACED_TOGETHER_PIXELS / pixels.max(1)).max(1) as usize;
@@ -70,8 +70,8 @@ pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<
 /// ≡ 2 mod 4) and an eighth after it (≡ 6 mod 8) do: recording a pt iteration's moments needs
 /// the bidirectional integrator's densities of every technique plus the estimator, which
 /// costs more than the pt iteration itself and on a scene where pt stays best is pure
-/// overhead (docs/decisions/0005-recording-under-path-tracing.md,
-/// 0033-sparser-recording-under-path-tracing.md). The updates at 4, 16 and 64 get 1, 4 and
+/// overhead (docs/decisions/0004-calls-and-recording-of-an-emis-render.md,
+/// which holds the former 0033). The updates at 4, 16 and 64 get 1, 4 and
 /// 10 iterations of moments on top of the pilot's. With a bidirectional strategy the
 /// estimator adds a smaller share and every iteration records.
 pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
@@ -94,7 +94,7 @@ fn records_under_path_tracing(iteration: u32) -> bool {
 /// - Under path tracing, one iteration if it records moments ([`collects_moments`]), else the
 ///   run of iterations up to the next one that does (at most [`FINAL_ITERATIONS_PER_CALL`]):
 ///   such a run is rendered by `pt` in one call, not one call per iteration, each a barrier
-///   for the threads (docs/decisions/0006-path-tracing-runs-in-one-call.md).
+///   for the threads (docs/decisions/0004-calls-and-recording-of-an-emis-render.md).
 ///
 /// The cut depends on iteration numbers and the strategy only, which a farm knows when it
 /// plans a pass, so local and farm renders add the same calls.
@@ -170,7 +170,7 @@ impl RestartTotal {
 ///   recording costs more than the pt iteration it replaces, and a late switch has a short
 ///   rest to gain on (docs/decisions/0035-updates-a-short-render-skips.md); a bidirectional
 ///   strategy records every iteration at up to a third more, and an update that governs only
-///   a short tail cannot repay it (docs/decisions/0055-repeats-and-short-bidirectional-renders.md).
+///   a short tail cannot repay it (docs/decisions/0035-updates-a-short-render-skips.md).
 /// - A sample budget collects for any update before its end: a restart renders all the
 ///   budget's iterations after the update, which then governs at least as many as precede it.
 pub fn update_pays(update: u32, total: u32, timed: bool) -> bool {

@@ -29,7 +29,7 @@ use crate::options::scene_name;
 use anyhow::{Context, bail};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tessera_common::emis::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth, SeedVariance};
+use tessera_testing::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth, SeedVariance};
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};

@@ -1,4 +1,4 @@
-//! `tessera bench ground-truth K` (docs/emis.md, checklist 15 and decision 3): do the pilot's
+//! `tessera bench ground-truth K` (docs/emis.md, checklist 15 and D3): do the pilot's
 //! moments choose what the true variances would choose?
 //!
 //! Per scene: a `vcm` pilot (ν = 1, c = 1, χ = 1, correlation-aware; `--pilot`

@@ -213,7 +213,7 @@ fn group_sums(
             for ((r, k), ((&moment, &n), &weight)) in rel_terms.iter_mut().zip(cost_terms.iter_mut()).zip(pixels_in) {
                 // outliers are zeroed, but an infinite moment (the candidate cannot sample this
                 // pixel's paths) stays infinite, so that candidate cannot win
-                // (docs/emis.md, decision 4)
+                // (docs/emis.md, D4)
                 let outlier = moment / n > threshold && moment.is_finite();
                 let moment = if outlier { 0.0 } else { moment };
                 // black pixels carry no relative moment, so they are left out of the cost too;

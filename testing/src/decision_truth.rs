@@ -12,7 +12,7 @@
 //! nor time anything.
 //!
 //! ```
-//! use tessera_common::emis::decision_truth::{CandidateTruth, SceneTruth};
+//! use tessera_testing::decision_truth::{CandidateTruth, SceneTruth};
 //! let c = |nu, connections, relative_variance, seconds| CandidateTruth {
 //!     nu, connections, relative_variance, trimmed_variance: relative_variance,
 //!     seeds: Vec::new(), relmse_k: relative_variance, seconds, model_cost: 1.0,

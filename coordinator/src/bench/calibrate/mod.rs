@@ -3,17 +3,19 @@
 //! bidirectional engine, and path tracing through the `pt` integrator, interleaved and the
 //! fastest of `--repeats` kept; turns the times into costs per pixel in camera-vertex units
 //! (time ÷ the bidirectional engine's time at ν = 0 × L̄c); fits the heuristic's constants to
-//! all scenes at once (`tessera_common::emis::calibrate`; path tracing's constant is the
+//! all scenes at once ([`fit`]; path tracing's constant is the
 //! geometric mean of its time ratios); and reports each configuration's error with the
 //! reference and the fitted constants against the ±30 % the authors report for theirs. Beside
 //! them, the constants each scene's own pilot measures (`--cost-model measured`), and every
 //! set's error after the one scale per scene that costs in other units need (decisions depend
 //! on cost ratios only).
 
+mod fit;
+
 use super::SceneArgs;
 use crate::options::scene_name;
 use std::time::Instant;
-use tessera_common::emis::calibrate::{CostSample, calibration_configurations, fit_constants};
+use fit::{CostSample, calibration_configurations, fit_constants};
 use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::cost::{CostConstants, pixel_cost};
 use tessera_common::emis::measured::measured_constants;

@@ -1,15 +1,15 @@
 //! Calibration of the cost heuristic's constants from measured render times
-//! (docs/emis.md, decision 8: the constants fitted to measured times on this renderer).
+//! (docs/emis.md, D8: the constants fitted to measured times on this renderer).
 //!
-//! Every term of [`pixel_cost`](super::cost::pixel_cost) is a constant times a feature of the
+//! Every term of [`pixel_cost`] is a constant times a feature of the
 //! candidate and the scene's statistics, so a measured cost (a configuration's time per
 //! iteration divided by the time of one camera vertex) is linear in the constants. Given such
 //! measurements over several scenes and configurations, [`fit_constants`] finds the
 //! constants (the camera vertex stays the unit) that minimise the squared *relative* error,
 //! keeping every constant non-negative.
 
-use super::candidate::Candidate;
-use super::cost::{CostConstants, PathStatistics, pixel_cost};
+use tessera_common::emis::candidate::Candidate;
+use tessera_common::emis::cost::{CostConstants, PathStatistics, pixel_cost};
 
 /// How many constants the fit determines (all but the camera vertex, the unit, and path
 /// tracing's, which is a measured ratio of its own).
