@@ -9,7 +9,9 @@
 //!
 //! Plus one invariant per extreme: where light paths are essential (caustic-glass) every
 //! update keeps ν > 0; where path tracing wins (veach-mis) the merge mask stays almost empty.
-//! Decisions 0018, 0027, 0028, 0045 and 0046 have the figures.
+//! docs/decisions/0018-decision-quality-tests.md (with the former 0027),
+//! docs/decisions/0028-pilot-image-not-denoised.md, docs/decisions/0046-incumbent-margin.md
+//! and the lab note docs/lab/2026-11-29-decision-truth-re-timed.md have the figures.
 //! `EMIS_DIAG=1` prints every candidate's prediction beside its truth at each judged update;
 //! `EMIS_OUTLIERS=each` (or `filtered`) decides with that outlier rule instead of the default;
 //! `EMIS_INCUMBENT_MARGIN=0` (or another scale) with that incumbent margin.
@@ -140,9 +142,10 @@ fn caustic_glass_decisions_keep_light_paths() {
 }
 
 /// The light-path part of the moments is heavy-tailed and a short pilot sees a fraction of
-/// it (decisions 0036, 0037), so after 4 iterations cheaper, noisier candidates look a few per
-/// cent better than the pilot's (ν 1, c 1) and were chosen at regret 1.40–1.84; the incumbent
-/// margin keeps (ν 1, c 1), regret 1.14 (decision 0046).
+/// it (docs/decisions/0036-light-path-moments-underestimated.md), so after 4 iterations
+/// cheaper, noisier candidates look a few per cent better than the pilot's (ν 1, c 1) and were
+/// chosen at regret 1.40–1.84; the incumbent margin keeps (ν 1, c 1), regret 1.14
+/// (docs/decisions/0046-incumbent-margin.md).
 #[test]
 fn caustic_glass_decisions_are_near_the_best() {
     assert_regrets("caustic-glass", &judge("caustic-glass"));

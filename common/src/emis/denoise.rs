@@ -141,7 +141,8 @@ const ARENA_PLANES: usize = 3 + 3 + 1 + 1 + 3 + 3;
 /// Runs the filter's levels on the albedo-demodulated image and hands `finish` the result's
 /// planes and the albedo planes (to modulate with, clamped to 1e-3 as they were divided by).
 /// Every buffer is a part of one allocation, which the allocator always maps afresh and
-/// returns when dropped, whatever the process allocated before (decision 0026).
+/// returns when dropped, whatever the process allocated before
+/// (docs/decisions/0021-optimiser-at-1080p.md).
 fn filtered<R>(
     width: usize,
     height: usize,
@@ -341,9 +342,10 @@ fn blend(pick: bool, a: f32, b: f32) -> f32 {
 }
 
 /// e^x for x ≤ 0 (larger x count as 0; NaN stays NaN) in arithmetic alone, so that the loop
-/// over a row's taps compiles to vector code (`f32::exp` is a library call per value; decision
-/// 0026). Relative error below 2e-7·(1 + |x|), far inside the weights' purpose, and the same
-/// on every host, as it does not depend on the C library's `expf`.
+/// over a row's taps compiles to vector code (`f32::exp` is a library call per value;
+/// docs/decisions/0021-optimiser-at-1080p.md). Relative error below 2e-7·(1 + |x|), far
+/// inside the weights' purpose, and the same on every host, as it does not depend on the C
+/// library's `expf`.
 #[inline(always)]
 fn exp_nonpositive(x: f32) -> f32 {
     // e^x = 2^n · e^(r·ln 2), n the nearest integer to x·log2(e), |r| ≤ ½; `max` sends NaN to

@@ -22,7 +22,7 @@
 //! after it; the updates that follow keep the schedule (their iteration counts include the
 //! start's). When no update would follow to weigh the start, the restart discards it, and a
 //! candidate wins only by more than the share of the render it discards
-//! (docs/decisions/0040-keep-the-path-tracing-start.md). The pt start's recording
+//! (docs/decisions/0032-light-probe-and-restart-share.md). The pt start's recording
 //! iterations carry a light probe (`integrator::LightProbe`): without
 //! it the cost model would know neither the light paths' length nor the photons a merge
 //! finds, and price merging as free (docs/decisions/0032-light-probe-and-restart-share.md).

@@ -70,10 +70,9 @@ pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<
 /// ≡ 2 mod 4) and an eighth after it (≡ 6 mod 8) do: recording a pt iteration's moments needs
 /// the bidirectional integrator's densities of every technique plus the estimator, which
 /// costs more than the pt iteration itself and on a scene where pt stays best is pure
-/// overhead (docs/decisions/0004-calls-and-recording-of-an-emis-render.md,
-/// which holds the former 0033). The updates at 4, 16 and 64 get 1, 4 and
-/// 10 iterations of moments on top of the pilot's. With a bidirectional strategy the
-/// estimator adds a smaller share and every iteration records.
+/// overhead (docs/decisions/0004-calls-and-recording-of-an-emis-render.md). The updates at
+/// 4, 16 and 64 get 1, 4 and 10 iterations of moments on top of the pilot's. With a
+/// bidirectional strategy the estimator adds a smaller share and every iteration records.
 pub fn collects_moments(nu: f32, iterations: &Range<u32>) -> bool {
     nu > 0.0 || iterations.clone().any(records_under_path_tracing)
 }

@@ -1,6 +1,6 @@
 //! A path-tracing start's image after a restart: kept beside the bidirectional iterations
 //! and combined with them by inverse-variance weights, rather than discarded
-//! (docs/decisions/0040-keep-the-path-tracing-start.md).
+//! (docs/decisions/0032-light-probe-and-restart-share.md).
 //!
 //! Both parts estimate the same image without bias, so any fixed weighting of the two does
 //! too. The weight of one start iteration against one later iteration is the ratio of their

@@ -228,23 +228,57 @@ impl EmisState {
     /// tracing by more than the share of them the restart discards, and renders that
     /// candidate's own merge decision.
     pub fn update(&mut self, image: &[[f32; 3]], iteration: u32, restart_total: RestartTotal) -> &UpdateReport {
-        let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let t0 = Instant::now();
-        let reduced = self.candidate_set == CandidateSet::Reduced;
+        let intensity = self.image_estimate(image);
+        let denoise_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = Instant::now();
+        let model = self.cost_model();
+        let (mut decision, followed) = self.choose(&intensity, &model, iteration, restart_total);
+        let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
+        let restarted = self.candidate_set == CandidateSet::Reduced && decision.nu > 0.0;
+        // a restart that a full-set update follows pilots it as the method's own pilot does,
+        // merging everywhere: the global decision comes from path-tracing samples that rarely
+        // hold the paths merging is for, and the iterations up to that update stay in the image
+        // (docs/decisions/0032-light-probe-and-restart-share.md)
+        if restarted && followed && self.config.method == EmisMethod::Vcm {
+            decision.merge_mask = Image::filled(intensity.width, intensity.height, 1.0);
+        }
+        let mut report = self.report(&decision, &intensity, &model, iteration, restarted);
+        (report.denoise_ms, report.optimize_ms) = (denoise_ms, optimize_ms);
+        self.adopt(decision, restarted, image, iteration);
+        self.updates_done += 1;
+        // a restart that no paying update follows renders its winner to the end: recording
+        // the first call after it, before the render loop sees the new pace, buys nothing
+        let unfollowed = restarted && !followed;
+        if self.updates_done >= self.config.updates.len() || report.settled || unfollowed {
+            self.collecting = false;
+        }
+        self.reports.push(report);
+        self.reports.last().expect("invariant: just pushed")
+    }
+
+    /// The image estimate Ī the moments are made relative to: `image` (per-pixel means)
+    /// denoised as the candidate set's settings say.
+    fn image_estimate(&self, image: &[[f32; 3]]) -> Image {
+        let (w, h) = (self.moments.width as usize, self.moments.height as usize);
         let denoise = self.config.denoise_of(self.candidate_set);
         // without à-trous levels the guides are not read (and not recorded)
         let (albedo, normal, depth) = if denoise.levels > 0 { self.guides.means() } else { Default::default() };
         let guides = Guides { albedo: &albedo, normal: &normal, depth: &depth };
-        let intensity = denoised_intensity(w, h, image, &guides, denoise);
-        let denoise_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let t1 = Instant::now();
-        let statistics = self.statistics.statistics((w * h) as u32);
+        denoised_intensity(w, h, image, &guides, denoise)
+    }
+
+    /// What the optimiser prices candidates with: the path statistics, the constants (measured
+    /// per job where configured and possible) and the incumbent's margin.
+    fn cost_model(&self) -> CostModelInput {
+        let pixels = self.moments.width * self.moments.height;
+        let statistics = self.statistics.statistics(pixels);
         let measured = if self.config.measured_costs {
             measured_constants(&self.statistics.times, &self.config.constants)
         } else {
             None
         };
-        let constants = measured.unwrap_or(self.config.constants);
+        let reduced = self.candidate_set == CandidateSet::Reduced;
         let incumbent = (!reduced && self.config.incumbent_margin > 0.0).then(|| Incumbent {
             nu: self.strategy.nu,
             connections: match self.strategy.connections {
@@ -253,46 +287,62 @@ impl EmisState {
             },
             margin: Incumbent::margin_after(self.config.incumbent_margin, self.moments.iterations),
         });
+        CostModelInput { statistics, constants: measured.unwrap_or(self.config.constants), measured, incumbent }
+    }
+
+    /// The optimiser's decision after `iteration`, and whether an update of the full set
+    /// follows a restart into it. A path-tracing start's restart discards the start unless
+    /// such an update follows to weigh it; then a candidate must beat path tracing by more
+    /// than the share of the render the restart discards.
+    fn choose(
+        &self,
+        intensity: &Image,
+        model: &CostModelInput,
+        iteration: u32,
+        restart_total: RestartTotal,
+    ) -> (Decision, bool) {
+        let reduced = self.candidate_set == CandidateSet::Reduced;
         let decide = |restart_share: f64| {
             optimize(&OptimizerInput {
                 candidates: &self.candidates,
                 moments: &self.moments,
-                image: &intensity,
-                statistics,
-                constants,
+                image: intensity,
+                statistics: model.statistics,
+                constants: model.constants,
                 filters: self.config.filters,
                 merge_scope: if reduced { MergeScope::Global } else { MergeScope::PerPixel },
                 connection_scope: self.config.connection_scope,
                 restart_share,
-                incumbent,
+                incumbent: model.incumbent,
             })
         };
-        // a restart discards the start unless an update of the full set follows to weigh it
         let share = iteration as f64 / restart_total.at_current_pace().max(1) as f64;
         let weighing = self.config.updates.iter().copied().find(|&u| u > iteration);
         let kept = reduced && weighing.is_some_and(|u| restart_total.pays(u, restart_total.at_current_pace() as f64));
-        let mut decision = decide(if reduced && !kept { share } else { 0.0 });
-        // whether an update of the full set follows a restart into the winner
-        let mut followed = kept;
+        let decision = decide(if reduced && !kept { share } else { 0.0 });
         let merging = self.config.method == EmisMethod::Vcm;
         if kept && decision.nu > 0.0 && !reaches(&decision, restart_total, iteration, weighing, merging) {
             // at the winner's pace the render would end before that update, or too soon
             // after it for it to pay
-            decision = decide(share);
-            followed = false;
+            return (decide(share), false);
         }
-        let optimize_ms = t1.elapsed().as_secs_f64() * 1e3;
-        let restarted = reduced && decision.nu > 0.0;
-        // a restart that a full-set update follows pilots it as the method's own pilot does,
-        // merging everywhere: the global decision comes from path-tracing samples that rarely
-        // hold the paths merging is for, and the iterations up to that update stay in the image
-        // (docs/decisions/0048-restart-pilots-with-merging.md)
-        let pilot_merging = restarted && followed && self.config.method == EmisMethod::Vcm;
-        if pilot_merging {
-            decision.merge_mask = Image::filled(w, h, 1.0);
-        }
+        (decision, kept)
+    }
+
+    /// The update's report (its timings filled in by the caller), with whether path tracing
+    /// settles: after two clear wins later recordings cost more than the rare switch they
+    /// find; one recording is too few, a caustic can look like path tracing's
+    /// (docs/decisions/0041). Weighs a kept path-tracing start by the decision.
+    fn report(
+        &mut self,
+        decision: &Decision,
+        intensity: &Image,
+        model: &CostModelInput,
+        iteration: u32,
+        restarted: bool,
+    ) -> UpdateReport {
+        let reduced = self.candidate_set == CandidateSet::Reduced;
         let mask = &decision.merge_mask.data;
-        let recorded = self.moments.iterations;
         let start_weight = match (&mut self.start, decision.chosen) {
             (Some(start), Some(chosen)) if !reduced => {
                 let k = start_weight(&decision.scores, chosen, relative_mean_square(&intensity.data));
@@ -307,22 +357,21 @@ impl EmisState {
             restarted,
             settled: false,
             start_weight,
-            incumbent_margin: incumbent.map(|i| i.margin),
+            incumbent_margin: model.incumbent.map(|i| i.margin),
             nu: decision.nu,
             connections: decision.connections,
             mean_connections: decision.connection_mask.as_ref().map(|m| m.mean()),
             mean_merge_probability: mask.iter().map(|&v| v as f64).sum::<f64>() / mask.len().max(1) as f64,
             merging_pixels: mask.iter().filter(|&&v| v > 0.1).count() as f64 / mask.len().max(1) as f64,
-            statistics,
-            measured_constants: measured,
+            statistics: model.statistics,
+            measured_constants: model.measured,
             candidates: decision.scores.iter().map(ScoreReport::from).collect(),
-            denoise_ms,
-            optimize_ms,
+            denoise_ms: 0.0,
+            optimize_ms: 0.0,
         };
-        // after two clear wins later recordings cost more than the rare switch they find; one
-        // recording is too few, a caustic can look like path tracing's (docs/decisions/0041)
         let wins = |r: &UpdateReport| r.reduced && !r.restarted && r.path_tracing_margin() >= self.config.settle_margin;
-        report.settled = wins(&report) && self.reports.last().is_some_and(wins) && recorded >= SETTLE_RECORDINGS;
+        report.settled =
+            wins(&report) && self.reports.last().is_some_and(wins) && self.moments.iterations >= SETTLE_RECORDINGS;
         tracing::info!(
             iteration,
             nu = decision.nu,
@@ -333,23 +382,33 @@ impl EmisState {
             settled = report.settled,
             "emis update"
         );
-        let merge = match (self.config.method, reduced) {
+        report
+    }
+
+    /// Switches to `decision`'s strategy; on a restart, sets the path-tracing start (`image`,
+    /// the iterations before `iteration`) aside and starts the moments again for the full set.
+    fn adopt(&mut self, decision: Decision, restarted: bool, image: &[[f32; 3]], iteration: u32) {
+        let (w, h) = (self.moments.width, self.moments.height);
+        let merge = match (self.config.method, self.candidate_set) {
             (EmisMethod::Bdpt, _) => None,
             // merging everywhere or nowhere
-            (EmisMethod::Vcm, true) => Some(MergeMask::Constant(mask.first().copied().unwrap_or(0.0))),
-            (EmisMethod::Vcm, false) => Some(MergeMask::PerPixel(Arc::new(decision.merge_mask.data.clone()))),
+            (EmisMethod::Vcm, CandidateSet::Reduced) => {
+                Some(MergeMask::Constant(decision.merge_mask.data.first().copied().unwrap_or(0.0)))
+            }
+            (EmisMethod::Vcm, CandidateSet::Full) => Some(MergeMask::PerPixel(Arc::new(decision.merge_mask.data))),
         };
         let connections = match decision.connection_mask {
             Some(mask) => Connections::PerPixel(Arc::new(mask.data)),
             None => Connections::Fixed(decision.connections),
         };
         self.strategy = Strategy { nu: decision.nu, connections, merge };
+        self.relative_moment = Some(decision.relative_moment);
         if restarted {
             // the path-tracing start is over: what follows is sampled with a bidirectional
             // strategy, and later updates choose from the full set on its moments alone
             self.candidate_set = CandidateSet::Full;
             self.candidates = self.config.candidates_of(CandidateSet::Full);
-            self.moments = MomentBuffer::new(w as u32, h as u32, self.candidates.len());
+            self.moments = MomentBuffer::new(w, h, self.candidates.len());
             // path tracing's probe is not run again: its time stays for the later updates
             let probe = self.statistics.times;
             self.statistics = StatisticsSums::default();
@@ -358,16 +417,6 @@ impl EmisState {
             self.kept_from = iteration;
             self.start = Some(KeptStart { image: image.to_vec(), iterations: iteration, weight: None });
         }
-        self.relative_moment = Some(decision.relative_moment);
-        self.updates_done += 1;
-        // a restart that no paying update follows renders its winner to the end: recording
-        // the first call after it, before the render loop sees the new pace, buys nothing
-        let unfollowed = restarted && !followed;
-        if self.updates_done >= self.config.updates.len() || report.settled || unfollowed {
-            self.collecting = false;
-        }
-        self.reports.push(report);
-        self.reports.last().expect("invariant: just pushed")
     }
 
     /// The render's image from `film`, which holds the iterations from
@@ -391,13 +440,23 @@ impl EmisState {
     }
 }
 
+/// What an update prices candidates with (see [`EmisState::update`]).
+struct CostModelInput {
+    statistics: PathStatistics,
+    constants: CostConstants,
+    /// The constants measured per job, when they were.
+    measured: Option<CostConstants>,
+    incumbent: Option<Incumbent>,
+}
+
 /// Whether a render restarted into `decision`'s winner after `iteration` would still run the
 /// update at `weighing`: reach it before `restart_total` (scaled by the winner's cost per
 /// iteration over path tracing's under a time budget) and, as the render loop demands before
 /// it collects for it, find it pays ([`RestartTotal::pays`]); an update reached but skipped
-/// would leave the pilot's strategy to the end and the start unweighed (decision 0056). With
+/// would leave the pilot's strategy to the end and the start unweighed
+/// (docs/decisions/0032-light-probe-and-restart-share.md). With
 /// `merging` the winner is priced as rendered until that update: its ν and c merging
-/// everywhere (decision 0048).
+/// everywhere (the same record).
 fn reaches(
     decision: &Decision,
     restart_total: RestartTotal,

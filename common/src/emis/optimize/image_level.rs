@@ -164,7 +164,8 @@ pub(super) fn image_level_scores(
 
 /// Per pixel, what a moment is multiplied by for its share of the image's mean relative moment,
 /// 1 / ((Ī² + 1e-4) · pixels); 0 for a black pixel, which carries none. Computed once per
-/// update rather than as two divisions per pixel in every group (decision 0026).
+/// update rather than as two divisions per pixel in every group
+/// (docs/decisions/0021-optimiser-at-1080p.md).
 pub(super) fn relative_weights(image: &[f32]) -> Vec<f64> {
     let pixels = image.len() as f64;
     image

@@ -24,7 +24,7 @@ const TILE: usize = 16;
 
 /// Every candidate's image of moments, in one allocation, plane after plane: a block this
 /// large is always mapped afresh and returned when dropped, whatever the process allocated
-/// before, where one block per plane was not (decision 0026).
+/// before, where one block per plane was not (docs/decisions/0021-optimiser-at-1080p.md).
 #[derive(Clone, Debug, PartialEq)]
 pub(super) struct Planes {
     width: usize,

@@ -4,7 +4,7 @@
 //! never leaves a half-written blob under a real name nor loses a rename that was reported
 //! done; a blob is checked against its digest whenever it is read. Accepted tile results live in
 //! the database (docs/decisions/0009-results-in-the-database.md), except large ones, which are
-//! files under `results/<job>/` ([`BlobStore::put_result`], decision 0022): SQLite copies each
+//! files under `results/<job>/` ([`BlobStore::put_result`], the same record): SQLite copies each
 //! byte twice (its log, then the checkpoint of the log), a file once.
 //!
 //! Files go when the database stops naming them: a deleted job's files after the commit that

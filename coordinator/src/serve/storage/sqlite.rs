@@ -9,7 +9,7 @@
 //! `accepted` and merged again on start-up from their results, which the `results` table keeps
 //! (written in the transaction that accepts them, deleted in the one that records the
 //! checkpoint covering them: one commit per result, and no file per result). Results of a
-//! megabyte or more are files instead (docs/decisions/0022-large-results-as-files.md).
+//! megabyte or more are files instead (docs/decisions/0009-results-in-the-database.md).
 //!
 //! Deleting a job removes its job, tile and result rows in one transaction queued like any
 //! other batch (so it lands after every earlier change of the job); the space is given back by
