@@ -11,6 +11,11 @@
 //! ```
 #![deny(missing_docs)]
 
+/// The version of every binary format Tessera writes and reads back: the pilot data a worker
+/// uploads with a tile, and the coordinator's film and EMIS state checkpoints. A change to any
+/// of them bumps it; readers refuse another version by name, and keep no reader for older ones.
+pub const FORMAT_VERSION: u32 = 3;
+
 pub mod bsdf;
 pub mod bundle;
 pub mod camera;

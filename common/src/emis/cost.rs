@@ -156,7 +156,6 @@ pub struct StatisticsSums {
     pub photons_per_path: f64,
     /// The time the work took (for costs measured per job; not part of equality across
     /// runs).
-    #[serde(default)]
     pub times: WorkTimes,
 }
 

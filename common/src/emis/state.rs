@@ -38,11 +38,9 @@ pub struct UpdateReport {
     /// Iterations rendered before the update.
     pub iteration: u32,
     /// The candidate set decided from (the path-tracing start's reduced one, or the full).
-    #[serde(default)]
     pub reduced: bool,
     /// A path-tracing start ended: the iterations so far left the image, to be combined
     /// with it at the end by the weight later updates estimate.
-    #[serde(default)]
     pub restarted: bool,
     /// Path tracing won this update and the one before by [`EmisConfig::settle_margin`], on
     /// [`SETTLE_RECORDINGS`] recorded iterations or more: no moments are collected and no

@@ -10,33 +10,31 @@ use super::guides::GuideBuffer;
 use super::moments::{MomentBuffer, bf16_bits, from_bf16_bits};
 use super::start::KeptStart;
 use super::{CandidateSet, EmisConfig, EmisState, PilotData, PilotStart, Strategy, UpdateReport};
+use crate::FORMAT_VERSION;
 use crate::integrator::observer::WorkTimes;
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
-/// Pilot data with f32 moment sums and without work times (checkpoints and uploads of earlier
-/// versions, still read).
-const PILOT_MAGIC_F32: &[u8; 4] = b"TPD1";
-/// Pilot data with bfloat16 moment sums and without work times (earlier uploads, still read).
-const PILOT_MAGIC_BF16: &[u8; 4] = b"TPD2";
-/// Pilot data with f32 moment sums and work times before path tracing's probe (earlier
-/// checkpoints, still read).
-const PILOT_MAGIC_F32_TIMED_V1: &[u8; 4] = b"TPD3";
-/// The same with bfloat16 moment sums (earlier uploads, still read).
-const PILOT_MAGIC_BF16_TIMED_V1: &[u8; 4] = b"TPD4";
-/// Pilot data with f32 moment sums and work times: the coordinator's checkpoints.
-const PILOT_MAGIC_F32_TIMED: &[u8; 4] = b"TPD5";
-/// Pilot data with bfloat16 moment sums and work times: uploads, whose sums
-/// [`MomentBuffer::round_for_wire`] rounded, so that the encoding loses nothing.
-const PILOT_MAGIC_BF16_TIMED: &[u8; 4] = b"TPD6";
-/// Work-time integers before path tracing's probe, and now.
-const TIMES_U64_V1: usize = 13;
+/// Pilot data: this magic, [`FORMAT_VERSION`], then whether moment sums are f32
+/// (checkpoints) or bfloat16 (uploads, whose sums [`MomentBuffer::round_for_wire`] rounded,
+/// so that the encoding loses nothing).
+const PILOT_MAGIC: &[u8; 4] = b"TPIL";
+/// Work-time integers.
 const TIMES_U64: usize = 15;
 /// Bytes of the work times.
 const TIMES_BYTES: usize = (TIMES_U64 + 2) * 8;
-const STATE_MAGIC: &[u8; 4] = b"TES1";
+/// An EMIS state checkpoint: this magic, [`FORMAT_VERSION`], its JSON head's length.
+const STATE_MAGIC: &[u8; 4] = b"TEMS";
+
+/// Refuses data of another [`FORMAT_VERSION`], naming `what`.
+fn check_version(what: &str, version: u32) -> Result<(), String> {
+    if version == FORMAT_VERSION {
+        return Ok(());
+    }
+    Err(format!("{what} is format version {version}, written by another Tessera version (this one reads {FORMAT_VERSION})"))
+}
 
 /// Little-endian writer.
 struct Writer(Vec<u8>);
@@ -116,7 +114,12 @@ fn write_pilot(
     statistics: &StatisticsSums,
     guides: &GuideBuffer,
 ) {
-    w.0.extend_from_slice(if precision == SumPrecision::F32 { PILOT_MAGIC_F32_TIMED } else { PILOT_MAGIC_BF16_TIMED });
+    w.0.extend_from_slice(PILOT_MAGIC);
+    w.u32(FORMAT_VERSION);
+    w.u32(match precision {
+        SumPrecision::F32 => 0,
+        SumPrecision::Bf16 => 1,
+    });
     w.u32(moments.width);
     w.u32(moments.height);
     w.u32(moments.candidates as u32);
@@ -170,11 +173,10 @@ fn write_times(w: &mut Writer, t: &WorkTimes) {
     w.f64(t.merge_ns_photons);
 }
 
-/// Reads work times of `count` integers ([`TIMES_U64_V1`] or [`TIMES_U64`]); those an
-/// earlier format lacks are 0.
-fn read_times(r: &mut Reader, count: usize) -> Result<WorkTimes, String> {
+/// Reads work times.
+fn read_times(r: &mut Reader) -> Result<WorkTimes, String> {
     let mut u = [0u64; TIMES_U64];
-    for v in &mut u[..count] {
+    for v in &mut u {
         *v = r.u64("the work times")?;
     }
     let (photons_squared, merge_ns_photons) = (r.f64("the work times")?, r.f64("the work times")?);
@@ -224,15 +226,14 @@ fn read_times(r: &mut Reader, count: usize) -> Result<WorkTimes, String> {
 }
 
 fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Result<PilotData, String> {
-    // the work-time integers the format holds
-    let (precision, timed) = match r.take(4, "the header")? {
-        m if m == PILOT_MAGIC_F32 => (SumPrecision::F32, 0),
-        m if m == PILOT_MAGIC_BF16 => (SumPrecision::Bf16, 0),
-        m if m == PILOT_MAGIC_F32_TIMED_V1 => (SumPrecision::F32, TIMES_U64_V1),
-        m if m == PILOT_MAGIC_BF16_TIMED_V1 => (SumPrecision::Bf16, TIMES_U64_V1),
-        m if m == PILOT_MAGIC_F32_TIMED => (SumPrecision::F32, TIMES_U64),
-        m if m == PILOT_MAGIC_BF16_TIMED => (SumPrecision::Bf16, TIMES_U64),
-        _ => return Err("pilot data has an unknown format".into()),
+    if r.take(4, "the header")? != PILOT_MAGIC {
+        return Err("pilot data has an unknown format".into());
+    }
+    check_version("pilot data", r.u32("the format version")?)?;
+    let precision = match r.u32("the precision")? {
+        0 => SumPrecision::F32,
+        1 => SumPrecision::Bf16,
+        other => return Err(format!("pilot data precision {other} is neither 0 (f32) nor 1 (bfloat16)")),
     };
     let (w, h, c) = (r.u32("the width")?, r.u32("the height")?, r.u32("the candidate count")? as usize);
     if (w, h, c) != (width, height, candidates) {
@@ -257,9 +258,7 @@ fn read_pilot(r: &mut Reader, width: u32, height: u32, candidates: usize) -> Res
         photons_per_path: r.f64("the statistics")?,
         times: WorkTimes::default(),
     };
-    if timed > 0 {
-        statistics.times = read_times(r, timed)?;
-    }
+    statistics.times = read_times(r)?;
     if !(statistics.photons_per_path >= 0.0 && statistics.photons_per_path.is_finite()) {
         return Err(format!("photons per path {} is out of range", statistics.photons_per_path));
     }
@@ -306,7 +305,7 @@ impl PilotData {
     /// Bytes of [`PilotData::encode`].
     pub fn encoded_len(&self) -> usize {
         let pixels = self.moments.width as usize * self.moments.height as usize;
-        20 + self.moments.sums.len() * 2 + 48 + TIMES_BYTES + 8 + if self.guides.is_zero() { 0 } else { pixels * 7 * 4 }
+        28 + self.moments.sums.len() * 2 + 48 + TIMES_BYTES + 8 + if self.guides.is_zero() { 0 } else { pixels * 7 * 4 }
     }
 
     /// Decodes pilot data of a `width`×`height` image with `candidates` candidates; the error
@@ -346,13 +345,10 @@ struct StateMeta {
     relative_moment: bool,
     reports: Vec<UpdateReport>,
     /// The path-tracing start's reduced candidate set is still in use.
-    #[serde(default)]
     reduced: bool,
     /// The first iteration the image keeps.
-    #[serde(default)]
     kept_from: u32,
     /// Connections per pixel follow the merge mask (`connections` is then 0).
-    #[serde(default)]
     connection_mask: bool,
     /// A kept path-tracing start: its iterations and the bits of its weight (JSON numbers
     /// need not read back to the same f64); its image follows the buffers.
@@ -402,6 +398,7 @@ impl EmisState {
         let json = serde_json::to_vec(&meta).expect("invariant: plain data serialises");
         let mut w = Writer(Vec::new());
         w.0.extend_from_slice(STATE_MAGIC);
+        w.u32(FORMAT_VERSION);
         w.u32(json.len() as u32);
         w.0.extend_from_slice(&json);
         write_pilot(&mut w, SumPrecision::F32, &self.moments, &self.statistics, &self.guides);
@@ -424,12 +421,14 @@ impl EmisState {
     /// buffers after them: what a job that ended without outputs still shows.
     pub fn read_decisions(r: &mut impl std::io::Read) -> Result<Decisions, String> {
         use std::io::Read;
-        let mut head = [0u8; 8];
+        let mut head = [0u8; 12];
         r.read_exact(&mut head).map_err(|e| format!("EMIS checkpoint: {e}"))?;
         if &head[..4] != STATE_MAGIC {
             return Err("EMIS checkpoint has an unknown format".into());
         }
-        let len = u32::from_le_bytes(head[4..].try_into().expect("invariant: 4 bytes")) as u64;
+        let word = |at: usize| u32::from_le_bytes(head[at..at + 4].try_into().expect("invariant: 4 bytes"));
+        check_version("EMIS checkpoint", word(4))?;
+        let len = word(8) as u64;
         let mut json = Vec::new();
         // a header longer than a few reports is corrupt: read no more than that
         r.take(len.min(MAX_META_BYTES)).read_to_end(&mut json).map_err(|e| format!("EMIS checkpoint: {e}"))?;
@@ -446,6 +445,7 @@ impl EmisState {
         if r.take(4, "the header")? != STATE_MAGIC {
             return Err("EMIS checkpoint has an unknown format".into());
         }
+        check_version("EMIS checkpoint", r.u32("the format version")?)?;
         let len = r.u32("the header")? as usize;
         let meta: StateMeta =
             serde_json::from_slice(r.take(len, "the header")?).map_err(|e| format!("EMIS checkpoint: {e}"))?;

@@ -1,4 +1,4 @@
-//! Tests of the EMIS wire encodings: round trips, old formats still read, bad data refused.
+//! Tests of the EMIS wire encodings: round trips, other format versions and bad data refused.
 
 use super::*;
 use crate::emis::EmisMethod;
@@ -44,22 +44,6 @@ fn pilot(width: u32, height: u32, candidates: usize) -> PilotData {
     PilotData { moments, statistics, guides }
 }
 
-/// The same upload in the format before path tracing's probe (`TPD4`): two integers fewer.
-fn without_probe(bytes: &[u8], candidates_sums: usize) -> Vec<u8> {
-    let at = 20 + 2 * candidates_sums + 48 + TIMES_U64_V1 * 8;
-    let mut old = [&bytes[..at], &bytes[at + 16..]].concat();
-    old[..4].copy_from_slice(PILOT_MAGIC_BF16_TIMED_V1);
-    old
-}
-
-/// The same upload in the format before work times (`TPD2`).
-fn without_times(bytes: &[u8], candidates_sums: usize) -> Vec<u8> {
-    let at = 20 + 2 * candidates_sums + 48;
-    let mut old = [&bytes[..at], &bytes[at + TIMES_BYTES..]].concat();
-    old[..4].copy_from_slice(PILOT_MAGIC_BF16);
-    old
-}
-
 #[test]
 fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
     let mut p = pilot(3, 2, 5);
@@ -68,17 +52,16 @@ fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
     p.moments.round_for_wire();
     let bytes = p.encode();
     assert_eq!(bytes.len(), p.encoded_len());
-    assert_eq!(&bytes[..4], PILOT_MAGIC_BF16_TIMED);
+    assert_eq!((&bytes[..4], &bytes[4..12]), (&PILOT_MAGIC[..], &[FORMAT_VERSION.to_le_bytes(), 1u32.to_le_bytes()].concat()[..]));
     assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
-    // an upload of a worker from before work times: everything but the times
-    let old = PilotData::decode(&without_times(&bytes, p.moments.sums.len()), 3, 2, 5).unwrap();
-    assert_eq!(old.statistics.times, WorkTimes::default());
-    assert_eq!((old.moments, old.guides), (p.moments.clone(), p.guides.clone()));
-    // one from before path tracing's probe: every time but the probe's
-    let v1 = PilotData::decode(&without_probe(&bytes, p.moments.sums.len()), 3, 2, 5).unwrap();
-    let unprobed = WorkTimes { path_tracing_vertices: 0, path_tracing_ns: 0, ..p.statistics.times };
-    assert_eq!(v1.statistics.times, unprobed);
-    assert_eq!((&v1.moments, &v1.guides), (&p.moments, &p.guides));
+    // an upload of another version is refused by name, whatever follows
+    let mut other = bytes.clone();
+    other[4..8].copy_from_slice(&(FORMAT_VERSION - 1).to_le_bytes());
+    let e = PilotData::decode(&other, 3, 2, 5).unwrap_err();
+    assert!(e.contains("format version 2") && e.contains("another Tessera version"), "{e}");
+    other[4..8].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    other[8..12].copy_from_slice(&2u32.to_le_bytes());
+    assert!(PilotData::decode(&other, 3, 2, 5).unwrap_err().contains("precision 2"));
     // unrounded sums are rounded by the encoding: the decoded data is not the original
     assert_ne!(PilotData::decode(&exact.encode(), 3, 2, 5).unwrap(), exact);
     // a checkpoint keeps sums exactly (they are sums of rounded calls, not rounded)
@@ -133,10 +116,15 @@ fn decisions_read_from_a_checkpoint_head_alone() {
     );
     assert_eq!(d.reports[0].iteration, 1);
     // the head is enough: the buffers after it are not read
-    let meta_len = 8 + u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
+    let meta_len = 12 + u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     assert!(EmisState::read_decisions(&mut &bytes[..meta_len]).is_ok());
     assert!(EmisState::read_decisions(&mut &bytes[..meta_len - 1]).unwrap_err().contains("bytes"));
-    assert!(EmisState::read_decisions(&mut &b"TPD1...."[..]).unwrap_err().contains("unknown format"));
+    assert!(EmisState::read_decisions(&mut &b"TPIL........"[..]).unwrap_err().contains("unknown format"));
+    let mut other = bytes.clone();
+    other[4..8].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    assert!(EmisState::read_decisions(&mut &other[..]).unwrap_err().contains("another Tessera version"));
+    let config = EmisConfig::new(EmisMethod::Vcm);
+    assert!(EmisState::decode(config, 4, 3, &other).err().is_some_and(|e| e.contains("another Tessera version")));
 }
 
 #[test]

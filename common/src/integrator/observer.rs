@@ -127,10 +127,8 @@ pub struct WorkTimes {
     /// Camera vertices of the iterations the `pt` integrator rendered as a probe (costs
     /// measured per job: path tracing's cost per camera vertex), as the bidirectional engine
     /// counted them in the same iterations.
-    #[serde(default)]
     pub path_tracing_vertices: u64,
     /// The probe's time: its tiles' times summed over the threads.
-    #[serde(default)]
     pub path_tracing_ns: u64,
 }
 

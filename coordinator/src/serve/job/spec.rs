@@ -34,13 +34,8 @@ pub struct JobSpec {
     pub bundle_digest: String,
     /// The scene XML's path inside the bundle.
     pub scene_path: String,
-    /// The film's reconstruction filter (jobs stored before filters carry none: the box).
-    #[serde(default = "box_filter")]
+    /// The film's reconstruction filter.
     pub filter: FilterKind,
-}
-
-fn box_filter() -> FilterKind {
-    FilterKind::Box
 }
 
 impl JobSpec {

@@ -14,12 +14,11 @@
 use std::collections::HashSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use tessera_common::FORMAT_VERSION;
 use tessera_common::film::Film;
 
 /// The first word of a film checkpoint ("TSCK").
 pub const CHECKPOINT_MAGIC: u32 = u32::from_le_bytes(*b"TSCK");
-/// The checkpoint format this version writes.
-pub const CHECKPOINT_VERSION: u32 = 2;
 
 /// The fixed part of a checkpoint: its film's size and channels.
 struct CheckpointHeader {
@@ -31,7 +30,7 @@ struct CheckpointHeader {
 }
 
 impl CheckpointHeader {
-    /// From the checkpoint's first bytes (20 or 12 of them, after the box-only format's).
+    /// From the checkpoint's first 20 bytes.
     fn parse(name: &str, bytes: &[u8]) -> std::io::Result<CheckpointHeader> {
         let word = |at: usize| -> std::io::Result<u32> {
             Ok(u32::from_le_bytes(
@@ -42,14 +41,14 @@ impl CheckpointHeader {
                     .expect("invariant: 4 bytes"),
             ))
         };
-        let (flags, header) = match word(0)? {
-            CHECKPOINT_MAGIC if word(4)? == CHECKPOINT_VERSION => (word(8)?, 12),
-            CHECKPOINT_MAGIC => {
-                return Err(corrupt_checkpoint(name, &format!("unknown format version {}", word(4)?)));
-            }
-            _ => (0, 0),
-        };
-        Ok(CheckpointHeader { flags, width: word(header)?, height: word(header + 4)?, at: header + 8 })
+        if word(0)? != CHECKPOINT_MAGIC {
+            return Err(corrupt_checkpoint(name, "not a checkpoint"));
+        }
+        if word(4)? != FORMAT_VERSION {
+            let why = format!("format version {}, written by another Tessera version (this one reads {FORMAT_VERSION})", word(4)?);
+            return Err(corrupt_checkpoint(name, &why));
+        }
+        Ok(CheckpointHeader { flags: word(8)?, width: word(12)?, height: word(16)?, at: 20 })
     }
 
     fn weights(&self) -> bool {
@@ -266,7 +265,7 @@ impl BlobStore {
         // streamed: a 4K film is 230 MB or more, not worth copying in memory first
         self.write_atomic_with(&self.root.join("checkpoints").join(&name), |w| {
             let flags = film.weight.is_some() as u32 | (film.splat.is_some() as u32) << 1;
-            for word in [CHECKPOINT_MAGIC, CHECKPOINT_VERSION, flags, film.width, film.height] {
+            for word in [CHECKPOINT_MAGIC, FORMAT_VERSION, flags, film.width, film.height] {
                 w.write_all(&word.to_le_bytes())?;
             }
             w.write_all(&film.non_finite.to_le_bytes())?;
@@ -282,8 +281,7 @@ impl BlobStore {
         Ok(name)
     }
 
-    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`] (or, without the magic
-    /// number, by the box-only format before it): the film and the trailer.
+    /// Reads a checkpoint written by [`BlobStore::put_checkpoint`]: the film and the trailer.
     pub fn get_checkpoint(&self, name: &str) -> std::io::Result<(Film, Vec<u8>)> {
         let bytes = std::fs::read(self.root.join("checkpoints").join(name))?;
         let h = CheckpointHeader::parse(name, &bytes)?;
@@ -471,29 +469,23 @@ mod tests {
     }
 
     #[test]
-    fn checkpoints_of_the_box_only_format_still_load_and_corrupt_ones_are_refused() {
+    fn checkpoints_round_trip_and_other_versions_and_corrupt_ones_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let blobs = BlobStore::open(dir.path()).unwrap();
-        // width 1, height 1, non-finite 4, one pixel's sums and count, a trailer
-        let mut old = Vec::new();
-        old.extend_from_slice(&1u32.to_le_bytes());
-        old.extend_from_slice(&1u32.to_le_bytes());
-        old.extend_from_slice(&4u64.to_le_bytes());
-        for v in [1.0f64, 2.0, 3.0] {
-            old.extend_from_slice(&v.to_le_bytes());
-        }
-        old.extend_from_slice(&7u32.to_le_bytes());
-        old.extend_from_slice(b"tail");
-        std::fs::write(dir.path().join("checkpoints").join("old.film"), &old).unwrap();
-        let (film, trailer) = blobs.get_checkpoint("old.film").unwrap();
-        assert_eq!((film.sum[0], film.count[0], film.non_finite, film.weight.is_none()), ([1.0, 2.0, 3.0], 7, 4, true));
-        assert_eq!(trailer, b"tail");
-        let name = blobs.put_checkpoint("job", 1, &film, &[]).unwrap();
+        let mut film = Film::for_filter(2, 1, &tessera_common::film::filter::Filter::new(tessera_common::film::filter::FilterKind::Box));
+        (film.sum[1], film.count[1], film.non_finite) = ([1.0, 2.0, 3.0], 7, 4);
+        let name = blobs.put_checkpoint("job", 1, &film, b"tail").unwrap();
+        let (back, trailer) = blobs.get_checkpoint(&name).unwrap();
+        assert_eq!((back.sum, back.count, back.non_finite, trailer), (film.sum.clone(), film.count.clone(), 4, b"tail".to_vec()));
         let path = dir.path().join("checkpoints").join(&name);
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[4] = 9;
         std::fs::write(&path, &bytes).unwrap();
-        assert!(blobs.get_checkpoint(&name).unwrap_err().to_string().contains("version 9"));
+        let e = blobs.get_checkpoint(&name).unwrap_err().to_string();
+        assert!(e.contains("format version 9") && e.contains("another Tessera version"), "{e}");
+        // a file without the magic number (the box-only format of before checkpoints had one)
+        std::fs::write(&path, &bytes[8..]).unwrap();
+        assert!(blobs.get_checkpoint(&name).unwrap_err().to_string().contains("not a checkpoint"));
         std::fs::write(&path, &bytes[..20]).unwrap();
         assert!(blobs.get_checkpoint(&name).is_err());
     }

@@ -359,7 +359,7 @@ impl JobService {
         };
         let (non_finite, bytes) = match self.commits.store().load_result(job, i, t.epoch)? {
             Some(r) => r,
-            // a data directory written before results moved into the database keeps them as files
+            // a large result is a file, not a row (docs/decisions/0009-results-in-the-database.md)
             None => {
                 let bytes = self.blobs.get_result(job, i, t.epoch)?;
                 let nf = bytes.get(..8).ok_or_else(|| corrupt("too short"))?.try_into().expect("invariant: 8 bytes");
