@@ -2,8 +2,8 @@
 //! merging their sums into a [`Film`] in the driver's order, so the result is bit-identical
 //! for any thread count and to a farm's.
 
-use crate::emis::{EmisState, render_emis};
 use crate::driver::{Driver, Shape, Step, TileSpec};
+use crate::emis::{EmisState, render_emis};
 use crate::film::{Film, TileAccum};
 use crate::integrator::{Integrator, TileRequest};
 use crate::scene::Scene;

@@ -27,11 +27,11 @@
 mod common;
 
 use common::scene_path;
-use tessera_testing::decision_truth::{DecisionTruth, SceneTruth};
 use tessera_common::emis::{EmisConfig, EmisMethod, UpdateReport, render_emis};
 use tessera_common::integrator::PathSettings;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
+use tessera_testing::decision_truth::{DecisionTruth, SceneTruth};
 
 /// Side of the square images.
 const SIZE: u32 = 128;

@@ -263,7 +263,8 @@ fn path_tracing_with_a_merge_mask_counts_only_the_probes_queries() {
 
 /// Costs measured per job: a collecting call times its work as it renders (light vertices and
 /// the photon map every iteration, camera vertices, connections and merges in one pixel of
-/// eight), and the times give constants of plausible size.
+/// eight), and the times give constants of plausible size. With the default calibrated costs
+/// nothing is timed.
 #[test]
 fn collecting_iterations_time_their_work() {
     use tessera_common::emis::cost::CostConstants;
@@ -273,8 +274,10 @@ fn collecting_iterations_time_their_work() {
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     let config = EmisConfig::new(EmisMethod::Vcm);
+    let measured = EmisConfig { measured_costs: true, ..config.clone() };
     let pilot = Strategy::pilot(EmisMethod::Vcm);
-    let (_, data) = render_iterations(&scene, settings, &config, &pilot, 2, 0..2, Some(CandidateSet::Full));
+    // not the job's first call, which would also probe path tracing
+    let (_, data) = render_iterations(&scene, settings, &measured, &pilot, 2, 1..3, Some(CandidateSet::Full));
     let s = data.expect("a collecting call").statistics;
     let t = s.times;
     assert_eq!((t.iterations, t.light_vertices), (2, s.light_vertices), "{t:?}");
@@ -293,9 +296,14 @@ fn collecting_iterations_time_their_work() {
     ] {
         assert!(v.is_finite() && (1e-3..1e3).contains(&v), "{name} {v} camera vertices: {k:?}");
     }
-    // path tracing is probed only when costs are measured
+    // path tracing is probed by the first call only
     assert_eq!((t.path_tracing_vertices, t.path_tracing_ns), (0, 0), "{t:?}");
     assert_eq!(k.path_tracing, CostConstants::calibrated().path_tracing);
+    // calibrated costs time nothing
+    let (_, plain) = render_iterations(&scene, settings, &config, &pilot, 2, 0..2, Some(CandidateSet::Full));
+    let plain = plain.expect("a collecting call").statistics;
+    assert_eq!(plain.times, Default::default(), "{:?}", plain.times);
+    assert!(plain.camera_vertices > 0 && plain.light_vertices > 0, "the counts are kept: {plain:?}");
     // a call that does not collect times nothing
     let (_, none) = render_iterations(&scene, settings, &config, &pilot, 2, 0..1, None);
     assert!(none.is_none());

@@ -78,8 +78,10 @@ impl Experiment {
 fn parse_experiment(s: &str) -> Result<Experiment, String> {
     fn value<T: ValueEnum>(key: &str, v: &str) -> Result<T, String> {
         T::from_str(v, false).map_err(|_| {
-            let names: Vec<String> =
-                T::value_variants().iter().filter_map(|x| Some(x.to_possible_value()?.get_name().to_string())).collect();
+            let names: Vec<String> = T::value_variants()
+                .iter()
+                .filter_map(|x| Some(x.to_possible_value()?.get_name().to_string()))
+                .collect();
             format!("{key}={v}: expected one of {}", names.join(", "))
         })
     }

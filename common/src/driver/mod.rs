@@ -149,18 +149,29 @@ impl Driver {
         (driver, tiles)
     }
 
-    /// A driver rebuilt from stored passes; `iterations` gives the iterations of a range of
-    /// tiles (from the stored tiles).
+    /// A driver rebuilt from stored passes over `tiles` stored tiles, whose iterations
+    /// `samples(i)` gives. Refused unless the passes tile the tiles without gaps.
     pub fn restore(
         shape: Shape,
         mut passes: Vec<Pass>,
         started_ms: Option<f64>,
-        iterations: impl Fn(Range<usize>) -> Range<u32>,
-    ) -> Driver {
+        tiles: usize,
+        samples: impl Fn(usize) -> Range<u32>,
+    ) -> Result<Driver, String> {
+        let mut end = 0;
         for p in &mut passes {
-            p.iterations = iterations(p.tiles.clone());
+            if p.tiles.start != end || p.tiles.is_empty() {
+                return Err(format!("pass of tiles {:?} does not follow tile {end}", p.tiles));
+            }
+            end = p.tiles.end;
+            let (begin, last) =
+                p.tiles.clone().map(&samples).fold((u32::MAX, 0), |(b, e), s| (b.min(s.start), e.max(s.end)));
+            p.iterations = begin..last;
         }
-        Driver { shape, passes, started_ms }
+        if end != tiles {
+            return Err(format!("the passes hold {end} tiles, the job {tiles}"));
+        }
+        Ok(Driver { shape, passes, started_ms })
     }
 
     /// Starts the clock a time budget counts from, at the first work handed out.

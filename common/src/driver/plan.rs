@@ -109,6 +109,8 @@ fn pass_tiles(shape: &Shape, begin: u32, end: u32) -> Vec<TileSpec> {
             .into_iter()
             .map(|rect| TileSpec { rect, samples: begin..end })
             .collect(),
-        None => (begin..end).map(|i| TileSpec { rect: Rect::full(shape.width, shape.height), samples: i..i + 1 }).collect(),
+        None => {
+            (begin..end).map(|i| TileSpec { rect: Rect::full(shape.width, shape.height), samples: i..i + 1 }).collect()
+        }
     }
 }

@@ -50,7 +50,8 @@ fn at(shape: &Shape, done: u32, kept_from: u32, clock: Clock, collected: bool, n
         passes.push(pass(0..1, false, &ranges[0]));
     }
     let started = (clock.elapsed_s > 0.0).then(|| now_ms - clock.elapsed_s * 1000.0);
-    (Driver::restore(shape.clone(), passes, started, |tiles| ranges[tiles.start].clone()), now_ms)
+    let tiles = passes.len();
+    (Driver::restore(shape.clone(), passes, started, tiles, |tile| ranges[tile].clone()).unwrap(), now_ms)
 }
 
 fn clock(elapsed_s: f64) -> Clock {
@@ -65,7 +66,14 @@ fn after_pass(shape: &Shape, done: u32, kept_from: u32, c: Clock, collected: boo
 
 /// The pass after an update at `done` (a restart there when `kept_from == done`), and whether
 /// it collects.
-fn pass_after_update(shape: &Shape, done: u32, kept_from: u32, c: Clock, nu: f32, collect: bool) -> (Vec<Range<u32>>, bool) {
+fn pass_after_update(
+    shape: &Shape,
+    done: u32,
+    kept_from: u32,
+    c: Clock,
+    nu: f32,
+    collect: bool,
+) -> (Vec<Range<u32>>, bool) {
     let restarted = kept_from == done && done > 0;
     let (mut driver, now) = at(shape, done, if restarted { 0 } else { kept_from }, c, true, 0.0);
     let tiles = driver.updated(restarted, nu, collect, now);
@@ -96,7 +104,9 @@ fn bidir_is_one_full_frame_iteration_per_tile() {
         assert_eq!(t.samples, i as u32..i as u32 + 1);
     }
     assert_eq!(driver.barrier(1000.0), Step::Finish);
-    assert!(matches!(Driver::new(shape(Kind::Lt, Some(2), None)).1.as_slice(), [a, b] if a.samples == (0..1) && b.samples == (1..2)));
+    assert!(
+        matches!(Driver::new(shape(Kind::Lt, Some(2), None)).1.as_slice(), [a, b] if a.samples == (0..1) && b.samples == (1..2))
+    );
 }
 
 #[test]
@@ -309,4 +319,19 @@ fn an_emis_job_runs_from_pilot_to_finish() {
     }
     assert_eq!((next, updates), (40, vec![1, 4, 16]));
     assert!(driver.finishes(1e9));
+}
+
+/// Stored passes come back with their iterations from the tiles, and passes that do not tile
+/// the tiles are refused.
+#[test]
+fn a_restored_driver_takes_its_iterations_from_the_tiles_and_refuses_gaps() {
+    let (driver, tiles) = Driver::new(shape(Kind::Emis, Some(40), None));
+    let samples = |i: usize| tiles[i].samples.clone();
+    let passes = driver.passes().to_vec();
+    let back = Driver::restore(driver.shape().clone(), passes.clone(), None, tiles.len(), samples).unwrap();
+    assert_eq!(back, driver);
+    assert!(Driver::restore(driver.shape().clone(), passes.clone(), None, tiles.len() + 1, samples).is_err());
+    let mut gap = passes;
+    gap[0].tiles.start = 1;
+    assert!(Driver::restore(driver.shape().clone(), gap, None, tiles.len(), samples).unwrap_err().contains("follow"));
 }

@@ -78,6 +78,8 @@ pub struct MomentEstimator {
     /// lock, taken once per splat, would serialise the threads.
     queued: Vec<Shard>,
     statistics: Mutex<StatisticsSums>,
+    /// Time the work (costs measured per job).
+    timed: bool,
 }
 
 impl MomentEstimator {
@@ -103,7 +105,14 @@ impl MomentEstimator {
             sums: (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect(),
             queued: (0..rayon::current_num_threads().max(1)).map(|_| Shard(Mutex::new(Vec::new()))).collect(),
             statistics: Mutex::new(StatisticsSums::default()),
+            timed: false,
         }
+    }
+
+    /// The same estimator asking the integrator to time its work when `timed` (costs measured
+    /// per job need the times; calibrated costs do not).
+    pub fn timed(self, timed: bool) -> Self {
+        MomentEstimator { timed, ..self }
     }
 
     fn pixels(&self) -> f32 {
@@ -226,6 +235,8 @@ fn squared_value(record: &SampleRecord) -> f32 {
 }
 
 impl SampleObserver for MomentEstimator {
+    const MEASURES: bool = true;
+
     fn on_sample(&self, record: &SampleRecord) {
         let proxy = self.proxy_counts(record.counts);
         let w: ProxyWeights = proxy_weights(record.pdfs, record.ratios, &proxy);
@@ -247,8 +258,7 @@ impl SampleObserver for MomentEstimator {
     }
 
     fn wants_times(&self) -> bool {
-        // the work of collecting iterations is timed for costs measured per job
-        true
+        self.timed
     }
 
     fn on_iteration_start(&self, start: &IterationStart) {

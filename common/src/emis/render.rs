@@ -342,7 +342,7 @@ pub fn render_iterations_until(
         return (accum, None);
     };
     let candidates = config.candidates_of(set);
-    let estimator = MomentEstimator::new(w, h, &candidates);
+    let estimator = MomentEstimator::new(w, h, &candidates).timed(config.measured_costs);
     let guided = if config.records_guides(set) {
         iterations.start.min(GUIDE_ITERATIONS)..iterations.end.min(GUIDE_ITERATIONS)
     } else {

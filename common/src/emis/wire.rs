@@ -33,7 +33,9 @@ fn check_version(what: &str, version: u32) -> Result<(), String> {
     if version == FORMAT_VERSION {
         return Ok(());
     }
-    Err(format!("{what} is format version {version}, written by another Tessera version (this one reads {FORMAT_VERSION})"))
+    Err(format!(
+        "{what} is format version {version}, written by another Tessera version (this one reads {FORMAT_VERSION})"
+    ))
 }
 
 /// Little-endian writer.

@@ -52,7 +52,10 @@ fn uploads_carry_moments_in_half_the_bytes_and_lose_nothing_once_rounded() {
     p.moments.round_for_wire();
     let bytes = p.encode();
     assert_eq!(bytes.len(), p.encoded_len());
-    assert_eq!((&bytes[..4], &bytes[4..12]), (&PILOT_MAGIC[..], &[FORMAT_VERSION.to_le_bytes(), 1u32.to_le_bytes()].concat()[..]));
+    assert_eq!(
+        (&bytes[..4], &bytes[4..12]),
+        (&PILOT_MAGIC[..], &[FORMAT_VERSION.to_le_bytes(), 1u32.to_le_bytes()].concat()[..])
+    );
     assert_eq!(PilotData::decode(&bytes, 3, 2, 5).unwrap(), p);
     // an upload of another version is refused by name, whatever follows
     let mut other = bytes.clone();

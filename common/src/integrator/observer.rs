@@ -170,9 +170,14 @@ pub fn timed_pixel(pixel: u32) -> bool {
 /// light-tracing phase from any thread for any pixel; during its camera phase, all samples of
 /// one camera path come from one thread, in order, followed by `on_camera_path_end`.
 pub trait SampleObserver: Send + Sync {
+    /// Whether this kind of observer measures the work: times it ([`Self::wants_times`]) and
+    /// counts a light probe's photons. When false, integrators compile none of that code for
+    /// it, so plain renders pay nothing for EMIS's measurements.
+    const MEASURES: bool = false;
     /// Called once per non-zero sample.
     fn on_sample(&self, record: &SampleRecord);
-    /// Whether the integrator should time its work ([`PathCounters::times`]).
+    /// Whether the integrator should time its work ([`PathCounters::times`]); only read when
+    /// [`Self::MEASURES`].
     #[inline(always)]
     fn wants_times(&self) -> bool {
         false
@@ -193,6 +198,7 @@ pub trait SampleObserver: Send + Sync {
 }
 
 impl<T: SampleObserver + ?Sized> SampleObserver for &T {
+    const MEASURES: bool = T::MEASURES;
     #[inline(always)]
     fn on_sample(&self, record: &SampleRecord) {
         (**self).on_sample(record)
@@ -222,6 +228,7 @@ impl<T: SampleObserver + ?Sized> SampleObserver for &T {
 /// Several observers of the same kind watching one render (e.g. moment estimators with
 /// different settings).
 impl<T: SampleObserver> SampleObserver for [T] {
+    const MEASURES: bool = T::MEASURES;
     fn on_sample(&self, record: &SampleRecord) {
         self.iter().for_each(|o| o.on_sample(record))
     }
@@ -245,6 +252,7 @@ impl<T: SampleObserver> SampleObserver for [T] {
 /// Two observers of different kinds watching one render (e.g. moments and guides), each
 /// told everything in the same order.
 impl<A: SampleObserver, B: SampleObserver> SampleObserver for (A, B) {
+    const MEASURES: bool = A::MEASURES || B::MEASURES;
     #[inline(always)]
     fn on_sample(&self, record: &SampleRecord) {
         self.0.on_sample(record);

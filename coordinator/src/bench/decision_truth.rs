@@ -29,7 +29,6 @@ use crate::options::scene_name;
 use anyhow::{Context, bail};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tessera_testing::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth, SeedVariance};
 use tessera_common::emis::denoise::DenoiseSettings;
 use tessera_common::emis::filter::Image;
 use tessera_common::emis::optimize::{ConnectionScope, MergeScope, OptimizerInput, optimize};
@@ -40,6 +39,7 @@ use tessera_common::integrator::PathSettings;
 use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::scene::Scene;
+use tessera_testing::decision_truth::{CandidateTruth, DecisionTruth, SceneTruth, SeedVariance};
 
 /// Arguments of `tessera bench decision-truth`.
 #[derive(clap::Args, Debug, Clone)]

@@ -14,8 +14,8 @@ mod fit;
 
 use super::SceneArgs;
 use crate::options::scene_name;
-use std::time::Instant;
 use fit::{CostSample, calibration_configurations, fit_constants};
+use std::time::Instant;
 use tessera_common::emis::candidate::Candidate;
 use tessera_common::emis::cost::{CostConstants, pixel_cost};
 use tessera_common::emis::measured::measured_constants;

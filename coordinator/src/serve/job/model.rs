@@ -16,15 +16,15 @@
 mod failures;
 mod index;
 
-pub use index::TileIndex;
 pub use super::spec::{JobSpec, TileSpec};
-pub use tessera_common::driver::{Pass, PassKind};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
 pub(super) use failures::{fail_tile, host_of};
+pub use index::TileIndex;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use tessera_common::driver::{Driver, Step};
+pub use tessera_common::driver::{Pass, PassKind};
 use tessera_common::emis::RestartTotal;
 
 /// A tile that failed this many times fails its job.

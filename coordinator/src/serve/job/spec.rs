@@ -4,8 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 use std::time::Duration;
-use tessera_common::driver::{Budget, EmisSchedule, Shape};
 pub use tessera_common::driver::TileSpec;
+use tessera_common::driver::{Budget, EmisSchedule, Shape};
 use tessera_common::emis::Strategy;
 use tessera_common::film::filter::{Filter, FilterKind};
 use tessera_common::film::{Layout, Rect};

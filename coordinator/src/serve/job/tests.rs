@@ -2,8 +2,8 @@
 //! interleavings of lease, heartbeat, expiry, result and failure events.
 
 use super::leasing::LeaseLifetime;
-use super::model::*;
 use super::model::BarrierAction;
+use super::model::*;
 use proptest::prelude::*;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 

@@ -45,7 +45,10 @@ impl CheckpointHeader {
             return Err(corrupt_checkpoint(name, "not a checkpoint"));
         }
         if word(4)? != FORMAT_VERSION {
-            let why = format!("format version {}, written by another Tessera version (this one reads {FORMAT_VERSION})", word(4)?);
+            let why = format!(
+                "format version {}, written by another Tessera version (this one reads {FORMAT_VERSION})",
+                word(4)?
+            );
             return Err(corrupt_checkpoint(name, &why));
         }
         Ok(CheckpointHeader { flags: word(8)?, width: word(12)?, height: word(16)?, at: 20 })
@@ -472,11 +475,18 @@ mod tests {
     fn checkpoints_round_trip_and_other_versions_and_corrupt_ones_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let blobs = BlobStore::open(dir.path()).unwrap();
-        let mut film = Film::for_filter(2, 1, &tessera_common::film::filter::Filter::new(tessera_common::film::filter::FilterKind::Box));
+        let mut film = Film::for_filter(
+            2,
+            1,
+            &tessera_common::film::filter::Filter::new(tessera_common::film::filter::FilterKind::Box),
+        );
         (film.sum[1], film.count[1], film.non_finite) = ([1.0, 2.0, 3.0], 7, 4);
         let name = blobs.put_checkpoint("job", 1, &film, b"tail").unwrap();
         let (back, trailer) = blobs.get_checkpoint(&name).unwrap();
-        assert_eq!((back.sum, back.count, back.non_finite, trailer), (film.sum.clone(), film.count.clone(), 4, b"tail".to_vec()));
+        assert_eq!(
+            (back.sum, back.count, back.non_finite, trailer),
+            (film.sum.clone(), film.count.clone(), 4, b"tail".to_vec())
+        );
         let path = dir.path().join("checkpoints").join(&name);
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[4] = 9;

@@ -18,8 +18,8 @@
 use crate::serve::job::model::{Changes, Job, JobSpec, JobState, JobsModel, Pass, Tile, TileSpec, TileState};
 use rusqlite::{Connection, OptionalExtension, params};
 use std::path::Path;
-use tessera_common::film::Rect;
 use tessera_common::driver::Driver;
+use tessera_common::film::Rect;
 
 /// Storage failed.
 #[derive(Debug, thiserror::Error)]
@@ -451,19 +451,12 @@ impl Store {
             let worker_failures =
                 serde_json::from_str(&failures).map_err(|e| corrupt(format!("worker_failures: {e}")))?;
             let tiles = self.load_tiles(&id, merged as usize, deadline_ms)?;
-            let gapless = passes.iter().scan(0, |end, p| Some(std::mem::replace(end, p.tiles.end) == p.tiles.start));
-            if passes.last().map_or(0, |p| p.tiles.end) != tiles.len()
-                || merged as usize > tiles.len()
-                || !gapless.clone().all(|ok| ok)
-                || passes.iter().any(|p| p.tiles.is_empty())
-            {
-                return Err(corrupt("tiles do not match passes".into()));
+            if merged as usize > tiles.len() {
+                return Err(corrupt("more tiles merged than planned".into()));
             }
-            let iterations = |range: std::ops::Range<usize>| {
-                let specs = || tiles[range.clone()].iter().map(|t| &t.spec.samples);
-                specs().map(|s| s.start).min().unwrap_or(0)..specs().map(|s| s.end).max().unwrap_or(0)
-            };
-            let driver = Driver::restore(spec.shape(), passes, started.map(|t| t as f64), iterations);
+            let samples = |i: usize| tiles[i].spec.samples.clone();
+            let driver = Driver::restore(spec.shape(), passes, started.map(|t| t as f64), tiles.len(), samples)
+                .map_err(|e| corrupt(format!("tiles do not match passes: {e}")))?;
             let job = Job {
                 id: id.clone(),
                 seq: seq as u64,

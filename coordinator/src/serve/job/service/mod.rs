@@ -418,7 +418,8 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
     super::model::Job {
         id: id.to_string(),
         seq: 0,
-        driver: tessera_common::driver::Driver::restore(spec.shape(), Vec::new(), None, |_| 0..0),
+        driver: tessera_common::driver::Driver::restore(spec.shape(), Vec::new(), None, 0, |_| 0..0)
+            .expect("invariant: no passes tile no tiles"),
         spec,
         state: JobState::Failed,
         tiles: Vec::new(),

@@ -20,25 +20,22 @@
 //! factor (`--correlation-aware`). Use them where light arrives along paths camera paths find
 //! hard (through small openings, from hidden lights); caustics seen directly need merging.
 
-use super::observer::{IterationStart, NoObserver, PathCounters, PrimaryHit, SampleObserver, timed_pixel};
+mod camera;
+
+use super::observer::{IterationStart, NoObserver, PathCounters, SampleObserver};
 use super::path::connections::Connections;
 use super::path::light_cache::{CacheMemory, LightCache};
 use super::path::light_path::{MAX_BIDIR_EDGES, light_path_count};
-use super::path::merge::{MergeConfig, merge, merge_radius_max, path_radius};
+use super::path::merge::{MergeConfig, merge_radius_max, path_radius};
 use super::path::mis::{MergeCounts, SampleCounts};
 use super::path::photon_map::PhotonMap;
-use super::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, light_trace, next_event};
-use super::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
+use super::path::techniques::light_trace;
 use super::{Integrator, PathSettings, TileRequest};
-use crate::bsdf::TransportMode;
 use crate::film::TileAccum;
-use crate::geometry::SurfaceRef;
-use crate::math::{Rgb, max_component};
-use crate::sampler::Sampler;
+use crate::math::Rgb;
 use crate::scene::Scene;
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use rayon::prelude::*;
-use std::cell::Cell;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -207,255 +204,6 @@ impl<O: SampleObserver> Bidir<O> {
             })
             .collect()
     }
-
-    /// One camera path through pixel (x, y): the sum of its weighted contributions and the
-    /// raster position it started from. Its work is added to `counters`.
-    #[allow(clippy::too_many_arguments)]
-    fn camera_path(
-        &self,
-        scene: &Scene,
-        it: &Iteration,
-        x: u32,
-        y: u32,
-        seed: u64,
-        iteration: u32,
-        verts: &mut Vec<PathVertex>,
-        counters: &mut PathCounters,
-    ) -> (Rgb, Vec2) {
-        let cam = &scene.camera;
-        let cache = &it.cache;
-        let pixels = (cam.width * cam.height) as f32;
-        let pixel = y * cam.width + x;
-        let mut sampler = Sampler::for_pixel(seed, pixel, iteration);
-        // until the primary hit is known, any radius will do: no merge can involve the camera ray
-        let mut counts = self.counts(it, pixel, 1.0);
-        let mut radius = 0.0;
-        // a sample of the paths is timed (for costs measured per job), the observer's own
-        // time left out
-        let timed = self.observer.wants_times() && timed_pixel(pixel);
-        let clock = Cell::new(0u64);
-        let path_start = timed.then(Instant::now);
-        let vertices_before = counters.camera_vertices;
-        let mut block_ns = 0u64;
-        let report = Report { observer: &self.observer, pixel, clock: timed.then_some(&clock) };
-        let raster = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-        let mut ray = cam.generate_ray(raster);
-        let mut pdf_dir = pixels * cam.pdf_ray(ray.d).1;
-        let mut beta = Rgb::ONE;
-        let mut eta = 1.0f32;
-        let mut total = Rgb::ZERO;
-        let max_edges = self.max_edges();
-        let connect_scale = if counts.connect > 0.0 { 1.0 / counts.connect } else { 0.0 };
-        verts.clear();
-        verts.push(camera_vertex(scene));
-        loop {
-            let depth = verts.len() as u32;
-            let prev = verts[verts.len() - 1];
-            let Some(hit) = scene.intersect(&ray) else {
-                // ---- escaped: infinite lights ----
-                if !(self.settings.hide_emitters && depth == 1) {
-                    for &li in &scene.infinite_lights {
-                        let radiance = scene.lights[li as usize].eval_infinite(ray.d);
-                        if radiance == Rgb::ZERO {
-                            continue;
-                        }
-                        let env = PathVertex {
-                            p: ray.o + ray.d * (2.0 * scene.bounds_radius),
-                            n_geo: -ray.d,
-                            n_shading: -ray.d,
-                            tangent: Vec3::ZERO,
-                            wo: -ray.d,
-                            beta,
-                            pdf_fwd: pdf_dir,
-                            pdf_rev: 0.0,
-                            pdf_next_event: 0.0,
-                            kind: VertexKind::Light { light: li, at: SurfaceRef::default() },
-                            delta: false,
-                            depth,
-                        };
-                        verts.push(env);
-                        total += emitter_hit(scene, verts, li, radiance, &counts, &report);
-                        verts.pop();
-                    }
-                }
-                break;
-            };
-            let shape = &scene.shapes[hit.shape as usize];
-            let v = PathVertex {
-                p: hit.p,
-                n_geo: hit.n_geo,
-                n_shading: hit.frame.n,
-                tangent: scene.vertex_tangent(&hit),
-                wo: hit.wo,
-                beta,
-                pdf_fwd: solid_angle_to_area(pdf_dir, prev.p, hit.p, hit.n_geo),
-                pdf_rev: 0.0,
-                pdf_next_event: 0.0,
-                kind: VertexKind::Surface { material: shape.material, at: hit.surface() },
-                delta: false,
-                depth,
-            };
-            verts.push(v);
-            counters.camera_vertices += 1;
-            if depth == 1 {
-                let d1 = (hit.p - cam.origin).length();
-                counts = self.counts(it, pixel, d1);
-                radius = path_radius(d1, it.radius_max);
-            }
-            // ---- emitter hit ----
-            if let Some(li) = shape.light {
-                if !(self.settings.hide_emitters && depth == 1) {
-                    let le = area_emission(scene, li, &v);
-                    if le != Rgb::ZERO {
-                        total += emitter_hit(scene, verts, li, le, &counts, &report);
-                    }
-                }
-            }
-            // the denoiser's guides: reported once the primary vertex's BSDF sample is known
-            let primary = |albedo: Rgb| PrimaryHit { pixel, albedo, normal: hit.frame.n, distance: hit.t };
-            if depth >= max_edges {
-                if depth == 1 {
-                    self.observer.on_primary_hit(&primary(Rgb::ZERO));
-                }
-                break;
-            }
-            // drawn in the order they are used, but before the work that comes first: the first
-            // connection's two dependent loads then overlap with the material and next-event
-            // estimation (docs/decisions/0044)
-            let (u_light, u_pos) = (sampler.next_1d(), sampler.next_2d());
-            let connections = self.connections.draw(pixel, &mut sampler);
-            let u_first = (connections > 0).then(|| sampler.next_1d());
-            if let Some(u) = u_first {
-                cache.prefetch_pick(u);
-            }
-            let material = scene.material_at(shape.material, hit.surface(), hit.p);
-            // a vertex without a smooth lobe connects to nothing
-            let smooth = material.has_smooth_lobe();
-            let mut pick = u_first.filter(|_| smooth).and_then(|u| cache.pick(u));
-            if let Some(i) = pick {
-                cache.prefetch_subpath(i);
-            }
-            // ---- next-event estimation ----
-            if smooth {
-                if let Some(w) = next_event(scene, verts, &material, u_light, u_pos, &counts, &report) {
-                    total += w.value;
-                }
-            }
-            // ---- connections to cached light vertices ----
-            let block = timed.then(|| (Instant::now(), clock.get()));
-            let mut tried = 0u64;
-            for k in 0..connections {
-                let this = pick;
-                // the next pick is loaded while this one connects
-                if k + 1 < connections {
-                    let u = sampler.next_1d();
-                    pick = if smooth { cache.pick(u) } else { None };
-                    if let Some(i) = pick {
-                        cache.prefetch_subpath(i);
-                    }
-                }
-                let Some(this) = this else { continue };
-                let light = cache.subpath(this);
-                if depth + light.len() as u32 > max_edges {
-                    continue;
-                }
-                tried += 1;
-                if let Some(w) = connect(scene, verts, &material, light, connect_scale, &counts, &report) {
-                    total += w.value;
-                }
-            }
-            if let Some(block) = block.filter(|_| tried > 0) {
-                let ns = net_ns(block, &clock);
-                block_ns += ns;
-                counters.times.connections += tried;
-                counters.times.connection_ns += ns;
-            }
-            // ---- merging (vcm), never at the primary vertex ----
-            if let Some(m) = &self.merge {
-                // drawn whether or not there is a map, so the samples that follow stay the same
-                let u = sampler.next_1d();
-                let chi = m.mask.at(pixel);
-                if let Some(probe) = &it.probe
-                    && depth >= 2
-                    && u < LightProbe::QUERY_SHARE
-                    && material.has_smooth_lobe()
-                {
-                    // count only, as `merge` counts what it finds
-                    let mut found = 0u64;
-                    probe.query(hit.p, radius, |_, _| found += 1);
-                    counters.merge_queries += 1;
-                    counters.photons_found += found;
-                } else if let Some(photons) = &it.photons
-                    && depth >= 2
-                    && chi > 0.0
-                    && u < chi
-                    && material.has_smooth_lobe()
-                {
-                    let block = timed.then(|| (Instant::now(), clock.get()));
-                    let (value, found) =
-                        merge(scene, verts, &material, cache, photons, radius, chi, &counts, max_edges, &report);
-                    total += value;
-                    counters.merge_queries += 1;
-                    counters.photons_found += found as u64;
-                    if let Some(block) = block {
-                        let (ns, t) = (net_ns(block, &clock), &mut counters.times);
-                        block_ns += ns;
-                        t.queries += 1;
-                        t.photons += found as u64;
-                        t.photons_squared += found as f64 * found as f64;
-                        t.merge_ns += ns;
-                        t.merge_ns_photons += ns as f64 * found as f64;
-                    }
-                }
-            }
-            // ---- continue the camera path ----
-            let frame = hit.frame;
-            let wo = frame.to_local(hit.wo);
-            let (uc, u) = (sampler.next_1d(), sampler.next_2d());
-            let sampled = material.sample(wo, uc, u, TransportMode::Radiance);
-            if depth == 1 {
-                let albedo = sampled.as_ref().map_or(Rgb::ZERO, |bs| bs.weight);
-                self.observer.on_primary_hit(&primary(if albedo.is_finite() { albedo } else { Rgb::ZERO }));
-            }
-            let Some(bs) = sampled else { break };
-            beta *= bs.weight;
-            eta *= bs.eta;
-            // Russian roulette as in Mitsuba's path (the MIS weights still sum to one per path,
-            // so stopping early keeps every technique unbiased)
-            if depth >= self.settings.rr_depth {
-                let q = (max_component(beta) * eta * eta).min(0.95);
-                if sampler.next_1d() >= q {
-                    break;
-                }
-                beta /= q;
-            }
-            let n = verts.len();
-            if n >= 3 {
-                let before = verts[n - 2];
-                verts[n - 2].pdf_rev =
-                    density_at_vertex(if bs.delta { 0.0 } else { material.pdf(bs.wi, wo) }, hit.p, &before, false);
-            }
-            verts[n - 1].delta = bs.delta;
-            pdf_dir = if bs.delta { 0.0 } else { bs.pdf };
-            if beta == Rgb::ZERO || !beta.is_finite() {
-                break;
-            }
-            ray = hit.spawn_ray(frame.to_world(bs.wi));
-        }
-        if let Some(start) = path_start {
-            let t = &mut counters.times;
-            let observer = clock.get();
-            t.camera_vertices += counters.camera_vertices - vertices_before;
-            t.camera_ns += (start.elapsed().as_nanos() as u64).saturating_sub(observer + block_ns);
-            t.observer_ns += observer;
-        }
-        (total, raster)
-    }
-}
-
-/// Nanoseconds since a block's start, less the observer's time in it (`clock` then and now).
-fn net_ns((start, clock_then): (Instant, u64), clock: &Cell<u64>) -> u64 {
-    (start.elapsed().as_nanos() as u64).saturating_sub(clock.get() - clock_then)
 }
 
 impl<O: SampleObserver> Integrator for Bidir<O> {
