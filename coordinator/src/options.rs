@@ -47,6 +47,28 @@ pub struct IntegratorArgs {
     /// connections=per-pixel. The defaults are the ones the measurements support.
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_experiment)]
     pub emis_experiment: Vec<Experiment>,
+    /// The flags that became `--emis-experiment` keys (issue 68): hidden, and refused with
+    /// their new spelling, so that a script using one learns what to write.
+    #[command(flatten)]
+    pub moved: MovedFlags,
+}
+
+/// Hidden flags that moved under `--emis-experiment`; parsing one fails with its new form.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MovedFlags {
+    #[arg(long, hide = true, value_parser = moved("cost-model"))]
+    cost_model: Option<String>,
+    #[arg(long, hide = true, value_parser = moved("moment-outliers"))]
+    moment_outliers: Option<String>,
+    #[arg(long, hide = true, value_parser = moved("image"))]
+    emis_image: Option<String>,
+    #[arg(long, hide = true, value_parser = moved("connections"))]
+    emis_connections: Option<String>,
+}
+
+/// A parser that refuses its value, naming the `--emis-experiment` key it moved to.
+fn moved(key: &'static str) -> impl Fn(&str) -> Result<String, String> + Clone + Send + Sync + 'static {
+    move |value| Err(format!("this flag moved: write --emis-experiment {key}={value}"))
 }
 
 /// A research variant of the EMIS optimiser (`--emis-experiment KEY=VALUE`).
@@ -232,5 +254,21 @@ mod tests {
         assert!(e.contains("shared, each"), "{e}");
         assert!(parse_experiment("merge-ratio=reference").unwrap_err().contains("cost-model, moment-outliers"));
         assert!(parse_experiment("cost-model").unwrap_err().contains("KEY=VALUE"));
+    }
+
+    /// A flag that moved under `--emis-experiment` is refused with its new spelling.
+    #[test]
+    fn a_moved_flag_names_its_new_form() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: IntegratorArgs,
+        }
+        let e = Cli::try_parse_from(["t", "--moment-outliers", "each"]).err().expect("refused").to_string();
+        assert!(e.contains("--emis-experiment moment-outliers=each"), "{e}");
+        let e = Cli::try_parse_from(["t", "--emis-connections", "per-pixel"]).err().expect("refused").to_string();
+        assert!(e.contains("--emis-experiment connections=per-pixel"), "{e}");
+        assert!(Cli::try_parse_from(["t", "--emis-experiment", "image=guided"]).is_ok());
     }
 }
