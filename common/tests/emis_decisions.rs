@@ -9,14 +9,13 @@
 //!
 //! Plus one invariant per extreme: where light paths are essential (caustic-glass) every
 //! update keeps ν > 0; where path tracing wins (veach-mis) the merge mask stays almost empty.
-//! docs/decisions/0018-decision-quality-tests.md (with the former 0027),
-//! docs/decisions/0028-pilot-image-not-denoised.md, docs/decisions/0046-incumbent-margin.md
-//! and the lab note docs/lab/2026-11-29-decision-truth-re-timed.md have the figures.
+//! docs/decisions/0018-decision-quality-tests.md, 0028-pilot-image-not-denoised.md and
+//! 0046-incumbent-margin.md have the figures.
 //! `EMIS_DIAG=1` prints every candidate's prediction beside its truth at each judged update;
 //! `EMIS_OUTLIERS=each` decides with that outlier rule instead of the default;
 //! `EMIS_INCUMBENT_MARGIN=0` (or another scale) with that incumbent margin;
 //! `EMIS_PILOT=path-tracing` with the path-tracing start (the tests judge the bidirectional
-//! pilot's decisions: issue 68 asks that they guard the default pilot, which is not done yet).
+//! pilot's decisions; under that start only one judged update may run).
 //!
 //! Regenerate the truth after a change that alters what candidates render or cost (from the
 //! repository root, release build, an otherwise idle machine; about 45 minutes on 2 cores):

@@ -47,7 +47,7 @@ pub struct IntegratorArgs {
     /// connections=per-pixel. The defaults are the ones the measurements support.
     #[arg(long, value_name = "KEY=VALUE", value_parser = parse_experiment)]
     pub emis_experiment: Vec<Experiment>,
-    /// The flags that became `--emis-experiment` keys (issue 68): hidden, and refused with
+    /// The flags that became `--emis-experiment` keys: hidden, and refused with
     /// their new spelling, so that a script using one learns what to write.
     #[command(flatten)]
     pub moved: MovedFlags,

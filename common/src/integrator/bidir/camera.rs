@@ -8,7 +8,7 @@ use super::{Bidir, Iteration, LightProbe};
 use crate::bsdf::{Material, TransportMode};
 use crate::geometry::{Ray, SurfaceInteraction, SurfaceRef};
 use crate::integrator::observer::{PathCounters, PrimaryHit, SampleObserver, timed_pixel};
-use crate::integrator::path::merge::{merge, path_radius};
+use crate::integrator::path::merge::{MergeConfig, merge, path_radius};
 use crate::integrator::path::mis::SampleCounts;
 use crate::integrator::path::techniques::{Report, area_emission, camera_vertex, connect, emitter_hit, next_event};
 use crate::integrator::path::vertex::{PathVertex, VertexKind, density_at_vertex, solid_angle_to_area};
@@ -32,13 +32,19 @@ struct Walk {
     total: Rgb,
 }
 
-/// What the steps at one surface vertex read.
-struct At<'a, O: SampleObserver> {
+/// What every step of one camera path reads.
+struct PathContext<'a, O: SampleObserver> {
     scene: &'a Scene,
     it: &'a Iteration,
-    material: &'a Material,
-    report: &'a Report<'a, O>,
+    pixel: u32,
+    report: Report<'a, O>,
     timer: &'a PathTimer,
+}
+
+/// What the steps at one surface vertex read: the path's context and the vertex's material.
+struct At<'a, O: SampleObserver> {
+    path: &'a PathContext<'a, O>,
+    material: &'a Material,
 }
 
 /// The timing of one camera path for costs measured per job: a sample of the paths is timed,
@@ -140,13 +146,14 @@ impl<O: SampleObserver> Bidir<O> {
         let mut walk = Walk { ray, pdf_dir, beta: Rgb::ONE, eta: 1.0, counts, radius: 0.0, total: Rgb::ZERO };
         verts.clear();
         verts.push(camera_vertex(scene));
+        let report = Report { observer: &self.observer, pixel, clock: timer.clock() };
+        let path = PathContext { scene, it, pixel, report, timer: &timer };
         loop {
-            let report = Report { observer: &self.observer, pixel, clock: timer.clock() };
             let Some(hit) = scene.intersect(&walk.ray) else {
-                self.escaped(scene, verts, &mut walk, &report);
+                self.escaped(scene, verts, &mut walk, &path.report);
                 break;
             };
-            if !self.at_vertex(scene, it, &hit, pixel, verts, &mut walk, &mut sampler, &timer, counters) {
+            if !self.at_vertex(&path, &hit, verts, &mut walk, &mut sampler, counters) {
                 break;
             }
         }
@@ -188,19 +195,16 @@ impl<O: SampleObserver> Bidir<O> {
     }
 
     /// Everything at the surface vertex `hit`: returns whether the path goes on.
-    #[allow(clippy::too_many_arguments)]
     fn at_vertex(
         &self,
-        scene: &Scene,
-        it: &Iteration,
+        path: &PathContext<O>,
         hit: &SurfaceInteraction,
-        pixel: u32,
         verts: &mut Vec<PathVertex>,
         walk: &mut Walk,
         sampler: &mut Sampler,
-        timer: &PathTimer,
         counters: &mut PathCounters,
     ) -> bool {
+        let (scene, it, pixel, report) = (path.scene, path.it, path.pixel, &path.report);
         let depth = verts.len() as u32;
         let shape = &scene.shapes[hit.shape as usize];
         let v = PathVertex {
@@ -224,14 +228,13 @@ impl<O: SampleObserver> Bidir<O> {
             walk.counts = self.counts(it, pixel, d1);
             walk.radius = path_radius(d1, it.radius_max);
         }
-        let report = Report { observer: &self.observer, pixel, clock: timer.clock() };
         // ---- emitter hit ----
         if let Some(li) = shape.light
             && !(self.settings.hide_emitters && depth == 1)
         {
             let le = area_emission(scene, li, &v);
             if le != Rgb::ZERO {
-                walk.total += emitter_hit(scene, verts, li, le, &walk.counts, &report);
+                walk.total += emitter_hit(scene, verts, li, le, &walk.counts, report);
             }
         }
         // the denoiser's guides: reported once the primary vertex's BSDF sample is known
@@ -259,13 +262,13 @@ impl<O: SampleObserver> Bidir<O> {
             it.cache.prefetch_subpath(i);
         }
         // ---- next-event estimation ----
-        if smooth && let Some(w) = next_event(scene, verts, &material, u_light, u_pos, &walk.counts, &report) {
+        if smooth && let Some(w) = next_event(scene, verts, &material, u_light, u_pos, &walk.counts, report) {
             walk.total += w.value;
         }
-        let at = At { scene, it, material: &material, report: &report, timer };
+        let at = At { path, material: &material };
         self.connect_cached(&at, verts, (connections, pick), walk, sampler, counters);
-        if self.merge.is_some() {
-            walk.total += self.merge_at(&at, hit, pixel, verts, walk, sampler, counters);
+        if let Some(m) = &self.merge {
+            walk.total += self.merge_at(&at, m, hit, verts, walk, sampler, counters);
         }
         // ---- continue the camera path ----
         let frame = hit.frame;
@@ -316,7 +319,8 @@ impl<O: SampleObserver> Bidir<O> {
         sampler: &mut Sampler,
         counters: &mut PathCounters,
     ) {
-        let (cache, material, timer) = (&at.it.cache, at.material, at.timer);
+        let (cache, material, timer) = (&at.path.it.cache, at.material, at.path.timer);
+        let max_edges = self.max_edges();
         let depth = verts.len() as u32 - 1;
         let smooth = material.has_smooth_lobe();
         let connect_scale = if walk.counts.connect > 0.0 { 1.0 / walk.counts.connect } else { 0.0 };
@@ -333,11 +337,13 @@ impl<O: SampleObserver> Bidir<O> {
             }
             let Some(this) = this else { continue };
             let light = cache.subpath(this);
-            if depth + light.len() as u32 > self.max_edges() {
+            if depth + light.len() as u32 > max_edges {
                 continue;
             }
             tried += 1;
-            if let Some(w) = connect(at.scene, verts, material, light, connect_scale, &walk.counts, at.report) {
+            if let Some(w) =
+                connect(at.path.scene, verts, material, light, connect_scale, &walk.counts, &at.path.report)
+            {
                 walk.total += w.value;
             }
         }
@@ -350,15 +356,14 @@ impl<O: SampleObserver> Bidir<O> {
     fn merge_at(
         &self,
         at: &At<O>,
+        m: &MergeConfig,
         hit: &SurfaceInteraction,
-        pixel: u32,
         verts: &[PathVertex],
         walk: &Walk,
         sampler: &mut Sampler,
         counters: &mut PathCounters,
     ) -> Rgb {
-        let (it, material) = (at.it, at.material);
-        let Some(m) = &self.merge else { return Rgb::ZERO };
+        let (it, material, pixel) = (at.path.it, at.material, at.path.pixel);
         let depth = verts.len() as u32 - 1;
         // drawn whether or not there is a map, so the samples that follow stay the same
         let u = sampler.next_1d();
@@ -381,13 +386,23 @@ impl<O: SampleObserver> Bidir<O> {
         if !(chi > 0.0 && u < chi) {
             return Rgb::ZERO;
         }
-        let block = at.timer.block();
+        let block = at.path.timer.block();
         let (max_edges, cache) = (self.max_edges(), &it.cache);
-        let (value, found) =
-            merge(at.scene, verts, material, cache, photons, walk.radius, chi, &walk.counts, max_edges, at.report);
+        let (value, found) = merge(
+            at.path.scene,
+            verts,
+            material,
+            cache,
+            photons,
+            walk.radius,
+            chi,
+            &walk.counts,
+            max_edges,
+            &at.path.report,
+        );
         counters.merge_queries += 1;
         counters.photons_found += found as u64;
-        at.timer.merge(block, found, counters);
+        at.path.timer.merge(block, found, counters);
         value
     }
 }

@@ -478,8 +478,8 @@ fn print_feeding(reports: &[IngestReport; 2], t: &TileTimes) {
     );
 }
 
-/// Fewest pt tiles the ingest target is judged on (an 8K frame has 8160;
-/// docs/lab/2026-12-06-pt-ingest-at-8k-not-regressed.md).
+/// Fewest pt tiles the ingest target is judged on: fewer tiles are few large frames, whose
+/// rate says little of the per-tile cost (an 8K frame has 8160).
 const TARGET_MIN_TILES: u64 = 1000;
 
 /// Seconds one thread needs for a 64×64 pt tile at `spp`.
