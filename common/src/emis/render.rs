@@ -445,9 +445,8 @@ pub fn render_emis(
                 // path tracing has settled: trace a pixel's iterations of several calls in a
                 // row, each call still summed alone and added in order, as a farm adds them
                 let tenth = driver.expected_total(done, ms_since(start)).saturating_sub(driver.kept_from()) / 10;
-                let group = traced_together(done..calls[calls.len() - 1].end, pixels, tenth);
-                debug_assert_eq!(group[..], calls[next..next + group.len()], "the driver's cut");
-                pool.install(|| path_trace(scene, settings, opts.seed, &group, &stop, |a| film.merge_tile(&a)));
+                let group = &calls[next..next + traced_together(&calls[next..], pixels, tenth)];
+                pool.install(|| path_trace(scene, settings, opts.seed, group, &stop, |a| film.merge_tile(&a)));
                 group.len()
             } else {
                 let (accum, pilot) = pool.install(|| {

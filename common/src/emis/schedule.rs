@@ -45,23 +45,17 @@ pub fn final_call(iterations: Range<u32>, nu: f32, pixels: u64) -> Range<u32> {
 /// pixel, so some 150 MB.
 const TRACED_TOGETHER_PIXELS: u64 = 1 << 22;
 
-/// The first calls of [`final_call`]'s cut of the path-tracing `iterations` that a local
+/// How many of the first path-tracing `calls` (consecutive, as the job driver cut them) a local
 /// render traces together, a pixel's iterations of all of them in a row: at least one call,
 /// then as many as fit in `target` iterations and [`TRACED_TOGETHER_PIXELS`]. Short calls
 /// traced alone give a pixel few samples in a row, which runs slower than `pt`'s passes
 /// (docs/decisions/0004-calls-and-recording-of-an-emis-render.md); grouping them keeps the cut,
 /// so a farm's tiles still sum the same numbers.
-pub fn traced_together(iterations: Range<u32>, pixels: u64, target: u32) -> Vec<Range<u32>> {
+pub fn traced_together(calls: &[Range<u32>], pixels: u64, target: u32) -> usize {
     let most = (TRACED_TOGETHER_PIXELS / pixels.max(1)).max(1) as usize;
-    let start = iterations.start;
-    let mut group = Vec::new();
-    for call in calls(iterations, |r| final_call(r, 0.0, pixels)) {
-        if !group.is_empty() && (call.end - start > target || group.len() == most) {
-            break;
-        }
-        group.push(call);
-    }
-    group
+    let Some(start) = calls.first().map(|c| c.start) else { return 0 };
+    let fits = calls.iter().take(most).take_while(|c| c.end - start <= target).count();
+    fits.max(1)
 }
 
 /// Whether a collecting call over `iterations` records moments when the current strategy
@@ -222,14 +216,15 @@ mod tests {
     fn calls_traced_together_are_the_cut_s_first_calls_within_the_target() {
         let small = 256 * 256;
         let cut = calls(4..1200, |r| final_call(r, 0.0, small));
-        let group = traced_together(4..1200, small, 200);
-        assert_eq!(group, cut[..group.len()], "a prefix of the cut");
-        assert!(group.len() >= 2 && group.last().unwrap().end - 4 <= 200, "{group:?}");
-        assert!(cut[group.len()].end - 4 > 200, "as many as fit: {group:?}");
+        let n = traced_together(&cut, small, 200);
+        assert!(n >= 2 && cut[n - 1].end - 4 <= 200, "{:?}", &cut[..n]);
+        assert!(cut[n].end - 4 > 200, "as many as fit: {:?}", &cut[..n]);
         // one call even when it alone passes the target; the memory bound at 1080p
-        assert_eq!(traced_together(4..1200, small, 3), [cut[0].clone()]);
-        assert_eq!(traced_together(0..4000, 1920 * 1080, 400), [0..8, 8..16]);
-        assert_eq!(traced_together(10..12, small, 100), [10..12]);
+        assert_eq!(traced_together(&cut, small, 3), 1);
+        let hd = calls(0..4000, |r| final_call(r, 0.0, 1920 * 1080));
+        assert_eq!(&hd[..traced_together(&hd, 1920 * 1080, 400)], [0..8, 8..16]);
+        assert_eq!(traced_together(&[10..12], small, 100), 1);
+        assert_eq!(traced_together(&[], small, 100), 0);
     }
 
     #[test]
