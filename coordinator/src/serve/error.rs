@@ -110,9 +110,11 @@ impl From<ServiceError> for ApiError {
             ServiceError::Io(io) if io.kind() == std::io::ErrorKind::StorageFull => ErrorCode::InsufficientStorage,
             ServiceError::NotFound(_) | ServiceError::Transition(TransitionError::UnknownJob(_)) => ErrorCode::NotFound,
             ServiceError::FailedPrecondition(_)
-            | ServiceError::Transition(TransitionError::Unfinished { .. } | TransitionError::NotOptimizing(_)) => {
-                ErrorCode::FailedPrecondition
-            }
+            | ServiceError::Transition(
+                TransitionError::Unfinished { .. }
+                | TransitionError::NotOptimizing(_)
+                | TransitionError::NotFinishing(_),
+            ) => ErrorCode::FailedPrecondition,
             ServiceError::Transition(TransitionError::DuplicateJob(_))
             | ServiceError::Corrupt { .. }
             | ServiceError::Emis { .. }

@@ -66,7 +66,7 @@ fn state_to_pb(s: JobState) -> pb::JobState {
         JobState::Queued => pb::JobState::Queued,
         JobState::Pilot => pb::JobState::Pilot,
         JobState::Optimizing => pb::JobState::Optimizing,
-        JobState::Final => pb::JobState::Final,
+        JobState::Final | JobState::Finishing => pb::JobState::Final,
         JobState::Done => pb::JobState::Done,
         JobState::Failed => pb::JobState::Failed,
         JobState::Cancelled => pb::JobState::Cancelled,

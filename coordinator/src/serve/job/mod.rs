@@ -5,7 +5,6 @@
 //! notifications ([`service`]).
 
 pub mod emis;
-pub mod leasing;
 pub mod model;
 pub mod retention;
 pub mod service;

@@ -1,8 +1,9 @@
 //! The pure, synchronous job state machine: jobs, each wrapping the job driver that
 //! `tessera render` runs (`tessera_common::driver`: passes, barriers, pacing, EMIS updates),
 //! with its tiles, leases with epochs, exactly-once acceptance of results and the canonical
-//! merge order. No IO and no clock: every method that depends on time takes `now_ms`. The service layer (`service.rs`) persists the
-//! [`Changes`] each call reports before it answers anyone.
+//! merge order. No IO and no clock: time is passed in. Everything that changes a job goes
+//! through [`JobsModel::apply`] (see `event.rs`): the service persists the [`Changes`] it
+//! reports before it answers anyone, then runs the [`Effect`]s it asks for.
 //!
 //! Tile life: `Queued → Leased{worker, deadline} → Accepted → Merged`. A lease that expires,
 //! a refused (invalid) result or a reported failure send the tile back to `Queued` with its
@@ -10,22 +11,27 @@
 //! merged in tile-index order only (the driver's order, see `tessera_common::driver`), so `tiles[..merged]` is exactly the
 //! set of tiles in the film.
 //!
-//! Job life: `Queued → (Pilot → Optimizing →) Final → Done | Failed | Cancelled`, then
-//! removed (by a client or the retention sweep, see `retention.rs`).
+//! Job life: `Queued → (Pilot → Optimizing →) Final → Finishing → Done | Failed | Cancelled`,
+//! then removed (by a client or the retention sweep, see `retention.rs`).
 
+#[cfg(test)]
+pub(crate) mod calls;
+mod event;
 mod failures;
 mod index;
+mod leasing;
 
 pub use super::spec::{JobSpec, TileSpec};
+pub use event::{Effect, Effects, Event};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
-pub(super) use failures::{fail_tile, host_of};
+use failures::{fail_tile, host_of};
 pub use index::TileIndex;
+pub use leasing::LeaseLifetime;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use tessera_common::driver::{Driver, Step};
 pub use tessera_common::driver::{Pass, PassKind};
-use tessera_common::emis::RestartTotal;
 
 /// A tile that failed this many times fails its job.
 pub const MAX_TILE_FAILURES: u32 = 6;
@@ -42,6 +48,8 @@ pub enum JobState {
     Optimizing,
     /// Rendering final passes.
     Final,
+    /// Every tile is merged; the outputs are being written (shown as `final`).
+    Finishing,
     /// Finished; the result is stored.
     Done,
     /// Stopped by an error.
@@ -56,13 +64,23 @@ impl JobState {
         matches!(self, JobState::Done | JobState::Failed | JobState::Cancelled)
     }
 
-    /// Lowercase name, as in JSON.
+    /// The state clients see: a finishing job is `final` (see [`JobState::as_str`]).
+    pub fn shown(self) -> JobState {
+        match self {
+            JobState::Finishing => JobState::Final,
+            s => s,
+        }
+    }
+
+    /// Lowercase name, as in JSON. A finishing job is `final` to clients and in storage:
+    /// until its outputs are committed it is a final pass whose tiles are all done (after a
+    /// restart it merges them again and finishes then).
     pub fn as_str(self) -> &'static str {
         match self {
             JobState::Queued => "queued",
             JobState::Pilot => "pilot",
             JobState::Optimizing => "optimizing",
-            JobState::Final => "final",
+            JobState::Final | JobState::Finishing => "final",
             JobState::Done => "done",
             JobState::Failed => "failed",
             JobState::Cancelled => "cancelled",
@@ -210,7 +228,7 @@ impl Job {
         range
     }
 
-    fn finish(&mut self, state: JobState, now_ms: u64) {
+    pub(super) fn finish(&mut self, state: JobState, now_ms: u64) {
         self.state = state;
         self.finished_ms = Some(now_ms);
     }
@@ -220,7 +238,7 @@ impl Job {
 /// changed (the job's own row is always saved for a job listed here).
 pub type Changes = BTreeMap<String, BTreeSet<usize>>;
 
-pub(super) fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
+fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
     let set = changes.entry(job.to_string()).or_default();
     if let Some(t) = tile {
         set.insert(t);
@@ -232,10 +250,9 @@ pub(super) fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
 pub enum BarrierAction {
     /// It planned the next pass.
     NextPass,
-    /// EMIS: an update is due. The service runs the optimiser on the merged image and
-    /// moments, then calls [`JobsModel::optimized`].
+    /// EMIS: an update is due ([`Effect::Optimize`]).
     Optimize,
-    /// Nothing left: the job is done.
+    /// Nothing left: the job is finishing ([`Effect::WriteOutputs`]).
     Finish,
 }
 
@@ -276,6 +293,9 @@ pub enum TransitionError {
     /// The job is not waiting for the optimiser.
     #[error("job {0} is not at an optimisation barrier")]
     NotOptimizing(String),
+    /// The job is not waiting for its outputs (it was cancelled meanwhile).
+    #[error("job {0} is not finishing")]
+    NotFinishing(String),
     /// Only a finished, failed or cancelled job can be removed.
     #[error("job {job} is {state}: cancel it before deleting it")]
     Unfinished {
@@ -298,7 +318,7 @@ pub struct JobsModel {
 
 impl JobsModel {
     /// Adds a job and plans its first pass.
-    pub fn submit(&mut self, id: &str, spec: JobSpec, now_ms: u64) -> Result<Changes, TransitionError> {
+    fn submit(&mut self, id: &str, spec: JobSpec, now_ms: u64) -> Result<Changes, TransitionError> {
         if self.jobs.contains_key(id) {
             return Err(TransitionError::DuplicateJob(id.to_string()));
         }
@@ -334,7 +354,7 @@ impl JobsModel {
     }
 
     /// The tile a lease refers to, if that lease is still the current one.
-    pub(super) fn current_tile(&mut self, worker: &str, lease: &LeaseRef) -> Option<(&mut Job, usize)> {
+    fn current_tile(&mut self, worker: &str, lease: &LeaseRef) -> Option<(&mut Job, usize)> {
         let job = self.jobs.get_mut(&lease.job)?;
         if job.state.is_terminal() {
             return None;
@@ -346,7 +366,7 @@ impl JobsModel {
 
     /// Applies an uploaded result. `verdict` is the validation of its buffers (done outside
     /// this model): `Err(reason)` refuses it. Only the current lease's first result counts.
-    pub fn result(
+    fn result(
         &mut self,
         worker: &str,
         lease: &LeaseRef,
@@ -380,7 +400,7 @@ impl JobsModel {
     }
 
     /// A worker could not render its lease: re-queue the tile and count the failure.
-    pub fn report_failure(&mut self, worker: &str, lease: &LeaseRef, message: &str, now_ms: u64) -> Changes {
+    fn report_failure(&mut self, worker: &str, lease: &LeaseRef, message: &str, now_ms: u64) -> Changes {
         let mut changes = Changes::new();
         let host = host_of(&self.hosts, worker).to_string();
         if let Some((job, i)) = self.current_tile(worker, lease) {
@@ -391,7 +411,7 @@ impl JobsModel {
     }
 
     /// Tiles of `job` that can be merged now: accepted ones right after the merged prefix.
-    pub fn mergeable(&self, job: &str) -> Range<usize> {
+    fn mergeable(&self, job: &str) -> Range<usize> {
         let Some(j) = self.jobs.get(job) else { return 0..0 };
         if j.state.is_terminal() {
             return j.merged..j.merged;
@@ -403,21 +423,9 @@ impl JobsModel {
         j.merged..end
     }
 
-    /// The iterations `job` would run in all if its EMIS update at `now_ms` restarted it (see
-    /// [`Driver::restart_total`]).
-    pub fn restart_total(&self, job: &str, now_ms: u64) -> RestartTotal {
-        self.jobs.get(job).map_or(RestartTotal::Time(u32::MAX), |j| j.driver.restart_total(now_ms as f64))
-    }
-
-    /// Whether [`JobsModel::merged`] with `upto` at `now_ms` would finish `job` (without doing it).
-    pub fn merge_finishes(&self, job: &str, upto: usize, now_ms: u64) -> bool {
-        let Some(j) = self.jobs.get(job) else { return false };
-        !j.state.is_terminal() && upto >= j.tiles.len() && j.driver.finishes(now_ms as f64)
-    }
-
     /// Records that the service merged `tiles[..upto]` into the film, and runs the barrier of
     /// every pass that is now complete. Returns the barrier's action when one ran.
-    pub fn merged(&mut self, job: &str, upto: usize, now_ms: u64) -> (Option<BarrierAction>, Changes) {
+    fn merged(&mut self, job: &str, upto: usize, now_ms: u64) -> (Option<BarrierAction>, Changes) {
         let mut changes = Changes::new();
         let Some(j) = self.jobs.get_mut(job) else { return (None, changes) };
         for i in j.merged..upto.min(j.tiles.len()) {
@@ -441,8 +449,9 @@ impl JobsModel {
                 j.state = JobState::Optimizing;
                 BarrierAction::Optimize
             }
+            // the outputs are written outside the model, then [`JobsModel::outputs_written`]
             Step::Finish => {
-                j.finish(JobState::Done, now_ms);
+                j.state = JobState::Finishing;
                 BarrierAction::Finish
             }
         };
@@ -453,7 +462,7 @@ impl JobsModel {
     /// barrier: plan the next pass with it. `restart`: the update ended a path-tracing start,
     /// and the service cleared the film, so a sample budget counts from the next pass on.
     /// `collect`: the EMIS state still collects moments (path tracing may have settled).
-    pub fn optimized(
+    fn optimized(
         &mut self,
         job: &str,
         restart: bool,
@@ -473,8 +482,20 @@ impl JobsModel {
         Ok(changes)
     }
 
+    /// A finishing job's outputs are stored: it is done.
+    fn outputs_written(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
+        if j.state != JobState::Finishing {
+            return Err(TransitionError::NotFinishing(job.to_string()));
+        }
+        j.finish(JobState::Done, now_ms);
+        let mut changes = Changes::new();
+        touch(&mut changes, job, None);
+        Ok(changes)
+    }
+
     /// Cancels a job: no more tiles are handed out and results in flight become stale.
-    pub fn cancel(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+    fn cancel(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         let mut changes = Changes::new();
         if !j.state.is_terminal() {
@@ -485,7 +506,7 @@ impl JobsModel {
     }
 
     /// Marks a job failed (for errors found outside the model, e.g. storage).
-    pub fn fail(&mut self, job: &str, error: String, now_ms: u64) -> Changes {
+    fn fail(&mut self, job: &str, error: String, now_ms: u64) -> Changes {
         let mut changes = Changes::new();
         if let Some(j) = self.jobs.get_mut(job).filter(|j| !j.state.is_terminal()) {
             j.error = Some(error);

@@ -38,6 +38,7 @@ impl JobsModel {
 
 #[cfg(test)]
 mod tests {
+    use super::super::model::calls::Calls;
     use super::super::model::{JobSpec, JobState};
     use super::*;
     use tessera_common::settings::IntegratorName;

@@ -12,7 +12,7 @@ use tessera_common::settings::{RenderSettings, Renderer};
 
 pub(super) const CFG: ServiceConfig = ServiceConfig {
     lease_timeout_ms: 10_000,
-    lease_lifetime: super::leasing::LeaseLifetime { floor_ms: 60_000, factor: 8.0 },
+    lease_lifetime: super::model::LeaseLifetime { floor_ms: 60_000, factor: 8.0 },
     checkpoint_interval_ms: 3_600_000,
     scene_limits: tessera_common::scene::SceneLimits::DEFAULT,
     work_limits: tessera_common::settings::WorkLimits::DEFAULT,

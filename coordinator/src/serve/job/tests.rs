@@ -1,8 +1,9 @@
 //! Tests of the pure job state machine: every transition, plus property tests over arbitrary
 //! interleavings of lease, heartbeat, expiry, result and failure events.
 
-use super::leasing::LeaseLifetime;
 use super::model::BarrierAction;
+use super::model::LeaseLifetime;
+use super::model::calls::Calls;
 use super::model::*;
 use proptest::prelude::*;
 use tessera_common::settings::{IntegratorName, RenderSettings};
@@ -350,7 +351,7 @@ fn progress_never_falls_when_an_update_discards_a_path_tracing_start() {
 
 /// One step of a random schedule.
 #[derive(Clone, Debug)]
-enum Event {
+enum Action {
     Lease { worker: usize, max: usize },
     Heartbeat { worker: usize },
     Advance { ms: u64 },
@@ -358,14 +359,14 @@ enum Event {
     Fail { pick: usize },
 }
 
-fn event() -> impl Strategy<Value = Event> {
+fn action() -> impl Strategy<Value = Action> {
     prop_oneof![
-        (0..3usize, 1..4usize).prop_map(|(worker, max)| Event::Lease { worker, max }),
-        (0..3usize).prop_map(|worker| Event::Heartbeat { worker }),
-        (0..1500u64).prop_map(|ms| Event::Advance { ms }),
+        (0..3usize, 1..4usize).prop_map(|(worker, max)| Action::Lease { worker, max }),
+        (0..3usize).prop_map(|worker| Action::Heartbeat { worker }),
+        (0..1500u64).prop_map(|ms| Action::Advance { ms }),
         (0..64usize, proptest::bool::weighted(0.85), proptest::bool::weighted(0.05))
-            .prop_map(|(pick, valid, wrong_worker)| Event::Result { pick, valid, wrong_worker }),
-        (0..64usize).prop_map(|pick| Event::Fail { pick }),
+            .prop_map(|(pick, valid, wrong_worker)| Action::Result { pick, valid, wrong_worker }),
+        (0..64usize).prop_map(|pick| Action::Fail { pick }),
     ]
 }
 
@@ -379,7 +380,7 @@ proptest! {
     // long: one scenario, its interleaving then the invariants over the state it left
     #[test]
     fn exactly_once_merge_under_arbitrary_interleavings(
-        events in proptest::collection::vec(event(), 1..120),
+        events in proptest::collection::vec(action(), 1..120),
         full_frame in any::<bool>(),
         emis in any::<bool>(),
         spp in 1..6u32,
@@ -398,23 +399,23 @@ proptest! {
         let mut epochs: Vec<u64> = m.jobs["j"].tiles.iter().map(|t| t.epoch).collect();
         for e in events {
             match e {
-                Event::Lease { worker, max } => {
+                Action::Lease { worker, max } => {
                     let w = format!("w{worker}");
                     let blocked = m.jobs["j"].is_blocklisted(&w);
                     let (leases, _) = m.lease(&w, max, now, TTL);
                     prop_assert!(!blocked || leases.is_empty(), "a blocklisted worker got a lease");
                     issued.extend(leases.into_iter().map(|l| (w.clone(), l)));
                 }
-                Event::Heartbeat { worker } => {
+                Action::Heartbeat { worker } => {
                     let w = format!("w{worker}");
                     let mine: Vec<LeaseRef> = issued.iter().filter(|(x, _)| *x == w).map(|(_, l)| l.clone()).collect();
                     m.heartbeat(&w, &mine, now, TTL);
                 }
-                Event::Advance { ms } => {
+                Action::Advance { ms } => {
                     now += ms;
                     m.expire(now, &LONG);
                 }
-                Event::Result { pick, valid, wrong_worker } if !issued.is_empty() => {
+                Action::Result { pick, valid, wrong_worker } if !issued.is_empty() => {
                     let (w, l) = issued[pick % issued.len()].clone();
                     let w = if wrong_worker { "intruder".to_string() } else { w };
                     let verdict = if valid { Ok(()) } else { Err("bad".to_string()) };
@@ -424,7 +425,7 @@ proptest! {
                         prop_assert_eq!(m.jobs["j"].tiles[l.tile].epoch, l.epoch);
                     }
                 }
-                Event::Fail { pick } if !issued.is_empty() => {
+                Action::Fail { pick } if !issued.is_empty() => {
                     let (w, l) = issued[pick % issued.len()].clone();
                     m.report_failure(&w, &l, "failed", now);
                 }
@@ -509,4 +510,31 @@ fn leases_stay_within_a_window_past_the_merge_frontier() {
     assert_eq!(m.jobs["a"].merged, window.len());
     let next = m.lease("w2", 1, 60, TTL).0;
     assert_eq!(next.iter().map(|l| l.tile).collect::<Vec<_>>(), [window.len()], "the window moved");
+}
+
+/// The last merge leaves a job finishing, not done: nothing more is leased, the outputs are
+/// asked for, and only their arrival ends the job; a job cancelled meanwhile refuses them.
+#[test]
+fn last_merge_asks_for_outputs_and_only_their_arrival_ends_the_job() {
+    let mut m = JobsModel::default();
+    for id in ["a", "b"] {
+        m.submit(id, spec(IntegratorName::Pt, 1, 0), 0).unwrap();
+        let (leases, _) = m.lease("w", 4, 1, TTL);
+        assert_eq!(leases.len(), 4);
+        for l in leases.iter().rev() {
+            let e = m.apply(Event::Result { worker: "w", lease: l, verdict: Ok(()) }, 2).unwrap();
+            let merge = (l.tile == 0).then(|| Effect::Merge { job: id.into(), tiles: 0..4 });
+            assert_eq!(e.then.get(1), merge.as_ref(), "only the frontier's tile makes tiles mergeable");
+        }
+        let e = m.apply(Event::Merged { job: id, upto: 4 }, 3).unwrap();
+        assert_eq!(e.then, vec![Effect::WriteOutputs { job: id.into(), upto: 4 }]);
+        assert_eq!((m.jobs[id].state, m.jobs[id].state.as_str()), (JobState::Finishing, "final"));
+    }
+    assert!(m.lease("w", 4, 4, TTL).0.is_empty());
+    let e = m.apply(Event::OutputsWritten { job: "a" }, 5).unwrap();
+    assert_eq!(e.then, vec![Effect::Ended { job: "a".into(), state: JobState::Done }]);
+    assert_eq!(m.jobs["a"].finished_ms, Some(5));
+    let e = m.apply(Event::Cancel { job: "b" }, 5).unwrap();
+    assert_eq!(e.then, vec![Effect::Ended { job: "b".into(), state: JobState::Cancelled }]);
+    assert_eq!(m.apply(Event::OutputsWritten { job: "b" }, 6), Err(TransitionError::NotFinishing("b".into())));
 }

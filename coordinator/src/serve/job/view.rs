@@ -94,28 +94,27 @@ fn sample_progress(job: &Job) -> f64 {
 impl JobView {
     /// The view of `job` at `now_ms`.
     pub fn of(job: &Job, now_ms: u64) -> JobView {
+        let state = job.state.shown();
         let elapsed_s = job.started_ms().map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
-        let progress = match (job.state, job.spec.settings.time_s) {
+        let progress = match (state, job.spec.settings.time_s) {
             (JobState::Done, _) => 1.0,
             (_, Some(budget)) => (elapsed_s.unwrap_or(0.0) / budget).clamp(0.0, 0.99),
             _ => sample_progress(job),
         };
         let eta_s = match elapsed_s {
-            Some(e) if !job.state.is_terminal() && progress > 0.0 => Some(e * (1.0 - progress) / progress),
+            Some(e) if !state.is_terminal() && progress > 0.0 => Some(e * (1.0 - progress) / progress),
             _ => None,
         };
         let current_pass =
             job.passes().iter().position(|p| p.tiles.end > job.merged).unwrap_or(job.passes().len().max(1) - 1);
-        let phase = match job.state {
-            JobState::Queued | JobState::Done | JobState::Failed | JobState::Cancelled => {
-                job.state.as_str().to_string()
-            }
+        let phase = match state {
+            JobState::Queued | JobState::Done | JobState::Failed | JobState::Cancelled => state.as_str().to_string(),
             s => format!("{} pass {}/{}", s.as_str(), current_pass + 1, job.passes().len()),
         };
         JobView {
             id: job.id.clone(),
             name: job.spec.name.clone(),
-            state: job.state,
+            state,
             phase,
             progress,
             tiles_done: job.tiles_done() as u64,

@@ -46,6 +46,7 @@ pub(super) fn reclaim(conn: &Connection) -> rusqlite::Result<u64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::serve::job::model::calls::Calls;
     use crate::serve::job::model::{Changes, JobSpec, JobsModel};
     use crate::serve::storage::Extra;
     use crate::serve::storage::sqlite::{Batch, Store};

@@ -2,6 +2,7 @@
 //! a finished job's outputs come back with their digests.
 
 use super::*;
+use crate::serve::job::model::calls::Calls;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
 #[test]

@@ -44,7 +44,7 @@ fn host_key(host: &str) -> String {
 
 /// The host `worker` registered from, as the model knows it: a worker of unknown address
 /// counts as a host of its own.
-pub(in crate::serve::job) fn host_of<'a>(hosts: &'a BTreeMap<String, String>, worker: &'a str) -> &'a str {
+pub(super) fn host_of<'a>(hosts: &'a BTreeMap<String, String>, worker: &'a str) -> &'a str {
     hosts.get(worker).map_or(worker, String::as_str)
 }
 
@@ -53,13 +53,7 @@ pub(in crate::serve::job) fn host_of<'a>(hosts: &'a BTreeMap<String, String>, wo
 /// [`HOST_BLOCKLIST_AFTER_FAILURES`]); fails the job when the tile has failed
 /// [`MAX_TILE_FAILURES`] times and the job's failures, at most [`MAX_FAILURES_PER_HOST`] a
 /// host, add up to as many.
-pub(in crate::serve::job) fn fail_tile(
-    job: &mut Job,
-    i: usize,
-    (worker, host): (&str, &str),
-    reason: &str,
-    now_ms: u64,
-) {
+pub(super) fn fail_tile(job: &mut Job, i: usize, (worker, host): (&str, &str), reason: &str, now_ms: u64) {
     job.set_tile_state(i, TileState::Queued);
     let tile = &mut job.tiles[i];
     tile.epoch += 1;

@@ -1,12 +1,12 @@
 //! The operator's log of what happens to jobs and workers: passes planned, EMIS decisions,
-//! jobs the model failed, workers lost and back, leases expired. Each line is one `tracing`
+//! workers lost and back, leases expired. Each line is one `tracing`
 //! event with `job_id` or `worker_id` as a field (a JSON log has them at the top level); the
 //! service calls these after the transition, since the pure model logs nothing.
 //!
 //! Submission, completion, cancellation, failures found by the service and registrations are
 //! logged where they happen (`submit`, `merge`, `query`, `leases`).
 
-use crate::serve::job::model::{Changes, JobState, JobsModel, PassKind};
+use crate::serve::job::model::{JobsModel, PassKind};
 use crate::serve::storage::WorkerRow;
 use std::collections::HashMap;
 use tessera_common::emis::UpdateReport;
@@ -48,17 +48,6 @@ pub(super) fn emis_update(job: &str, report: &UpdateReport) {
         update_ms = (report.denoise_ms + report.optimize_ms).round() as u64,
         "emis update"
     );
-}
-
-/// Jobs in `changes` that the model failed at `now_ms` (a tile failed too often): the model
-/// records the error, the service says so.
-pub(super) fn jobs_failed(model: &JobsModel, changes: &Changes, now_ms: u64) {
-    for job in changes.keys() {
-        let Some(j) = model.jobs.get(job) else { continue };
-        if j.state == JobState::Failed && j.finished_ms == Some(now_ms) {
-            tracing::error!(job_id = %job, error = j.error.as_deref().unwrap_or(""), "job failed");
-        }
-    }
 }
 
 /// Workers whose silence reached `timeout_ms` between the expiry runs at `previous_ms` and

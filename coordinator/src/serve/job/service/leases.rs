@@ -5,7 +5,7 @@
 use super::runtime::JobRuntime;
 use super::{Inner, JobService, LeaseGrant, ServiceError};
 use crate::serve::job::emis::MergeSpec;
-use crate::serve::job::model::{LeaseRef, ResultOutcome, TileSpec, TileState};
+use crate::serve::job::model::{Effects, Event, LeaseRef, ResultOutcome, TileSpec, TileState};
 use crate::serve::job::validate::ResultClaim;
 use crate::serve::storage::{Extra, WorkerRow};
 use std::collections::HashMap;
@@ -54,25 +54,16 @@ impl JobService {
         let row =
             WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256, host };
         self.commits.store().save_worker(&row)?;
-        let orphaned = inner.model.leases_of(&row.id);
-        let mut changes = crate::serve::job::model::Changes::new();
-        for lease in &orphaned {
-            for (job, tiles) in inner.model.report_failure(&row.id, lease, "the worker restarted", now_ms) {
-                changes.entry(job).or_default().extend(tiles);
-            }
-        }
-        if !changes.is_empty() {
-            tracing::warn!(worker_id = %row.id, tiles = orphaned.len(), "worker restarted: its leases are re-queued");
-            super::events::jobs_failed(&inner.model, &changes, now_ms);
-            self.persist(&mut inner, &changes, &[])?;
+        let orphaned = inner.model.leases_of(&row.id).len();
+        let effects = inner.model.apply(Event::Register { worker: &row.id, host: row.host.clone() }, now_ms)?;
+        if !effects.changes.is_empty() {
+            tracing::warn!(worker_id = %row.id, tiles = orphaned, "worker restarted: its leases are re-queued");
+            self.persist(&mut inner, &effects.changes, &[])?;
             self.sync(&inner)?;
+            self.ended(&mut inner, &effects);
             self.work.notify_waiters();
         }
         tracing::info!(worker_id = %row.id, name = %row.name, threads, host = row.host.as_deref().unwrap_or("-"), "worker registered");
-        match &row.host {
-            Some(host) => inner.model.hosts.insert(row.id.clone(), host.clone()),
-            None => inner.model.hosts.remove(&row.id),
-        };
         inner.workers.insert(row.id.clone(), row.clone());
         Ok(row.id)
     }
@@ -95,7 +86,7 @@ impl JobService {
         for id in silent {
             self.commits.store().delete_worker(&id)?;
             inner.workers.remove(&id);
-            inner.model.hosts.remove(&id);
+            inner.model.apply(Event::Forget { worker: &id }, now_ms)?;
             tracing::info!(worker_id = %id, "worker forgotten: silent too long");
         }
         Ok(())
@@ -123,17 +114,19 @@ impl JobService {
             // no new work below the reserve: what is leased already may still come back
             return Ok(Vec::new());
         }
-        let (leases, changes) = inner.model.lease(worker, max_tiles, now_ms, self.cfg.lease_timeout_ms);
-        if let Some(l) = leases.first() {
+        let ttl_ms = self.cfg.lease_timeout_ms;
+        let effects = inner.model.apply(Event::Lease { worker, max_tiles, ttl_ms }, now_ms)?;
+        if let Some(l) = effects.leases().next() {
             // an EMIS job's state is made at its first lease (all leases are of one job)
-            inner.emis(&l.job);
+            inner.emis(&l.job.clone());
         }
-        self.persist(&mut inner, &changes, &[])?;
+        self.persist(&mut inner, &effects.changes, &[])?;
         let state = &mut *inner;
-        let grants = leases
-            .into_iter()
+        let grants = effects
+            .leases()
+            .cloned()
             .map(|l| {
-                let job = &state.model.jobs[&l.job];
+                let job = state.model.jobs.get(&l.job).expect("invariant: a job just leased from exists");
                 let runtime = state.jobs.get_mut(&l.job);
                 let strategy = match runtime {
                     Some(JobRuntime { emis: Some(e), masks, .. }) => {
@@ -179,7 +172,8 @@ impl JobService {
     pub fn heartbeat(&self, worker: &str, leases: &[LeaseRef], now_ms: u64) -> Result<Vec<LeaseRef>, ServiceError> {
         let mut inner = self.lock();
         self.seen(&mut inner, worker, now_ms)?;
-        Ok(inner.model.heartbeat(worker, leases, now_ms, self.cfg.lease_timeout_ms))
+        let ttl_ms = self.cfg.lease_timeout_ms;
+        Ok(inner.model.apply(Event::Heartbeat { worker, leases, ttl_ms }, now_ms)?.leases().cloned().collect())
     }
 
     /// Re-queues expired leases, and fails the jobs no live worker may serve any more. The
@@ -192,18 +186,17 @@ impl JobService {
         let previous_ms = inner.last_expiry_ms;
         let late = now_ms.saturating_sub(previous_ms.unwrap_or(now_ms)).saturating_sub(period);
         inner.last_expiry_ms = Some(now_ms);
-        if late > period.max(self.cfg.lease_timeout_ms / 4) {
-            tracing::warn!(stalled_ms = late, "the coordinator stalled: leases postponed");
-            inner.model.postpone_leases(late);
+        let stalled_ms = if late > period.max(self.cfg.lease_timeout_ms / 4) { late } else { 0 };
+        if stalled_ms > 0 {
+            tracing::warn!(stalled_ms, "the coordinator stalled: leases postponed");
             inner.counters.stalls += 1;
         }
         let held: HashMap<String, usize> =
             inner.model.lease_counts().into_iter().map(|(w, n)| (w.to_string(), n)).collect();
-        let mut changes = inner.model.expire(now_ms, &self.cfg.lease_lifetime);
-        if !changes.is_empty() {
-            inner.counters.leases_expired += changes.values().map(|t| t.len() as u64).sum::<u64>();
+        let mut effects = inner.model.apply(Event::Expire { lifetime: self.cfg.lease_lifetime, stalled_ms }, now_ms)?;
+        if !effects.changes.is_empty() {
+            inner.counters.leases_expired += effects.changes.values().map(|t| t.len() as u64).sum::<u64>();
             super::events::leases_expired(&held, &inner.model.lease_counts());
-            super::events::jobs_failed(&inner.model, &changes, now_ms);
         }
         if let Some(previous_ms) = previous_ms {
             super::events::workers_lost(inner.workers.values(), &held, previous_ms, now_ms, self.cfg.lease_timeout_ms);
@@ -215,21 +208,14 @@ impl JobService {
             .filter(|w| now_ms.saturating_sub(w.last_seen_ms) <= self.cfg.lease_timeout_ms)
             .map(|w| w.id.clone())
             .collect();
-        let (stranded, failed) =
-            inner.model.fail_stranded(&live.iter().map(String::as_str).collect::<Vec<_>>(), now_ms);
-        for job in &stranded {
-            let error = inner.model.jobs[job].error.as_deref().unwrap_or("");
-            tracing::error!(job_id = %job, error, "job failed");
+        if !live.is_empty() {
+            let live: Vec<&str> = live.iter().map(String::as_str).collect();
+            effects.extend(inner.model.apply(Event::Strand { live: &live }, now_ms)?);
         }
-        for (j, tiles) in failed {
-            changes.entry(j).or_default().extend(tiles);
-        }
-        if !changes.is_empty() {
-            self.persist(&mut inner, &changes, &[])?;
+        if !effects.changes.is_empty() {
+            self.persist(&mut inner, &effects.changes, &[])?;
             self.sync(&inner)?;
-            for job in &stranded {
-                inner.job(job).end();
-            }
+            self.ended(&mut inner, &effects);
             self.work.notify_waiters();
         }
         Ok(())
@@ -249,11 +235,11 @@ impl JobService {
         now_ms: u64,
     ) -> Result<(), ServiceError> {
         let mut inner = self.lock();
-        let changes = inner.model.report_failure(worker, lease, message, now_ms);
+        let effects = inner.model.apply(Event::Failure { worker, lease, message }, now_ms)?;
         tracing::warn!(job_id = %lease.job, tile = lease.tile, worker_id = worker, message, "worker reported a failure");
-        super::events::jobs_failed(&inner.model, &changes, now_ms);
-        self.persist(&mut inner, &changes, &[])?;
+        self.persist(&mut inner, &effects.changes, &[])?;
         self.sync(&inner)?;
+        self.ended(&mut inner, &effects);
         self.work.notify_waiters();
         Ok(())
     }
@@ -281,7 +267,7 @@ impl JobService {
             // not current: let the model say whether it is a duplicate or stale; a duplicate
             // is answered once the acceptance it repeats is saved (it may still be queued)
             let mut inner = self.lock();
-            let (outcome, _) = inner.model.result(worker, lease, Ok(()), now_ms);
+            let outcome = result_outcome(&inner.model.apply(Event::Result { worker, lease, verdict: Ok(()) }, now_ms)?);
             inner.counters.results_ignored += 1;
             let ticket = inner.ticket;
             drop(inner);
@@ -310,8 +296,9 @@ impl JobService {
             }
         }
         let mut inner = self.lock();
-        let (outcome, changes) =
-            inner.model.result(worker, lease, verdict.as_ref().map(|_| ()).map_err(Clone::clone), now_ms);
+        let event = Event::Result { worker, lease, verdict: verdict.as_ref().map(|_| ()).map_err(Clone::clone) };
+        let effects = inner.model.apply(event, now_ms)?;
+        let outcome = result_outcome(&effects);
         if in_file && outcome == ResultOutcome::Stale {
             // the tile moved on to another epoch meanwhile: nothing names this file (a
             // duplicate's file is the accepted one's, the same bytes under the same name)
@@ -327,7 +314,7 @@ impl JobService {
                 runtime.result_files |= in_file;
                 // the result and its acceptance are committed in the merge's transaction: one
                 // commit (one fsync) per result, still before anyone is answered
-                let finishing = self.merge_ready(&mut inner, &lease.job, now_ms, changes, stored.into_iter().collect());
+                let finishing = self.merge_ready(&mut inner, effects, stored.into_iter().collect(), now_ms);
                 let ticket = inner.ticket;
                 drop(inner);
                 // outside the lock, so that concurrent uploads share a commit
@@ -338,16 +325,16 @@ impl JobService {
                 Ok(outcome)
             }
             (ResultOutcome::Refused(reason), _) => {
-                self.persist(&mut inner, &changes, &[])?;
+                self.persist(&mut inner, &effects.changes, &[])?;
                 self.sync(&inner)?;
                 inner.counters.results_refused += 1;
                 tracing::warn!(job_id = %lease.job, tile = lease.tile, worker_id = worker, reason = %reason, "tile result refused");
-                super::events::jobs_failed(&inner.model, &changes, now_ms);
+                self.ended(&mut inner, &effects);
                 self.work.notify_waiters();
                 Err(ServiceError::InvalidResult(reason.clone()))
             }
             _ => {
-                self.persist(&mut inner, &changes, &[])?;
+                self.persist(&mut inner, &effects.changes, &[])?;
                 self.sync(&inner)?;
                 inner.counters.results_ignored += 1;
                 Ok(outcome)
@@ -356,7 +343,11 @@ impl JobService {
     }
 }
 
-/// A kept identity is a short printable id and a secret long enough not to be guessed.
+/// What became of a result ([`Event::Result`] always says).
+fn result_outcome(effects: &Effects) -> ResultOutcome {
+    effects.outcome().cloned().expect("invariant: a result event has an outcome")
+}
+
 /// The host a peer address stands for: an IPv4 address, or an IPv6 /64 (one host's share of
 /// addresses), as the connection limits count peers.
 fn host_of_address(ip: std::net::IpAddr) -> String {
@@ -383,6 +374,7 @@ fn check_registration(name: &str, threads: u32) -> Result<(), ServiceError> {
     Ok(())
 }
 
+/// A kept identity is a short printable id and a secret long enough not to be guessed.
 fn check_identity(id: &str, secret: &str) -> Result<(), ServiceError> {
     let printable = |s: &str| s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
     if id.is_empty() || id.len() > 64 || !printable(id) {

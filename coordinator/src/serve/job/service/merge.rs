@@ -7,9 +7,11 @@ use super::runtime::{CheckpointState, HeldResult};
 use super::{Inner, JobService, ServiceError};
 use crate::output::{Outputs, PngEffort, Provenance};
 use crate::serve::job::emis::EmisJob;
-use crate::serve::job::model::{BarrierAction, Changes, JobSpec, TileSpec};
+use crate::serve::job::model::{Changes, Effect, Effects, Event, JobSpec, TileSpec};
 use crate::serve::job::validate::{ResultClaim, validate_result};
 use crate::serve::storage::{Extra, OutputDigests};
+use std::ops::Range;
+use tessera_common::emis::RestartTotal;
 use tessera_common::film::Film;
 use tessera_common::film::filter::Filter;
 
@@ -59,18 +61,23 @@ impl JobService {
         Ok((accum, pilot))
     }
 
-    /// The update at an EMIS barrier: optimise on the merged film and moments, then plan the
-    /// next pass with the new strategy. Committed with a checkpoint of both, so a restart
-    /// resumes after the update (or, if it stopped before, runs it again identically).
-    pub(super) fn optimize(&self, inner: &mut Inner, job: &str, now_ms: u64) -> Result<(), ServiceError> {
-        let iterations = inner.model.jobs[job].spp_merged();
-        let restart_total = inner.model.restart_total(job, now_ms);
-        let filter = Filter::new(inner.model.jobs[job].spec.filter);
+    /// The update at an EMIS barrier ([`Effect::Optimize`]): optimise on the merged film and
+    /// moments, then plan the next pass with the new strategy. Committed with a checkpoint of
+    /// both, so a restart resumes after the update (or, if it stopped before, runs it again
+    /// identically).
+    pub(super) fn optimize(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        iterations: u32,
+        restart_total: RestartTotal,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
+        let filter = inner.model.jobs.get(job).map(|j| Filter::new(j.spec.filter));
         inner.emis(job);
         let runtime = inner.job(job);
-        let (Some(film), Some(emis)) = (runtime.film.as_mut(), runtime.emis.as_mut()) else {
-            let changes = inner.model.fail(job, "the EMIS state of this job is missing".into(), now_ms);
-            return self.persist(inner, &changes, &[]);
+        let (Some(film), Some(emis), Some(filter)) = (runtime.film.as_mut(), runtime.emis.as_mut(), filter) else {
+            return self.fail_locked(inner, job, "the EMIS state of this job is missing", now_ms);
         };
         let span = tracing::info_span!("emis_update", job_id = %job, iterations);
         let restarted = span.in_scope(|| emis.update(film, iterations, restart_total));
@@ -83,12 +90,17 @@ impl JobService {
             *film = Film::for_filter(film.width, film.height, &filter);
         }
         let (nu, collect) = (emis.state.strategy.nu, emis.state.collecting());
-        let changes = inner.model.optimized(job, restarted, nu, collect, now_ms)?;
-        super::events::pass_planned(&inner.model, job);
-        let upto = inner.model.jobs[job].merged;
-        self.checkpoint(inner, job, upto, &changes, Vec::new(), now_ms)?;
-        self.work.notify_waiters();
+        let effects = inner.model.apply(Event::Optimized { job, restart: restarted, nu, collect }, now_ms)?;
+        let upto = inner.model.jobs.get(job).map_or(0, |j| j.merged);
+        self.checkpoint(inner, job, upto, &effects.changes, Vec::new(), now_ms)?;
+        self.pass_planned(inner, job);
         Ok(())
+    }
+
+    /// [`Effect::PassPlanned`]: its tiles are queued for the workers.
+    fn pass_planned(&self, inner: &Inner, job: &str) {
+        super::events::pass_planned(&inner.model, job);
+        self.work.notify_waiters();
     }
 
     /// Writes a checkpoint of the job's film (and EMIS state) holding `tiles[..upto]` and
@@ -130,86 +142,100 @@ impl JobService {
         Ok(())
     }
 
-    /// Merges the accepted tiles that are next in order, runs barriers, checkpoints. `pending`
-    /// and `extras` (not yet persisted: the accepted result that made tiles mergeable) are
-    /// committed in the same transaction as the merge.
+    /// Runs the [`Effect::Merge`] among `effects` (of a result or a resume): merges those
+    /// tiles into the film, then runs the barrier, checkpoints and what the barrier asks for.
+    /// `effects`' changes and `extras` (not yet persisted: the accepted result that made tiles
+    /// mergeable) are committed in the same transaction as the merge. A finishing job's
+    /// outputs are written by the caller, without the lock ([`JobService::finish`]).
     pub(super) fn merge_ready(
         &self,
         inner: &mut Inner,
-        job: &str,
-        now_ms: u64,
-        pending: Changes,
+        effects: Effects,
         extras: Vec<Extra>,
+        now_ms: u64,
     ) -> Result<Option<Finishing>, ServiceError> {
-        let range = inner.model.mergeable(job);
-        if range.is_empty() {
+        let Effects { changes: pending, then } = effects;
+        let Some((job, range)) = then.into_iter().find_map(|e| match e {
+            Effect::Merge { job, tiles } => Some((job, tiles)),
+            _ => None,
+        }) else {
             return self.persist(inner, &pending, &extras).map(|()| None);
+        };
+        let Some(film) = self.merge_into_film(inner, &job, range.clone(), &pending, &extras, now_ms)? else {
+            return Ok(None);
+        };
+        inner.counters.tiles_merged += range.len() as u64;
+        let mut merged = Effects { changes: pending, then: Vec::new() };
+        merged.extend(inner.model.apply(Event::Merged { job: &job, upto: range.end }, now_ms)?);
+        if let Some(Effect::WriteOutputs { upto, .. }) = merged.then.first() {
+            // encoding a frame's outputs takes seconds for big films: `finish` does it without
+            // the lock; the accepted result is committed now
+            let upto = *upto;
+            self.persist(inner, &merged.changes, &extras)?;
+            let spec = inner.model.jobs.get(&job).map(|j| j.spec.clone()).expect("invariant: a finishing job exists");
+            let emis = inner.job(&job).emis.take();
+            return Ok(Some(Finishing { job, spec, film, upto, now_ms, emis }));
         }
-        // a queued job holds no film: it is made when the job's first tiles merge
+        inner.job(&job).film = Some(film);
+        self.after_merge(inner, &job, merged, extras, now_ms)?;
+        Ok(None)
+    }
+
+    /// Merges `range` into the job's film (made at its first merge: a queued job holds none).
+    /// A result that cannot be read back or absorbed fails its job, since no retry can merge
+    /// it (`None`, with `pending` and `extras` committed).
+    fn merge_into_film(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        range: Range<usize>,
+        pending: &Changes,
+        extras: &[Extra],
+        now_ms: u64,
+    ) -> Result<Option<Film>, ServiceError> {
         let mut film = match inner.job(job).film.take() {
             Some(film) => film,
             None => {
-                let spec = &inner.model.jobs[job].spec;
+                let spec = &inner.model.jobs.get(job).expect("invariant: a merging job exists").spec;
                 Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter))
             }
         };
-        if let Err(e) = self.merge_range(inner, job, range.clone(), &mut film) {
-            // a result that cannot be read back or absorbed fails its job, since no retry can
-            // merge it (and `merge_range` may have merged part of the range then)
-            inner.job(job).film = Some(film);
-            self.persist(inner, &pending, &extras)?;
-            if !matches!(e, ServiceError::Corrupt { .. } | ServiceError::Emis { .. }) {
-                return Err(e);
-            }
-            self.fail_locked(inner, job, &format!("cannot merge its results: {e}"), now_ms)?;
-            return Ok(None);
-        }
-        inner.counters.tiles_merged += range.len() as u64;
-        if inner.model.merge_finishes(job, range.end, now_ms) {
-            // encoding a frame's outputs takes seconds for big films: `finish` does it without
-            // the lock; the accepted result is committed now
-            self.persist(inner, &pending, &extras)?;
-            let spec = inner.model.jobs[job].spec.clone();
-            let emis = inner.job(job).emis.take();
-            return Ok(Some(Finishing { job: job.to_string(), spec, film, upto: range.end, now_ms, emis }));
-        }
+        let Err(e) = self.merge_range(inner, job, range, &mut film) else { return Ok(Some(film)) };
+        // `merge_range` may have merged part of the range
         inner.job(job).film = Some(film);
-        let (action, mut changes) = inner.model.merged(job, range.end, now_ms);
-        for (j, tiles) in pending {
-            changes.entry(j).or_default().extend(tiles);
+        self.persist(inner, pending, extras)?;
+        if !matches!(e, ServiceError::Corrupt { .. } | ServiceError::Emis { .. }) {
+            return Err(e);
         }
-        self.after_merge(inner, job, action, &changes, extras, now_ms)?;
+        self.fail_locked(inner, job, &format!("cannot merge its results: {e}"), now_ms)?;
         Ok(None)
     }
 
     /// Commits a merge that did not finish the job (with a checkpoint when one is due or a
-    /// pass ended) and runs its barrier: the next pass, or an EMIS update.
+    /// pass ended) and runs what its barrier asks for: the next pass, or an EMIS update.
     fn after_merge(
         &self,
         inner: &mut Inner,
         job: &str,
-        action: Option<BarrierAction>,
-        changes: &Changes,
+        merged: Effects,
         extras: Vec<Extra>,
         now_ms: u64,
     ) -> Result<(), ServiceError> {
-        let upto = inner.model.jobs[job].merged;
+        let upto = inner.model.jobs.get(job).map_or(0, |j| j.merged);
         // a job's first merge (after submission or a restart) starts its checkpoint clock
         let last = *inner.job(job).checkpoint.get_or_insert(CheckpointState { at_ms: now_ms, cost_ms: 0 });
         let interval = self.cfg.checkpoint_interval_ms.max(last.cost_ms.saturating_mul(CHECKPOINT_SPACING));
         let due = now_ms.saturating_sub(last.at_ms) >= interval;
-        match action {
-            // `merge_finishes` answered this before the merge was committed
-            Some(BarrierAction::Finish) => unreachable!("invariant: a finishing merge returns before its barrier"),
-            Some(BarrierAction::NextPass) => {
-                super::events::pass_planned(&inner.model, job);
+        let changes = &merged.changes;
+        match merged.then.first() {
+            Some(Effect::PassPlanned { .. }) => {
                 self.checkpoint(inner, job, upto, changes, extras, now_ms)?;
-                self.work.notify_waiters();
+                self.pass_planned(inner, job);
             }
             // the update is committed with its own checkpoint of the new strategy
-            Some(BarrierAction::Optimize) => {
+            Some(&Effect::Optimize { iterations, restart_total, .. }) => {
                 self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?;
-                if let Err(e) = self.optimize(inner, job, now_ms) {
+                if let Err(e) = self.optimize(inner, job, iterations, restart_total, now_ms) {
                     if e.is_storage() {
                         return Err(e);
                     }
@@ -217,7 +243,7 @@ impl JobService {
                     self.fail_locked(inner, job, &format!("EMIS update failed: {e}"), now_ms)?;
                 }
             }
-            None => self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?,
+            _ => self.checkpoint_or_persist(inner, job, upto, changes, extras, now_ms, due)?,
         }
         Ok(())
     }
@@ -251,21 +277,17 @@ impl JobService {
             Err(e) => return self.fail_job(&f.job, &format!("cannot write its outputs: {e}"), f.now_ms),
         };
         let mut inner = self.lock();
-        let (action, changes) = inner.model.merged(&f.job, f.upto, f.now_ms);
-        if action == Some(BarrierAction::Finish) {
-            self.record_outputs(&mut inner, &f.job, outputs, f.upto, &changes, Vec::new(), f.emis)?;
-        } else {
+        match inner.model.apply(Event::OutputsWritten { job: &f.job }, f.now_ms) {
+            Ok(effects) => self.record_outputs(&mut inner, &f.job, outputs, f.upto, &effects.changes, f.emis)?,
             // cancelled (or cancelled and deleted) while the outputs were written: nothing will
             // name them
-            self.persist(&mut inner, &changes, &[])?;
-            self.remove_unused_blobs(&inner, outputs.all().cloned().collect());
+            Err(_) => self.remove_unused_blobs(&inner, outputs.all().cloned().collect()),
         }
         self.sync(&inner)
     }
 
     /// Commits a finished job's outputs (they replace its checkpoint: a finished film is never
-    /// read again) with `changes` and `extras`; keeps the EMIS decisions for status views.
-    #[allow(clippy::too_many_arguments)]
+    /// read again) with `changes`; keeps the EMIS decisions for status views.
     fn record_outputs(
         &self,
         inner: &mut Inner,
@@ -273,11 +295,10 @@ impl JobService {
         outputs: OutputDigests,
         upto: usize,
         changes: &Changes,
-        mut extras: Vec<Extra>,
         emis: Option<EmisJob>,
     ) -> Result<(), ServiceError> {
         let old = inner.job(job).files.checkpoint.clone();
-        extras.push(Extra::Outputs { job: job.to_string(), outputs: outputs.clone(), merged: upto });
+        let extras = [Extra::Outputs { job: job.to_string(), outputs: outputs.clone(), merged: upto }];
         self.persist(inner, changes, &extras)?;
         let runtime = inner.job(job);
         runtime.emis = emis;
@@ -296,7 +317,7 @@ impl JobService {
                 tracing::warn!(job_id = %job, error = %e, "cannot remove the result files of a finished job");
             }
         }
-        let j = &inner.model.jobs[job];
+        let Some(j) = inner.model.jobs.get(job) else { return Ok(()) };
         tracing::info!(
             job_id = %job,
             tiles = j.tiles.len(),
@@ -351,12 +372,12 @@ impl JobService {
     /// An accepted result read back from the database (after a restart). The payload is the
     /// image sums of the tile's rectangle followed by the EMIS pilot data, if any.
     fn stored_result(&self, inner: &Inner, job: &str, i: usize) -> Result<HeldResult, ServiceError> {
-        let j = &inner.model.jobs[job];
-        let t = &j.tiles[i];
         let corrupt = |why: &str| ServiceError::Corrupt {
             what: format!("stored result of job {job} tile {i}"),
             message: why.into(),
         };
+        let j = inner.model.jobs.get(job).ok_or_else(|| corrupt("the job is gone"))?;
+        let t = j.tiles.get(i).ok_or_else(|| corrupt("no such tile"))?;
         let (non_finite, bytes) = match self.commits.store().load_result(job, i, t.epoch)? {
             Some(r) => r,
             // a large result is a file, not a row (docs/decisions/0009-results-in-the-database.md)

@@ -22,8 +22,10 @@ mod submit;
 mod upload;
 
 use super::emis::{EmisJob, TileStrategy};
-pub use super::leasing::LeaseLifetime;
-use super::model::{Changes, JobSpec, JobState, JobsModel, LeaseRef, TileSpec, TransitionError};
+pub use super::model::LeaseLifetime;
+use super::model::{
+    Changes, Effect, Effects, Event, JobSpec, JobState, JobsModel, LeaseRef, TileSpec, TransitionError,
+};
 use crate::serve::storage::commit::{Committer, Ticket};
 use crate::serve::storage::disk::{Disk, Space};
 use crate::serve::storage::{BlobStore, Extra, Store, StoreError, WorkerRow, sqlite::Batch};
@@ -343,29 +345,45 @@ impl JobService {
 
     /// [`JobService::fail_job`] under the lock (committed with the caller's next wait).
     fn fail_locked(&self, inner: &mut Inner, job: &str, error: &str, now_ms: u64) -> Result<(), ServiceError> {
-        tracing::error!(job_id = %job, %error, "job failed");
-        let changes = inner.model.fail(job, error.to_string(), now_ms);
-        self.persist(inner, &changes, &[])?;
-        if let Some(r) = inner.jobs.get_mut(job) {
-            r.end();
-        }
-        self.work.notify_waiters();
+        let effects = inner.model.apply(Event::Fail { job, error: error.to_string() }, now_ms)?;
+        self.persist(inner, &effects.changes, &[])?;
+        self.ended(inner, &effects);
         Ok(())
     }
 
+    /// Frees what the jobs that `effects` ended held (a done job's outputs are recorded by
+    /// [`JobService::finish`]), says why the failed ones failed, and wakes the workers waiting
+    /// for work, which may now go to other jobs.
+    fn ended(&self, inner: &mut Inner, effects: &Effects) {
+        let mut any = false;
+        for (job, state) in effects.ended() {
+            if state == JobState::Failed {
+                let error = inner.model.jobs.get(job).and_then(|j| j.error.as_deref()).unwrap_or("");
+                tracing::error!(job_id = %job, error, "job failed");
+            }
+            if state != JobState::Done {
+                inner.job(job).end();
+            }
+            any = true;
+        }
+        if any {
+            self.work.notify_waiters();
+        }
+    }
+
     /// Brings a job loaded from storage to where it stopped: merges the tiles accepted after
-    /// its checkpoint and runs an update it stopped before.
+    /// its checkpoint (an update must see the whole pass: merging the pass's last tile runs its
+    /// barrier, and the update, again), or runs the update it stopped before.
     fn resume(&self, id: &str, now_ms: u64) -> Result<(), ServiceError> {
-        // accepted tiles after the checkpoint first: an update must see the whole pass
-        // (merging the pass's last tile runs its barrier, and the update, again)
-        let finishing = self.merge_ready(&mut self.lock(), id, now_ms, Changes::new(), Vec::new())?;
+        let mut inner = self.lock();
+        let effects = inner.model.apply(Event::Resume { job: id }, now_ms)?;
+        if let Some(Effect::Optimize { iterations, restart_total, .. }) = effects.then.first() {
+            return self.optimize(&mut inner, id, *iterations, *restart_total, now_ms);
+        }
+        let finishing = self.merge_ready(&mut inner, effects, Vec::new(), now_ms)?;
+        drop(inner);
         if let Some(f) = finishing {
             self.finish(f)?;
-        }
-        if self.lock().model.jobs[id].state == JobState::Optimizing {
-            // stopped between a barrier and its update, with the pass in the checkpoint: run
-            // the update now
-            self.optimize(&mut self.lock(), id, now_ms)?;
         }
         Ok(())
     }

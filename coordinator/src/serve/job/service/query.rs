@@ -2,7 +2,7 @@
 //! outputs, blobs, the workers' list and the figures behind `/metrics`.
 
 use super::{Counters, Inner, JobService, ServiceError};
-use crate::serve::job::model::JobState;
+use crate::serve::job::model::{Event, JobState};
 use crate::serve::job::view::{JobView, WorkerView};
 use std::collections::BTreeMap;
 
@@ -61,7 +61,8 @@ pub struct Metrics {
 impl JobService {
     /// A job's view with its EMIS decisions (kept after the job ends).
     pub(super) fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
-        let mut view = JobView::of(&inner.model.jobs[job], now_ms);
+        let j = inner.model.jobs.get(job).expect("invariant: callers check the job exists");
+        let mut view = JobView::of(j, now_ms);
         view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
         view
     }
@@ -70,10 +71,10 @@ impl JobService {
     pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         self.disk.make_room();
         let mut inner = self.lock();
-        let changes = inner.model.cancel(job, now_ms).map_err(super::retention::refused)?;
-        self.persist(&mut inner, &changes, &[])?;
+        let effects = inner.model.apply(Event::Cancel { job }, now_ms).map_err(super::retention::refused)?;
+        self.persist(&mut inner, &effects.changes, &[])?;
         self.sync(&inner)?;
-        inner.job(job).end();
+        self.ended(&mut inner, &effects);
         tracing::info!(job_id = %job, "job cancelled");
         Ok(self.view(&inner, job, now_ms))
     }

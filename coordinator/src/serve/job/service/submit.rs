@@ -4,7 +4,7 @@
 
 use super::upload::BundleUpload;
 use super::{Bundle, JobService, ServiceError};
-use crate::serve::job::model::JobSpec;
+use crate::serve::job::model::{Event, JobSpec};
 use crate::serve::job::spec::TILE_SIZE;
 use crate::serve::job::view::JobView;
 use std::path::Path;
@@ -75,7 +75,7 @@ impl JobService {
         };
         let id = uuid::Uuid::new_v4().to_string();
         let mut inner = self.lock();
-        let changes = inner.model.submit(&id, spec.clone(), now_ms)?;
+        let changes = inner.model.apply(Event::Submit { id: &id, spec: spec.clone() }, now_ms)?.changes;
         drop(pin);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;

@@ -3,7 +3,7 @@
 //! and its lifetime (heartbeats that go on without a result, bounded by what the job's tiles
 //! measurably take), plus the postponement of every lease when the coordinator stalled.
 
-use super::model::{
+use super::{
     BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, host_of,
     touch,
 };
@@ -11,7 +11,7 @@ use super::model::{
 /// How long a lease may be held, heartbeats or not: `factor` times what the tile should take at
 /// the slowest rate measured for its job, never less than `floor_ms`, doubled at each earlier
 /// failure of the tile (so a tile that is merely slow everywhere gets there, and a tile that
-/// never returns fails its job after [`super::model::MAX_TILE_FAILURES`] bounded attempts).
+/// never returns fails its job after [`super::MAX_TILE_FAILURES`] bounded attempts).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LeaseLifetime {
     /// The least lifetime, also the lifetime before anything was measured.
@@ -33,7 +33,13 @@ impl LeaseLifetime {
 impl JobsModel {
     /// Leases up to `max_tiles` queued tiles of the most urgent job `worker` may render
     /// (highest priority, then oldest). Full-frame jobs hand out one tile at a time.
-    pub fn lease(&mut self, worker: &str, max_tiles: usize, now_ms: u64, ttl_ms: u64) -> (Vec<LeaseRef>, Changes) {
+    pub(super) fn lease(
+        &mut self,
+        worker: &str,
+        max_tiles: usize,
+        now_ms: u64,
+        ttl_ms: u64,
+    ) -> (Vec<LeaseRef>, Changes) {
         let mut changes = Changes::new();
         let host = host_of(&self.hosts, worker);
         let candidate = self
@@ -70,7 +76,7 @@ impl JobsModel {
     /// Extends `worker`'s current leases among `leases` to `now_ms + ttl_ms`; returns those
     /// that are not current any more. Deadlines are not persisted (see `service.rs`), so this
     /// reports no changes.
-    pub fn heartbeat(&mut self, worker: &str, leases: &[LeaseRef], now_ms: u64, ttl_ms: u64) -> Vec<LeaseRef> {
+    pub(super) fn heartbeat(&mut self, worker: &str, leases: &[LeaseRef], now_ms: u64, ttl_ms: u64) -> Vec<LeaseRef> {
         let mut lost = Vec::new();
         for lease in leases {
             match self.current_tile(worker, lease) {
@@ -89,7 +95,7 @@ impl JobsModel {
     /// lease whose deadline has passed, and every lease held past its lifetime (see
     /// [`LeaseLifetime`]) however often it was extended: its worker is told so at its next
     /// heartbeat and abandons the tile.
-    pub fn expire(&mut self, now_ms: u64, lifetime: &LeaseLifetime) -> Changes {
+    pub(super) fn expire(&mut self, now_ms: u64, lifetime: &LeaseLifetime) -> Changes {
         let mut changes = Changes::new();
         let hosts = &self.hosts;
         for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
@@ -113,7 +119,7 @@ impl JobsModel {
 
     /// Fails the jobs with work left whose every live worker (`live`, not empty) is
     /// blocklisted for them: nobody would ever render them. Returns the failed jobs.
-    pub fn fail_stranded(&mut self, live: &[&str], now_ms: u64) -> (Vec<String>, Changes) {
+    pub(super) fn fail_stranded(&mut self, live: &[&str], now_ms: u64) -> (Vec<String>, Changes) {
         let mut changes = Changes::new();
         let stranded: Vec<String> = self
             .jobs
@@ -141,7 +147,7 @@ impl JobsModel {
 
     /// The coordinator itself stalled for `by_ms` (its timer ran that late): nobody could
     /// heartbeat or upload meanwhile, so every lease's clock moves on by as much.
-    pub fn postpone_leases(&mut self, by_ms: u64) {
+    pub(super) fn postpone_leases(&mut self, by_ms: u64) {
         for job in self.jobs.values_mut().filter(|j| !j.state.is_terminal()) {
             for &i in &job.index.leased {
                 if let TileState::Leased { deadline_ms, since_ms, .. } = &mut job.tiles[i].state {
