@@ -26,6 +26,38 @@ pub enum OutputError {
     },
 }
 
+/// Where a render's files go, from the path a user gave (`-o`): the EXR, with the PNG preview
+/// and, for EMIS, the strategy PNG and JSON report beside it. A `.png` path names the preview
+/// and the EXR goes beside it with `.exr`, so that no file overwrites another.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OutputPaths {
+    /// The EXR.
+    pub exr: PathBuf,
+    /// The sRGB preview.
+    pub png: PathBuf,
+    /// EMIS: the strategy PNG.
+    pub strategy_png: PathBuf,
+    /// EMIS: the report.
+    pub emis_json: PathBuf,
+}
+
+impl OutputPaths {
+    /// The files for `-o path`.
+    pub fn new(path: &Path) -> OutputPaths {
+        let is_png = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        let (exr, png) = match is_png {
+            true => (path.with_extension("exr"), path.to_path_buf()),
+            false => (path.to_path_buf(), path.with_extension("png")),
+        };
+        OutputPaths {
+            strategy_png: exr.with_extension("strategy.png"),
+            emis_json: exr.with_extension("emis.json"),
+            exr,
+            png,
+        }
+    }
+}
+
 fn write_error(path: &Path, e: impl std::fmt::Display) -> OutputError {
     OutputError::Write { path: path.to_path_buf(), message: e.to_string() }
 }
@@ -164,18 +196,17 @@ impl<'a> Outputs<'a> {
         Some(serde_json::to_string_pretty(&report).expect("invariant: a JSON value serialises"))
     }
 
-    /// Writes everything beside `exr`: the EXR, `NAME.png` and, for EMIS,
-    /// `NAME.strategy.png` and `NAME.emis.json`.
-    pub fn write_all(&self, exr: &Path, integrator: &str, iterations: u32) -> Result<(), OutputError> {
-        if let Some(dir) = exr.parent().filter(|d| !d.as_os_str().is_empty()) {
+    /// Writes everything to `paths`: the EXR, the PNG and, for EMIS, the strategy PNG and the
+    /// report.
+    pub fn write_all(&self, paths: &OutputPaths, integrator: &str, iterations: u32) -> Result<(), OutputError> {
+        if let Some(dir) = paths.exr.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| write_error(dir, e))?;
         }
-        self.write_exr(exr)?;
-        self.write_png(&exr.with_extension("png"), PngEffort::Default)?;
-        self.write_strategy_png(&exr.with_extension("strategy.png"), PngEffort::Default)?;
+        self.write_exr(&paths.exr)?;
+        self.write_png(&paths.png, PngEffort::Default)?;
+        self.write_strategy_png(&paths.strategy_png, PngEffort::Default)?;
         if let Some(text) = self.emis_report_text(integrator, iterations) {
-            let path = exr.with_extension("emis.json");
-            std::fs::write(&path, text).map_err(|e| write_error(&path, e))?;
+            std::fs::write(&paths.emis_json, text).map_err(|e| write_error(&paths.emis_json, e))?;
         }
         Ok(())
     }
@@ -232,4 +263,22 @@ fn strategy_map(rgb: &[[f32; 3]], mask: &[f32]) -> Vec<[f32; 3]> {
             [0, 1, 2].map(|k| grey * (1.0 - t) + ORANGE[k] * t)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod path_tests {
+    use super::OutputPaths;
+    use std::path::{Path, PathBuf};
+
+    /// `-o x.png` must not write the EXR under the PNG's name (it was overwritten by the PNG).
+    #[test]
+    fn a_png_output_keeps_the_exr_beside_it() {
+        let paths = |p: &str| {
+            let o = OutputPaths::new(Path::new(p));
+            [o.exr, o.png, o.strategy_png, o.emis_json].map(|p: PathBuf| p.display().to_string())
+        };
+        assert_eq!(paths("out/a.exr"), ["out/a.exr", "out/a.png", "out/a.strategy.png", "out/a.emis.json"]);
+        assert_eq!(paths("a.PNG"), ["a.exr", "a.PNG", "a.strategy.png", "a.emis.json"]);
+        assert_eq!(paths("a"), ["a", "a.png", "a.strategy.png", "a.emis.json"]);
+    }
 }

@@ -33,6 +33,25 @@ fn render_writes_exr_and_png_with_the_requested_samples() {
     assert!(dir.path().join("box.png").exists());
 }
 
+/// `-o NAME.png` names the preview: the EXR goes beside it as NAME.exr (it was written to
+/// NAME.png and then overwritten by the PNG).
+#[test]
+fn a_png_output_name_keeps_the_exr_beside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = tessera()
+        .args(["render"])
+        .arg(scene("cornell-box"))
+        .args(["--spp", "1", "-o"])
+        .arg(dir.path().join("shot.png"))
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let img = tessera_common::film::exr::read_rgb(&dir.path().join("shot.exr")).unwrap();
+    assert_eq!((img.width, img.height), (256, 256));
+    let png = std::fs::read(dir.path().join("shot.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+}
+
 #[test]
 fn default_output_is_named_after_the_scene_folder() {
     let dir = tempfile::tempdir().unwrap();

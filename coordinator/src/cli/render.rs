@@ -2,7 +2,7 @@
 //! plus per-pixel sample counts) and an sRGB PNG preview beside it (see [`crate::output`]).
 
 use crate::options::{JobArgs, make_renderer, scene_name};
-use crate::output::{Outputs, Provenance};
+use crate::output::{OutputPaths, Outputs, Provenance};
 use anyhow::bail;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -17,7 +17,8 @@ use tessera_common::texture::TextureLimits;
 pub struct RenderArgs {
     /// The Mitsuba 3 scene file (XML, format 3.0.0).
     pub scene: PathBuf,
-    /// Output EXR [default: the scene's name in the working directory, e.g. cornell-box.exr].
+    /// Output EXR, with a PNG beside it (a NAME.png names the PNG, and the EXR goes to
+    /// NAME.exr) [default: the scene's name in the working directory, e.g. cornell-box.exr].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Integrator, samples or time, seed, options and scene parameters.
@@ -48,7 +49,9 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     let work = WorkLimits { max_tile_bytes: u64::MAX, ..WorkLimits::default() };
     settings.resolved(&scene).check_work(scene.camera.width, scene.camera.height, &work)?;
     let renderer = make_renderer(&settings, &scene)?;
-    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
+    let output = OutputPaths::new(
+        &args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene)))),
+    );
     let budget = match settings.time_s {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
         None => Budget::Samples(settings.spp.unwrap_or(scene.spp)),
@@ -91,7 +94,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         samples as f64 / secs.max(1e-9),
         peak_rss_bytes() as f64 / 1e6,
         scene.texture_bytes as f64 / 1e6,
-        output.display()
+        output.exr.display()
     );
     Ok(())
 }

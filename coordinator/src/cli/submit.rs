@@ -4,6 +4,7 @@
 
 use super::client::{Client, ServerArgs, runtime, status_error};
 use crate::options::{JobArgs, scene_name};
+use crate::output::OutputPaths;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -34,7 +35,8 @@ pub struct SubmitArgs {
     #[arg(long)]
     pub wait: bool,
     /// Where --wait writes the EXR (a PNG goes beside it, and for EMIS NAME.strategy.png and
-    /// NAME.emis.json) [default: the scene's name].
+    /// NAME.emis.json; a NAME.png names the PNG, and the EXR goes to NAME.exr) [default: the
+    /// scene's name].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
 }
@@ -43,7 +45,9 @@ pub struct SubmitArgs {
 pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
     let bundle = tessera_common::bundle::pack(&args.scene, &settings.define_map())?;
-    let output = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene))));
+    let output = OutputPaths::new(
+        &args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene)))),
+    );
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
         let header = pb::SubmitJobRequest {
@@ -67,23 +71,23 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
                 last.error.map(|e| format!(": {e}")).unwrap_or_default()
             );
         }
-        download(&mut c, &job.id, pb::ResultFormat::Exr, &output).await?;
-        download(&mut c, &job.id, pb::ResultFormat::Png, &output.with_extension("png")).await?;
+        download(&mut c, &job.id, pb::ResultFormat::Exr, &output.exr).await?;
+        download(&mut c, &job.id, pb::ResultFormat::Png, &output.png).await?;
         if is_emis(&last) {
-            for (format, extension) in
-                [(pb::ResultFormat::StrategyPng, "strategy.png"), (pb::ResultFormat::EmisJson, "emis.json")]
+            for (format, path) in
+                [(pb::ResultFormat::StrategyPng, &output.strategy_png), (pb::ResultFormat::EmisJson, &output.emis_json)]
             {
                 // a coordinator from before these formats (INVALID_ARGUMENT), or a job it
                 // finished (NOT_FOUND), has none: the image is what was asked for
-                match download(&mut c, &job.id, format, &output.with_extension(extension)).await {
+                match download(&mut c, &job.id, format, path).await {
                     Err(Download::Status(s)) if matches!(s.code(), Code::NotFound | Code::InvalidArgument) => {
-                        eprintln!("warning: no {extension} for job {}: {}", job.id, s.message());
+                        eprintln!("warning: no {} for job {}: {}", path.display(), job.id, s.message());
                     }
                     done => done?,
                 }
             }
         }
-        eprintln!("{}: done -> {}", job.id, output.display());
+        eprintln!("{}: done -> {}", job.id, output.exr.display());
         Ok(())
     })
 }
