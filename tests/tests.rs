@@ -475,6 +475,7 @@ fn image_comparison_notices_a_different_seed() {
 mod bad_results;
 mod bounded_memory;
 mod connections;
+mod control;
 mod emis;
 mod faults;
 mod hostile;

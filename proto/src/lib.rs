@@ -69,6 +69,7 @@ pub fn state_name(state: i32) -> &'static str {
         S::Done => "done",
         S::Failed => "failed",
         S::Cancelled => "cancelled",
+        S::Paused => "paused",
         S::Unspecified => "unknown",
     }
 }

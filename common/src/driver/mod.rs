@@ -179,6 +179,17 @@ impl Driver {
         self.started_ms.get_or_insert(now_ms);
     }
 
+    /// Moves the clock on by `by_ms` that did not count (the job was paused): a time budget
+    /// and the last pass's pace count rendering time only.
+    pub fn postpone(&mut self, by_ms: f64) {
+        if let Some(t) = &mut self.started_ms {
+            *t += by_ms;
+        }
+        if let Some(t) = self.passes.last_mut().and_then(|p| p.planned_ms.as_mut()) {
+            *t += by_ms;
+        }
+    }
+
     /// When the clock started.
     pub fn started_ms(&self) -> Option<f64> {
         self.started_ms

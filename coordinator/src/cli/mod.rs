@@ -1,9 +1,11 @@
 //! The `tessera` command line: argument parsing and dispatch, `tessera render` (a local render
-//! with no setup) and the farm client commands `submit`, `status`, `cancel` and `delete`, which
+//! with no setup) and the farm client commands `submit`, `status`, `cancel`, `delete` and the job
+//! controls (`pause`, `resume`, `requeue`, `priority`), which
 //! talk to a coordinator only through `tessera-proto` and `tessera-link`. `tessera serve` hands
 //! over to [`crate::serve`] and `tessera bench …` to [`crate::bench`].
 
 pub mod client;
+pub mod control;
 pub mod healthcheck;
 pub mod render;
 pub mod submit;
@@ -34,6 +36,14 @@ pub enum Command {
     Cancel(client::CancelArgs),
     /// Delete an ended job (done, failed or cancelled) and all its data from a coordinator.
     Delete(client::DeleteArgs),
+    /// Pause a job: no more of its tiles are handed out (leased ones finish) until it resumes.
+    Pause(control::JobControlArgs),
+    /// Resume a paused job.
+    Resume(control::JobControlArgs),
+    /// Run a failed or cancelled job on from its last checkpoint, keeping what it merged.
+    Requeue(control::JobControlArgs),
+    /// Give a job a new priority (higher runs first).
+    Priority(control::PriorityArgs),
     /// Check that a coordinator answers on /healthz: exit 0 if it does, 1 if not.
     Healthcheck(healthcheck::HealthcheckArgs),
     /// Measure: rendering speed, equal-time quality, EMIS overheads and decisions, the farm.
@@ -78,6 +88,10 @@ pub fn run() -> anyhow::Result<()> {
         Command::Status(args) => client::status_command(&args),
         Command::Cancel(args) => client::cancel_command(&args),
         Command::Delete(args) => client::delete_command(&args),
+        Command::Pause(args) => control::control_command(control::Control::Pause, &args),
+        Command::Resume(args) => control::control_command(control::Control::Resume, &args),
+        Command::Requeue(args) => control::control_command(control::Control::Requeue, &args),
+        Command::Priority(args) => control::priority_command(&args),
         Command::Healthcheck(args) => healthcheck::healthcheck_command(&args),
         Command::Bench(command) => crate::bench::run(&command),
     }

@@ -113,7 +113,9 @@ impl From<ServiceError> for ApiError {
             | ServiceError::Transition(
                 TransitionError::Unfinished { .. }
                 | TransitionError::NotOptimizing(_)
-                | TransitionError::NotFinishing(_),
+                | TransitionError::NotFinishing(_)
+                | TransitionError::NotRequeueable { .. }
+                | TransitionError::Ended { .. },
             ) => ErrorCode::FailedPrecondition,
             ServiceError::Transition(TransitionError::DuplicateJob(_))
             | ServiceError::Corrupt { .. }

@@ -70,6 +70,7 @@ fn state_to_pb(s: JobState) -> pb::JobState {
         JobState::Done => pb::JobState::Done,
         JobState::Failed => pb::JobState::Failed,
         JobState::Cancelled => pb::JobState::Cancelled,
+        JobState::Paused => pb::JobState::Paused,
     }
 }
 

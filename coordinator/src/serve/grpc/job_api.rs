@@ -69,6 +69,31 @@ impl pb::job_service_server::JobService for JobApi {
         Ok(Response::new(job_to_pb(&blocking(move || svc.cancel(&id, now_ms())).await?)))
     }
 
+    async fn pause_job(&self, req: Request<pb::JobRef>) -> Result<Response<pb::Job>, Status> {
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(job_to_pb(&blocking(move || svc.pause(&id, now_ms())).await?)))
+    }
+
+    async fn resume_job(&self, req: Request<pb::JobRef>) -> Result<Response<pb::Job>, Status> {
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(job_to_pb(&blocking(move || svc.resume_job(&id, now_ms())).await?)))
+    }
+
+    async fn requeue_job(&self, req: Request<pb::JobRef>) -> Result<Response<pb::Job>, Status> {
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(job_to_pb(&blocking(move || svc.requeue(&id, now_ms())).await?)))
+    }
+
+    async fn update_job(&self, req: Request<pb::UpdateJobRequest>) -> Result<Response<pb::Job>, Status> {
+        let (svc, req) = (self.0.svc.clone(), req.into_inner());
+        let view = blocking(move || match req.priority {
+            Some(p) => svc.set_priority(&req.id, p, now_ms()),
+            None => svc.get(&req.id, now_ms()),
+        })
+        .await?;
+        Ok(Response::new(job_to_pb(&view)))
+    }
+
     async fn delete_job(&self, req: Request<pb::DeleteJobRequest>) -> Result<Response<pb::DeleteJobResponse>, Status> {
         let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
         blocking(move || svc.delete(&id)).await?;

@@ -13,6 +13,8 @@ pub mod validate;
 pub mod view;
 
 #[cfg(test)]
+mod control_tests;
+#[cfg(test)]
 mod fault_tests;
 #[cfg(test)]
 mod retention_tests;

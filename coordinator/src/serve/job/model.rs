@@ -16,6 +16,7 @@
 
 #[cfg(test)]
 pub(crate) mod calls;
+mod control;
 mod event;
 mod failures;
 mod index;
@@ -56,6 +57,9 @@ pub enum JobState {
     Failed,
     /// Stopped by a client.
     Cancelled,
+    /// Shown for a job a client paused (the model keeps the state it runs in beside
+    /// [`Job::paused_ms`]).
+    Paused,
 }
 
 impl JobState {
@@ -84,6 +88,7 @@ impl JobState {
             JobState::Done => "done",
             JobState::Failed => "failed",
             JobState::Cancelled => "cancelled",
+            JobState::Paused => "paused",
         }
     }
 }
@@ -156,6 +161,8 @@ pub struct Job {
     pub slowest_ms_per_sample: Option<f64>,
     /// Its queued and leased tiles (derived from `tiles`).
     pub index: TileIndex,
+    /// Paused by a client since then: no tile is leased (see `control.rs`).
+    pub paused_ms: Option<u64>,
 }
 
 /// Results that arrive ahead of the merge frontier wait in memory: a job leases no further
@@ -296,6 +303,22 @@ pub enum TransitionError {
     /// The job is not waiting for its outputs (it was cancelled meanwhile).
     #[error("job {0} is not finishing")]
     NotFinishing(String),
+    /// Only a failed or cancelled job can be requeued.
+    #[error("job {job} is {state}: only a failed or cancelled job can be requeued")]
+    NotRequeueable {
+        /// The job.
+        job: String,
+        /// Its state.
+        state: &'static str,
+    },
+    /// Only a job that has not ended can be paused or resumed.
+    #[error("job {job} is {state}: it has ended")]
+    Ended {
+        /// The job.
+        job: String,
+        /// Its state.
+        state: &'static str,
+    },
     /// Only a finished, failed or cancelled job can be removed.
     #[error("job {job} is {state}: cancel it before deleting it")]
     Unfinished {
@@ -339,6 +362,7 @@ impl JobsModel {
             finished_ms: None,
             slowest_ms_per_sample: None,
             index: TileIndex::default(),
+            paused_ms: None,
         };
         let range = job.add_tiles(first);
         self.jobs.insert(id.to_string(), job);

@@ -352,11 +352,30 @@ fn progress_never_falls_when_an_update_discards_a_path_tracing_start() {
 /// One step of a random schedule.
 #[derive(Clone, Debug)]
 enum Action {
-    Lease { worker: usize, max: usize },
-    Heartbeat { worker: usize },
-    Advance { ms: u64 },
-    Result { pick: usize, valid: bool, wrong_worker: bool },
-    Fail { pick: usize },
+    Lease {
+        worker: usize,
+        max: usize,
+    },
+    Heartbeat {
+        worker: usize,
+    },
+    Advance {
+        ms: u64,
+    },
+    Result {
+        pick: usize,
+        valid: bool,
+        wrong_worker: bool,
+    },
+    Fail {
+        pick: usize,
+    },
+    Pause,
+    Resume,
+    /// Cancel, then requeue from a checkpoint of at most `keep` tiles.
+    CancelRequeue {
+        keep: usize,
+    },
 }
 
 fn action() -> impl Strategy<Value = Action> {
@@ -367,14 +386,18 @@ fn action() -> impl Strategy<Value = Action> {
         (0..64usize, proptest::bool::weighted(0.85), proptest::bool::weighted(0.05))
             .prop_map(|(pick, valid, wrong_worker)| Action::Result { pick, valid, wrong_worker }),
         (0..64usize).prop_map(|pick| Action::Fail { pick }),
+        Just(Action::Pause),
+        Just(Action::Resume),
+        (0..64usize).prop_map(|keep| Action::CancelRequeue { keep }),
     ]
 }
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
 
-    /// Under any interleaving, each tile is accepted at most once, merged exactly once when
-    /// the job completes, epochs never go back, and the merged prefix is exactly the merged
+    /// Under any interleaving, with pauses, resumes and requeues from a checkpoint, each tile
+    /// is accepted at most once, merged exactly once when the job completes (once more after
+    /// a requeue whose checkpoint did not hold it), a paused job hands out nothing, epochs never go back, and the merged prefix is exactly the merged
     /// tiles; the same workers, well-behaved from then on, finish the job or see it fail with
     /// a reason (a tile failed too often, or every one of them is blocklisted).
     // long: one scenario, its interleaving then the invariants over the state it left
@@ -402,8 +425,10 @@ proptest! {
                 Action::Lease { worker, max } => {
                     let w = format!("w{worker}");
                     let blocked = m.jobs["j"].is_blocklisted(&w);
+                    let paused = m.jobs["j"].paused_ms.is_some();
                     let (leases, _) = m.lease(&w, max, now, TTL);
                     prop_assert!(!blocked || leases.is_empty(), "a blocklisted worker got a lease");
+                    prop_assert!(!paused || leases.is_empty(), "a paused job handed out a tile");
                     issued.extend(leases.into_iter().map(|l| (w.clone(), l)));
                 }
                 Action::Heartbeat { worker } => {
@@ -429,6 +454,23 @@ proptest! {
                     let (w, l) = issued[pick % issued.len()].clone();
                     m.report_failure(&w, &l, "failed", now);
                 }
+                Action::Pause => {
+                    let _ = m.pause("j", now);
+                }
+                Action::Resume => {
+                    let _ = m.resume("j", now);
+                }
+                Action::CancelRequeue { keep } => {
+                    let merged = m.jobs["j"].merged;
+                    let keep = keep.min(merged);
+                    let _ = m.cancel("j", now);
+                    if m.requeue("j", keep, now).is_ok() {
+                        // the film went back to the checkpoint: those tiles merge again
+                        for n in &mut merges[keep..merged] {
+                            *n -= 1;
+                        }
+                    }
+                }
                 _ => {}
             }
             merge_all(&mut m, "j", &mut merges, now);
@@ -448,6 +490,7 @@ proptest! {
         // or failed because a tile failed too often or every worker is blocklisted for it
         now += 10 * TTL;
         m.expire(now, &LONG);
+        let _ = m.resume("j", now);
         let workers = ["w0", "w1", "w2"];
         for _ in 0..1000 {
             let mut leased = false;

@@ -94,7 +94,7 @@ fn sample_progress(job: &Job) -> f64 {
 impl JobView {
     /// The view of `job` at `now_ms`.
     pub fn of(job: &Job, now_ms: u64) -> JobView {
-        let state = job.state.shown();
+        let state = job.shown_state();
         let elapsed_s = job.started_ms().map(|t| now_ms.saturating_sub(t) as f64 / 1000.0);
         let progress = match (state, job.spec.settings.time_s) {
             (JobState::Done, _) => 1.0,

@@ -142,6 +142,48 @@ pub async fn cancel(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto
     Ok(Json(blocking(move || svc.cancel(&id, now_ms())).await?.into()))
 }
 
+/// `POST /api/v1/jobs/{id}/pause`: no more tiles are handed out until it is resumed.
+pub async fn pause(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.pause(&id, now_ms())).await?.into()))
+}
+
+/// `POST /api/v1/jobs/{id}/resume`.
+pub async fn resume(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.resume_job(&id, now_ms())).await?.into()))
+}
+
+/// `POST /api/v1/jobs/{id}/requeue`: a failed or cancelled job runs on from its checkpoint.
+pub async fn requeue(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.requeue(&id, now_ms())).await?.into()))
+}
+
+/// What `PATCH /api/v1/jobs/{id}` may change.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobPatch {
+    /// Higher runs first.
+    priority: Option<i32>,
+}
+
+/// `PATCH /api/v1/jobs/{id}` with `{"priority": N}`.
+pub async fn patch(
+    State(st): St,
+    Path(id): Path<String>,
+    body: Result<Json<JobPatch>, axum::extract::rejection::JsonRejection>,
+) -> Result<Json<JobDto>, ApiError> {
+    let Json(patch) = body.map_err(|e| ApiError::new(ErrorCode::InvalidArgument, e.body_text()))?;
+    let svc = st.svc.clone();
+    let view = blocking(move || match patch.priority {
+        Some(p) => svc.set_priority(&id, p, now_ms()),
+        None => svc.get(&id, now_ms()),
+    })
+    .await?;
+    Ok(Json(view.into()))
+}
+
 /// `DELETE /api/v1/jobs/{id}`: removes an ended job and its data (204); an active one is a
 /// conflict (409) until it is cancelled.
 pub async fn delete(State(st): St, Path(id): Path<String>) -> Result<axum::http::StatusCode, ApiError> {

@@ -5,6 +5,9 @@
 //! | `POST /api/v1/jobs` | multipart: `scene` file, asset files (`asset`, file name = path relative to the scene), `settings` JSON |
 //! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON |
 //! | `POST /api/v1/jobs/{id}/cancel` | cancel: the job stops and stays, `cancelled` |
+//! | `POST /api/v1/jobs/{id}/pause`, `/resume` | no more tiles handed out (`paused`; leased ones finish), and on again |
+//! | `POST /api/v1/jobs/{id}/requeue` | a failed or cancelled job runs on from its last checkpoint |
+//! | `PATCH /api/v1/jobs/{id}` | `{"priority": N}`: a new priority (higher runs first) |
 //! | `DELETE /api/v1/jobs/{id}` | delete an ended job and all its data (204; 409 while it is active) |
 //! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job (409 before) |
 //! | `GET /api/v1/jobs/{id}/strategy.png`, `/emis.json` | a done EMIS job's strategy picture and report (404 for other integrators) |
@@ -27,8 +30,11 @@ pub fn router(state: Arc<AppState>) -> Router {
     let limit = state.max_upload_bytes;
     Router::new()
         .route("/api/v1/jobs", get(jobs::list).post(jobs::submit))
-        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::delete))
+        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::delete).patch(jobs::patch))
         .route("/api/v1/jobs/{id}/cancel", post(jobs::cancel))
+        .route("/api/v1/jobs/{id}/pause", post(jobs::pause))
+        .route("/api/v1/jobs/{id}/resume", post(jobs::resume))
+        .route("/api/v1/jobs/{id}/requeue", post(jobs::requeue))
         .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
         .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
         .route("/api/v1/jobs/{id}/strategy.png", get(jobs::strategy_png))

@@ -15,10 +15,9 @@
 //! other batch (so it lands after every earlier change of the job); the space is given back by
 //! incremental auto-vacuum (see [`super::space`]).
 
-use crate::serve::job::model::{Changes, Job, JobSpec, JobState, JobsModel, Pass, Tile, TileSpec, TileState};
+use crate::serve::job::model::{Changes, JobsModel, TileState};
 use rusqlite::{Connection, OptionalExtension, params};
 use std::path::Path;
-use tessera_common::driver::Driver;
 use tessera_common::film::Rect;
 
 /// Storage failed.
@@ -151,7 +150,7 @@ CREATE TABLE IF NOT EXISTS jobs (
     passes TEXT NOT NULL, worker_failures TEXT NOT NULL, error TEXT,
     created_ms INTEGER NOT NULL, started_ms INTEGER, finished_ms INTEGER,
     merged INTEGER NOT NULL DEFAULT 0, checkpoint TEXT, result_exr TEXT, preview_png TEXT,
-    strategy_png TEXT, emis_json TEXT);
+    strategy_png TEXT, emis_json TEXT, paused_ms INTEGER, priority INTEGER);
 CREATE TABLE IF NOT EXISTS tiles (
     job_id TEXT NOT NULL, idx INTEGER NOT NULL, x0 INTEGER NOT NULL, y0 INTEGER NOT NULL,
     x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, s0 INTEGER NOT NULL, s1 INTEGER NOT NULL,
@@ -188,6 +187,8 @@ struct JobRow {
     created_ms: i64,
     started_ms: Option<i64>,
     finished_ms: Option<i64>,
+    paused_ms: Option<i64>,
+    priority: i32,
 }
 
 #[derive(Clone, Debug)]
@@ -219,6 +220,8 @@ impl Batch {
                 created_ms: job.created_ms as i64,
                 started_ms: job.started_ms().map(|t| t as i64),
                 finished_ms: job.finished_ms.map(|t| t as i64),
+                paused_ms: job.paused_ms.map(|t| t as i64),
+                priority: job.spec.priority,
             });
             for &i in tiles {
                 let t = &job.tiles[i];
@@ -299,15 +302,21 @@ impl Store {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
-        // databases from before workers kept their identity and address, and before EMIS jobs
-        // stored their strategy PNG and report
-        let added =
-            [("workers", "secret_sha256"), ("workers", "host"), ("jobs", "strategy_png"), ("jobs", "emis_json")];
-        for (table, column) in added {
+        // databases from before workers kept their identity and address, before EMIS jobs
+        // stored their strategy PNG and report, and before jobs could be paused or reprioritised
+        let added = [
+            ("workers", "secret_sha256", "TEXT"),
+            ("workers", "host", "TEXT"),
+            ("jobs", "strategy_png", "TEXT"),
+            ("jobs", "emis_json", "TEXT"),
+            ("jobs", "paused_ms", "INTEGER"),
+            ("jobs", "priority", "INTEGER"),
+        ];
+        for (table, column, kind) in added {
             let exists =
                 conn.prepare("SELECT 1 FROM pragma_table_info(?1) WHERE name = ?2")?.exists(params![table, column])?;
             if !exists {
-                conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {column} TEXT"))?;
+                conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {column} {kind}"))?;
             }
         }
         Ok(Store { conn })
@@ -324,10 +333,11 @@ impl Store {
         for batch in batches {
             for j in &batch.jobs {
                 tx.prepare_cached(
-                    "INSERT INTO jobs (id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)
+                    "INSERT INTO jobs (id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms,
+                        finished_ms, paused_ms, priority)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)
                      ON CONFLICT(id) DO UPDATE SET state = ?4, passes = ?5, worker_failures = ?6, error = ?7,
-                        started_ms = ?9, finished_ms = ?10",
+                        started_ms = ?9, finished_ms = ?10, paused_ms = ?11, priority = ?12",
                 )?
                 .execute(params![
                     j.id,
@@ -339,7 +349,9 @@ impl Store {
                     j.error,
                     j.created_ms,
                     j.started_ms,
-                    j.finished_ms
+                    j.finished_ms,
+                    j.paused_ms,
+                    j.priority
                 ])?;
             }
             let mut stmt = tx.prepare_cached(
@@ -380,105 +392,6 @@ impl Store {
         Ok(())
     }
 
-    /// Every job as last committed, with its files, or why its rows do not decode (with its
-    /// id: one broken job must not keep the others from loading). Leased tiles get `deadline_ms`.
-    #[allow(clippy::type_complexity)]
-    pub fn load_jobs(
-        &self,
-        deadline_ms: u64,
-    ) -> Result<Vec<Result<(Job, JobFiles), (String, StoreError)>>, StoreError> {
-        let mut stmt = self.conn.prepare(
-            "SELECT id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms,
-                    merged, checkpoint, result_exr, preview_png, strategy_png, emis_json FROM jobs ORDER BY seq",
-        )?;
-        let rows = stmt.query_map([], |r| {
-            Ok((
-                r.get::<_, String>(0)?,
-                r.get::<_, i64>(1)?,
-                r.get::<_, String>(2)?,
-                r.get::<_, String>(3)?,
-                r.get::<_, String>(4)?,
-                r.get::<_, String>(5)?,
-                r.get::<_, Option<String>>(6)?,
-                r.get::<_, i64>(7)?,
-                r.get::<_, Option<i64>>(8)?,
-                r.get::<_, Option<i64>>(9)?,
-                r.get::<_, i64>(10)?,
-                JobFiles {
-                    checkpoint: r.get(11)?,
-                    result_exr: r.get(12)?,
-                    preview_png: r.get(13)?,
-                    strategy_png: r.get(14)?,
-                    emis_json: r.get(15)?,
-                },
-            ))
-        })?;
-        let mut out = Vec::new();
-        for row in rows {
-            let row = row?;
-            let id = row.0.clone();
-            out.push(self.decode_job(row, deadline_ms).map_err(|e| (id, e)));
-        }
-        Ok(out)
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn decode_job(
-        &self,
-        row: (
-            String,
-            i64,
-            String,
-            String,
-            String,
-            String,
-            Option<String>,
-            i64,
-            Option<i64>,
-            Option<i64>,
-            i64,
-            JobFiles,
-        ),
-        deadline_ms: u64,
-    ) -> Result<(Job, JobFiles), StoreError> {
-        {
-            let (id, seq, spec, state, passes, failures, error, created, started, finished, merged, files) = row;
-            let corrupt = |message: String| StoreError::Corrupt { job: id.clone(), message };
-            let spec = JobSpec::from_stored(&id, &spec).map_err(|e| corrupt(format!("spec: {e}")))?;
-            let state: JobState =
-                serde_json::from_value(serde_json::Value::String(state)).map_err(|e| corrupt(format!("state: {e}")))?;
-            let passes: Vec<Pass> = serde_json::from_str(&passes).map_err(|e| corrupt(format!("passes: {e}")))?;
-            let worker_failures =
-                serde_json::from_str(&failures).map_err(|e| corrupt(format!("worker_failures: {e}")))?;
-            let tiles = self.load_tiles(&id, merged as usize, deadline_ms)?;
-            if merged as usize > tiles.len() {
-                return Err(corrupt("more tiles merged than planned".into()));
-            }
-            let samples = |i: usize| tiles[i].spec.samples.clone();
-            let driver = Driver::restore(spec.shape(), passes, started.map(|t| t as f64), tiles.len(), samples)
-                .map_err(|e| corrupt(format!("tiles do not match passes: {e}")))?;
-            let job = Job {
-                id: id.clone(),
-                seq: seq as u64,
-                spec,
-                state,
-                driver,
-                tiles,
-                merged: merged as usize,
-                worker_failures,
-                last_failure: None,
-                error,
-                created_ms: created as u64,
-                finished_ms: finished.map(|t| t as u64),
-                slowest_ms_per_sample: None,
-                index: Default::default(),
-            };
-            let mut job = job;
-            job.reindex();
-            Ok((job, files))
-        }
-    }
-
     /// Marks a job whose rows cannot be loaded as failed with `error`, so that it stays so.
     pub fn mark_failed(&self, job: &str, error: &str, now_ms: u64) -> Result<(), StoreError> {
         self.conn.execute(
@@ -486,41 +399,6 @@ impl Store {
             params![job, error, now_ms as i64],
         )?;
         Ok(())
-    }
-
-    fn load_tiles(&self, job: &str, merged: usize, deadline_ms: u64) -> Result<Vec<Tile>, StoreError> {
-        let mut stmt = self.conn.prepare_cached(
-            "SELECT idx, x0, y0, x1, y1, s0, s1, epoch, state, worker, failures FROM tiles WHERE job_id = ?1 ORDER BY idx",
-        )?;
-        let rows = stmt.query_map([job], |r| {
-            let idx: i64 = r.get(0)?;
-            let rect = Rect { x0: r.get(1)?, y0: r.get(2)?, x1: r.get(3)?, y1: r.get(4)? };
-            let samples = r.get::<_, u32>(5)?..r.get::<_, u32>(6)?;
-            let state = match (r.get::<_, String>(8)?.as_str(), r.get::<_, Option<String>>(9)?) {
-                ("leased", Some(worker)) => TileState::Leased { worker, deadline_ms, since_ms: deadline_ms },
-                ("accepted", _) if (idx as usize) < merged => TileState::Merged,
-                ("accepted", _) => TileState::Accepted,
-                _ => TileState::Queued,
-            };
-            Ok((
-                idx,
-                Tile {
-                    spec: TileSpec { rect, samples },
-                    epoch: r.get::<_, i64>(7)? as u64,
-                    state,
-                    failures: r.get(10)?,
-                },
-            ))
-        })?;
-        let mut tiles = Vec::new();
-        for row in rows {
-            let (idx, tile) = row?;
-            if idx as usize != tiles.len() {
-                return Err(StoreError::Corrupt { job: job.to_string(), message: format!("tile {idx} out of order") });
-            }
-            tiles.push(tile);
-        }
-        Ok(tiles)
     }
 
     /// An accepted result not yet covered by a checkpoint: (non-finite count, payload).
@@ -590,6 +468,8 @@ impl Store {
             .optional()?)
     }
 }
+
+mod load;
 
 #[cfg(test)]
 #[path = "sqlite_tests.rs"]

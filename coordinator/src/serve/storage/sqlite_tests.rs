@@ -2,6 +2,7 @@
 //! a finished job's outputs come back with their digests.
 
 use super::*;
+use crate::serve::job::model::JobSpec;
 use crate::serve::job::model::calls::Calls;
 use tessera_common::settings::{IntegratorName, RenderSettings};
 
@@ -32,6 +33,10 @@ fn store_round_trips_the_model_and_pairs_merged_with_its_checkpoint() {
     let (_, c) = m.merged("a", 2, 12);
     // merged but not yet checkpointed: reloads as accepted
     store.persist(&m, &c, &[]).unwrap();
+    // a pause and a new priority are stored with the job
+    for c in [m.pause("a", 12).unwrap(), m.set_priority("a", -3).unwrap()] {
+        store.persist(&m, &c, &[]).unwrap();
+    }
     let loaded: Vec<_> = store.load_jobs(10 + 1000).unwrap().into_iter().map(Result::unwrap).collect();
     let mut expected = m.jobs["a"].clone();
     // what is not stored: the measured tile rate, a lease's start (counted from its
@@ -78,6 +83,8 @@ fn an_older_database_gains_the_emis_output_columns() {
     .unwrap();
     drop(old);
     let store = Store::open(&path).unwrap();
+    // every column a job is loaded with exists (the row's own spec does not decode)
+    assert!(store.load_jobs(0).unwrap()[0].is_err());
     let files = store.job_files("a").unwrap().unwrap();
     assert_eq!((files.result_exr.as_deref(), files.strategy_png, files.emis_json), (Some("e"), None, None));
 }

@@ -37,6 +37,12 @@ pub(crate) trait Calls {
     fn expire(&mut self, now_ms: u64, lifetime: &LeaseLifetime) -> Changes;
     fn fail_stranded(&mut self, live: &[&str], now_ms: u64) -> (Vec<String>, Changes);
     fn postpone_leases(&mut self, by_ms: u64);
+    fn pause(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError>;
+    fn resume(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError>;
+    fn set_priority(&mut self, job: &str, priority: i32) -> Result<Changes, TransitionError>;
+    /// Requeues from a checkpoint of `tiles[..merged]`, then merges and finishes as the
+    /// service would (without outputs: they are written at once).
+    fn requeue(&mut self, job: &str, merged: usize, now_ms: u64) -> Result<Changes, TransitionError>;
 }
 
 impl Calls for JobsModel {
@@ -72,7 +78,7 @@ impl Calls for JobsModel {
 
     fn mergeable(&self, job: &str) -> Range<usize> {
         let mut m = self.clone();
-        match m.apply(Event::Resume { job }, 0).expect("never refused").then.first() {
+        match m.apply(Event::Restored { job }, 0).expect("never refused").then.first() {
             Some(Effect::Merge { tiles, .. }) => tiles.clone(),
             _ => self.jobs.get(job).map_or(0..0, |j| j.merged..j.merged),
         }
@@ -119,6 +125,26 @@ impl Calls for JobsModel {
     fn fail_stranded(&mut self, live: &[&str], now_ms: u64) -> (Vec<String>, Changes) {
         let e = self.apply(Event::Strand { live }, now_ms).expect("never refused");
         (e.ended().map(|(j, _)| j.to_string()).collect(), e.changes)
+    }
+
+    fn pause(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        self.apply(Event::Pause { job }, now_ms).map(|e| e.changes)
+    }
+
+    fn resume(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        self.apply(Event::Resume { job }, now_ms).map(|e| e.changes)
+    }
+
+    fn set_priority(&mut self, job: &str, priority: i32) -> Result<Changes, TransitionError> {
+        self.apply(Event::SetPriority { job, priority }, 0).map(|e| e.changes)
+    }
+
+    fn requeue(&mut self, job: &str, merged: usize, now_ms: u64) -> Result<Changes, TransitionError> {
+        let e = self.apply(Event::Requeue { job, merged }, now_ms)?;
+        if e.then.iter().any(|e| matches!(e, Effect::WriteOutputs { .. })) {
+            self.apply(Event::OutputsWritten { job }, now_ms)?;
+        }
+        Ok(e.changes)
     }
 
     fn postpone_leases(&mut self, by_ms: u64) {

@@ -89,9 +89,34 @@ pub enum Event<'a> {
     },
     /// A job loaded from storage: merge what was accepted after its checkpoint, or run the
     /// update it stopped before.
+    Restored {
+        /// The job.
+        job: &'a str,
+    },
+    /// A client paused a job: no more leases (see `control.rs`).
+    Pause {
+        /// The job.
+        job: &'a str,
+    },
+    /// A client resumed a paused job.
     Resume {
         /// The job.
         job: &'a str,
+    },
+    /// A client changed a job's priority.
+    SetPriority {
+        /// The job.
+        job: &'a str,
+        /// Higher runs first.
+        priority: i32,
+    },
+    /// A client requeued a failed or cancelled job, whose last checkpoint holds
+    /// `tiles[..merged]` (the service reloaded its film from it).
+    Requeue {
+        /// The job.
+        job: &'a str,
+        /// Tiles in the checkpoint.
+        merged: usize,
     },
     /// The service merged `tiles[..upto]` into the job's film (after [`Effect::Merge`]).
     Merged {
@@ -255,7 +280,15 @@ impl JobsModel {
                 Effects::of(self.expire(now_ms, &lifetime))
             }
             Event::Strand { live } => Effects::of(self.fail_stranded(live, now_ms).1),
-            Event::Resume { job } => self.resume(job, now_ms),
+            Event::Restored { job } => self.restored(job, now_ms),
+            Event::Pause { job } => Effects::of(self.pause(job, now_ms)?),
+            Event::Resume { job } => Effects::of(self.resume_paused(job, now_ms)?),
+            Event::SetPriority { job, priority } => Effects::of(self.set_priority(job, priority)?),
+            Event::Requeue { job, merged } => {
+                let mut effects = Effects::of(self.requeue(job, merged)?);
+                effects.extend(self.restored(job, now_ms));
+                effects
+            }
             Event::Merged { job, upto } => self.on_merged(job, upto, now_ms),
             Event::Optimized { job, restart, nu, collect } => {
                 let changes = self.optimized(job, restart, nu, collect, now_ms)?;
@@ -303,12 +336,18 @@ impl JobsModel {
         (!tiles.is_empty()).then(|| Effect::Merge { job: job.to_string(), tiles })
     }
 
-    fn resume(&mut self, job: &str, now_ms: u64) -> Effects {
+    fn restored(&mut self, job: &str, now_ms: u64) -> Effects {
         let mut effects = Effects::default();
         effects.then.extend(self.merge_effect(job));
-        if self.jobs.get(job).is_some_and(|j| j.state == JobState::Optimizing) {
+        let Some(j) = self.jobs.get(job) else { return effects };
+        let all_merged = !j.state.is_terminal() && j.merged == j.tiles.len();
+        if j.state == JobState::Optimizing {
             // stopped between a barrier and its update (all its tiles merged)
             effects.then.push(self.optimize_effect(job, now_ms));
+        } else if effects.then.is_empty() && all_merged {
+            // requeued with every tile in its checkpoint: the barrier the cancel cut off
+            let upto = j.merged;
+            effects.extend(self.on_merged(job, upto, now_ms));
         }
         effects
     }

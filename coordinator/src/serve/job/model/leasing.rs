@@ -45,7 +45,9 @@ impl JobsModel {
         let candidate = self
             .jobs
             .values()
-            .filter(|j| matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final))
+            .filter(|j| {
+                matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final) && j.paused_ms.is_none()
+            })
             .filter(|j| !j.is_blocklisted_on(worker, host))
             .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
@@ -124,7 +126,7 @@ impl JobsModel {
         let stranded: Vec<String> = self
             .jobs
             .values()
-            .filter(|j| !j.state.is_terminal() && !live.is_empty())
+            .filter(|j| !j.state.is_terminal() && j.paused_ms.is_none() && !live.is_empty())
             .filter(|j| !j.index.queued.is_empty())
             // by the workers' own failures: a host blocklisted for workers that registered
             // afresh before each failure (one token holder lying) leaves the job waiting for

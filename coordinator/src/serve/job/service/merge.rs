@@ -167,18 +167,28 @@ impl JobService {
         inner.counters.tiles_merged += range.len() as u64;
         let mut merged = Effects { changes: pending, then: Vec::new() };
         merged.extend(inner.model.apply(Event::Merged { job: &job, upto: range.end }, now_ms)?);
+        inner.job(&job).film = Some(film);
         if let Some(Effect::WriteOutputs { upto, .. }) = merged.then.first() {
             // encoding a frame's outputs takes seconds for big films: `finish` does it without
             // the lock; the accepted result is committed now
             let upto = *upto;
             self.persist(inner, &merged.changes, &extras)?;
-            let spec = inner.model.jobs.get(&job).map(|j| j.spec.clone()).expect("invariant: a finishing job exists");
-            let emis = inner.job(&job).emis.take();
-            return Ok(Some(Finishing { job, spec, film, upto, now_ms, emis }));
+            return Ok(self.finishing(inner, &job, upto, now_ms));
         }
-        inner.job(&job).film = Some(film);
         self.after_merge(inner, &job, merged, extras, now_ms)?;
         Ok(None)
+    }
+
+    /// What [`JobService::finish`] takes from a finishing job: its film, spec and EMIS state.
+    pub(super) fn finishing(&self, inner: &mut Inner, job: &str, upto: usize, now_ms: u64) -> Option<Finishing> {
+        let spec = inner.model.jobs.get(job)?.spec.clone();
+        let runtime = inner.job(job);
+        let film = match runtime.film.take() {
+            Some(film) => film,
+            None => Film::for_filter(spec.width, spec.height, &Filter::new(spec.filter)),
+        };
+        let emis = runtime.emis.take();
+        Some(Finishing { job: job.to_string(), spec, film, upto, now_ms, emis })
     }
 
     /// Merges `range` into the job's film (made at its first merge: a queued job holds none).

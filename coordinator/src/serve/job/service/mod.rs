@@ -12,6 +12,7 @@
 //! ([`submit`], [`query`], [`retention`] for deleting ended jobs), workers ([`leases`]), and the
 //! merge path ([`merge`]); what the service holds per job is one [`runtime::JobRuntime`].
 
+mod control;
 mod events;
 mod leases;
 mod merge;
@@ -376,16 +377,43 @@ impl JobService {
     /// barrier, and the update, again), or runs the update it stopped before.
     fn resume(&self, id: &str, now_ms: u64) -> Result<(), ServiceError> {
         let mut inner = self.lock();
-        let effects = inner.model.apply(Event::Resume { job: id }, now_ms)?;
-        if let Some(Effect::Optimize { iterations, restart_total, .. }) = effects.then.first() {
-            return self.optimize(&mut inner, id, *iterations, *restart_total, now_ms);
-        }
-        let finishing = self.merge_ready(&mut inner, effects, Vec::new(), now_ms)?;
+        let effects = inner.model.apply(Event::Restored { job: id }, now_ms)?;
+        self.run_restored(inner, id, effects, now_ms)
+    }
+
+    /// Runs what a job whose film was just reloaded from its checkpoint asks for (after a
+    /// restart or a requeue): merging the tiles accepted since, an update it stopped before, or
+    /// the barrier a cancel cut off. `effects`' changes are committed with it.
+    fn run_restored(
+        &self,
+        mut inner: std::sync::MutexGuard<'_, Inner>,
+        id: &str,
+        effects: Effects,
+        now_ms: u64,
+    ) -> Result<(), ServiceError> {
+        let finishing = match effects.then.first().cloned() {
+            Some(Effect::Optimize { iterations, restart_total, .. }) => {
+                self.persist(&mut inner, &effects.changes, &[])?;
+                return self.optimize(&mut inner, id, iterations, restart_total, now_ms);
+            }
+            Some(Effect::WriteOutputs { upto, .. }) => {
+                self.persist(&mut inner, &effects.changes, &[])?;
+                self.finishing(&mut inner, id, upto, now_ms)
+            }
+            _ => {
+                let planned = effects.then.iter().any(|e| matches!(e, Effect::PassPlanned { .. }));
+                let finishing = self.merge_ready(&mut inner, effects, Vec::new(), now_ms)?;
+                if planned {
+                    self.work.notify_waiters();
+                }
+                finishing
+            }
+        };
         drop(inner);
-        if let Some(f) = finishing {
-            self.finish(f)?;
+        match finishing {
+            Some(f) => self.finish(f),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -449,6 +477,7 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
         finished_ms: Some(now_ms),
         slowest_ms_per_sample: None,
         index: Default::default(),
+        paused_ms: None,
     }
 }
 

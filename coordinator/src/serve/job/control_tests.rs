@@ -1,0 +1,103 @@
+//! Tests of the job controls in the pure model: pause, resume, priority and requeue.
+
+use super::model::calls::Calls;
+use super::model::*;
+use tessera_common::settings::{IntegratorName, RenderSettings};
+
+const TTL: u64 = 1000;
+
+fn spec(spp: u32, priority: i32, time_s: Option<f64>) -> JobSpec {
+    let settings = RenderSettings { integrator: IntegratorName::Pt, spp: Some(spp), time_s, ..Default::default() };
+    JobSpec { priority, settings, ..JobSpec::bare("j", IntegratorName::Pt, Some(spp), 128, 128) }
+}
+
+/// A paused job hands out nothing, shows `paused`, and its leased tiles still count; resumed,
+/// it goes on. Ended jobs cannot be paused.
+#[test]
+fn a_paused_job_leases_nothing_until_resumed_and_keeps_its_leased_work() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 0, None), 0).unwrap();
+    let (held, _) = m.lease("w", 1, 1, TTL);
+    assert_eq!(held.len(), 1);
+    assert!(!m.pause("a", 2).unwrap().is_empty());
+    assert!(m.pause("a", 3).unwrap().is_empty(), "pausing twice changes nothing");
+    assert_eq!(m.jobs["a"].shown_state(), JobState::Paused);
+    assert!(m.lease("w", 4, 4, TTL).0.is_empty());
+    assert_eq!(m.result("w", &held[0], Ok(()), 5).0, ResultOutcome::Accepted, "leased work is kept");
+    m.resume("a", 6).unwrap();
+    assert_eq!(m.jobs["a"].shown_state(), JobState::Final);
+    assert_eq!(m.lease("w", 4, 7, TTL).0.len(), 3);
+    m.cancel("a", 8).unwrap();
+    assert!(matches!(m.pause("a", 9), Err(TransitionError::Ended { .. })));
+}
+
+/// Resuming moves a time budget's clock on by the pause: the pause is not spent.
+#[test]
+fn a_pause_does_not_spend_a_time_budget() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 0, Some(10.0)), 0).unwrap();
+    m.lease("w", 1, 1_000, TTL);
+    m.pause("a", 2_000).unwrap();
+    m.resume("a", 7_000).unwrap();
+    assert_eq!(m.jobs["a"].driver.started_ms(), Some(6_000.0));
+}
+
+/// A new priority reorders the queue: the next lease goes to the job that now ranks first.
+#[test]
+fn a_priority_change_reorders_the_queue() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 5, None), 0).unwrap();
+    m.submit("b", spec(1, 0, None), 0).unwrap();
+    assert_eq!(m.lease("w", 1, 1, TTL).0[0].job, "a");
+    m.set_priority("b", 9).unwrap();
+    assert_eq!(m.lease("w", 1, 2, TTL).0[0].job, "b");
+    assert_eq!(m.jobs["b"].spec.priority, 9);
+}
+
+/// Requeueing a cancelled job runs it on from its checkpoint: merged tiles after it merge
+/// again, leased ones go back to the queue with a new epoch (their late results are stale),
+/// failures are forgotten. A done job cannot be requeued.
+#[test]
+fn requeue_runs_a_cancelled_job_on_from_its_checkpoint() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 0, None), 0).unwrap();
+    let (leases, _) = m.lease("w", 4, 1, TTL);
+    for l in &leases[..3] {
+        m.result("w", l, Ok(()), 2);
+    }
+    m.merged("a", 3, 3);
+    m.report_failure("w", &leases[3], "boom", 3);
+    let (retry, _) = m.lease("w", 1, 4, TTL);
+    m.cancel("a", 5).unwrap();
+    m.requeue("a", 1, 6).unwrap();
+    let job = &m.jobs["a"];
+    assert_eq!((job.state, job.merged, job.finished_ms), (JobState::Final, 1, None));
+    assert_eq!(job.tiles[1].state, TileState::Accepted, "merged after the checkpoint: merges again");
+    assert_eq!((job.tiles[3].state.clone(), job.tiles[3].failures), (TileState::Queued, 0));
+    assert!(job.worker_failures.is_empty());
+    assert_eq!(m.mergeable("a"), 1..3);
+    assert_eq!(m.result("w", &retry[0], Ok(()), 7).0, ResultOutcome::Stale);
+    m.merged("a", 3, 8);
+    let (last, _) = m.lease("w", 4, 9, TTL);
+    m.result("w", &last[0], Ok(()), 10);
+    m.merged("a", 4, 11);
+    assert_eq!(m.jobs["a"].state, JobState::Done);
+    assert!(matches!(m.requeue("a", 4, 12), Err(TransitionError::NotRequeueable { state: "done", .. })));
+}
+
+/// A job cancelled with every tile in its checkpoint runs the barrier the cancel cut off when
+/// requeued: here the last one, so its outputs are asked for.
+#[test]
+fn requeue_with_every_tile_checkpointed_runs_the_barrier() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 0, None), 0).unwrap();
+    for l in m.lease("w", 4, 1, TTL).0 {
+        m.result("w", &l, Ok(()), 2);
+    }
+    let e = m.apply(Event::Merged { job: "a", upto: 4 }, 3).unwrap();
+    assert_eq!(e.then, vec![Effect::WriteOutputs { job: "a".into(), upto: 4 }]);
+    m.cancel("a", 4).unwrap();
+    let e = m.apply(Event::Requeue { job: "a", merged: 4 }, 5).unwrap();
+    assert_eq!(e.then, vec![Effect::WriteOutputs { job: "a".into(), upto: 4 }]);
+    assert_eq!(m.jobs["a"].state, JobState::Finishing);
+}
