@@ -41,7 +41,7 @@ fn malformed_results_are_refused_and_the_tile_requeued() {
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
         let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
-        let reg = pb::RegisterRequest { name: "hand".into(), threads: 1, version: "test".into(), ..Default::default() };
+        let reg = pb::RegisterRequest { name: "hand".into(), threads: 1, ..tessera_link::build::registration() };
         let worker = client.register(reg).await.unwrap().into_inner().worker_id;
 
         let first = lease_one(&mut client, &worker).await;
@@ -110,8 +110,7 @@ fn a_hostile_worker_cannot_make_the_coordinator_buffer_past_a_lease() {
     rt.block_on(async {
         let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
         let register = async |name: &str| {
-            let reg =
-                pb::RegisterRequest { name: name.into(), threads: 1, version: "test".into(), ..Default::default() };
+            let reg = pb::RegisterRequest { name: name.into(), threads: 1, ..tessera_link::build::registration() };
             client.clone().register(reg).await.unwrap().into_inner().worker_id
         };
         let (honest, thief) = (register("honest").await, register("thief").await);

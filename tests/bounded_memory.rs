@@ -98,8 +98,7 @@ fn a_stalled_first_tile_holds_back_only_the_lease_window() {
             .unwrap()
             .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
         let register = async |name: &str| {
-            let reg =
-                pb::RegisterRequest { name: name.into(), threads: 1, version: "test".into(), ..Default::default() };
+            let reg = pb::RegisterRequest { name: name.into(), threads: 1, ..tessera_link::build::registration() };
             client.clone().register(reg).await.unwrap().into_inner().worker_id
         };
         let (staller, fast) = (register("staller").await, register("fast").await);

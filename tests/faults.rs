@@ -24,7 +24,7 @@ fn a_worker_that_heartbeats_but_never_returns_loses_its_tile() {
     let started = std::time::Instant::now();
     rt.block_on(async {
         let mut client = WorkerServiceClient::connect(c.url.clone()).await.unwrap();
-        let reg = pb::RegisterRequest { name: "stuck".into(), threads: 1, ..Default::default() };
+        let reg = pb::RegisterRequest { name: "stuck".into(), threads: 1, ..tessera_link::build::registration() };
         let worker = client.register(reg).await.unwrap().into_inner().worker_id;
         let req = pb::LeaseTileRequest { worker_id: worker.clone(), max_tiles: 1, wait_ms: 5000 };
         let lease = client.lease_tile(req).await.unwrap().into_inner().leases.pop().unwrap().lease.unwrap();
@@ -98,7 +98,7 @@ fn a_restarted_worker_keeps_its_identity_and_nobody_else_can_take_it() {
             threads: 1,
             worker_id: first.clone(),
             worker_secret: "0123456789abcdef0123456789abcdef".into(),
-            ..Default::default()
+            ..tessera_link::build::registration()
         };
         let e = client.register(reg).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::FailedPrecondition, "{e:?}");

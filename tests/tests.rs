@@ -482,3 +482,4 @@ mod hostile;
 mod logs;
 mod scale;
 mod tls;
+mod workers;

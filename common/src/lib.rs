@@ -16,6 +16,15 @@
 /// of them bumps it; readers refuse another version by name, and keep no reader for older ones.
 pub const FORMAT_VERSION: u32 = 3;
 
+/// The renderer's revision: a digest of this crate's sources and the workspace's `Cargo.lock`
+/// (`build.rs`). Two builds that agree on it render the same bits.
+pub const RENDERER_REVISION: &str = env!("TESSERA_RENDERER_REVISION");
+
+/// This build as `tessera version` prints it and workers and the coordinator compare it.
+pub fn build_id() -> String {
+    format!("{} (renderer {RENDERER_REVISION})", env!("CARGO_PKG_VERSION"))
+}
+
 pub mod bsdf;
 pub mod bundle;
 pub mod camera;

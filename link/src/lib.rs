@@ -13,6 +13,7 @@
 
 #![deny(missing_docs)]
 
+pub mod build;
 pub mod bundle;
 pub mod connect;
 pub mod convert;

@@ -71,16 +71,20 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                 .register(client.request(pb::RegisterRequest {
                     name: name.clone(),
                     threads: threads as u32,
-                    version: env!("CARGO_PKG_VERSION").into(),
                     worker_id: identity.id.clone(),
                     worker_secret: identity.secret.clone(),
+                    ..tessera_link::build::registration()
                 }))
                 .await
                 .map_err(|s| match s.code() {
-                    // another worker's identity: retrying cannot help
+                    // another worker's identity, another build: retrying cannot help
                     tonic::Code::FailedPrecondition | tonic::Code::InvalidArgument => {
                         anyhow::Error::new(Fatal(s.message().to_string()))
                     }
+                    tonic::Code::Unauthenticated | tonic::Code::PermissionDenied => anyhow::Error::new(Fatal(format!(
+                        "the coordinator refused this worker's token ({}): check --token (TESSERA_TOKEN)",
+                        s.message()
+                    ))),
                     _ => s.into(),
                 })?
                 .into_inner();

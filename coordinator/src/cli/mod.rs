@@ -44,6 +44,9 @@ pub enum Command {
     Requeue(control::JobControlArgs),
     /// Give a job a new priority (higher runs first).
     Priority(control::PriorityArgs),
+    /// Print this build: its version and renderer revision (workers must match the
+    /// coordinator's).
+    Version,
     /// Check that a coordinator answers on /healthz: exit 0 if it does, 1 if not.
     Healthcheck(healthcheck::HealthcheckArgs),
     /// Measure: rendering speed, equal-time quality, EMIS overheads and decisions, the farm.
@@ -92,6 +95,10 @@ pub fn run() -> anyhow::Result<()> {
         Command::Resume(args) => control::control_command(control::Control::Resume, &args),
         Command::Requeue(args) => control::control_command(control::Control::Requeue, &args),
         Command::Priority(args) => control::priority_command(&args),
+        Command::Version => {
+            println!("tessera {}", tessera_common::build_id());
+            Ok(())
+        }
         Command::Healthcheck(args) => healthcheck::healthcheck_command(&args),
         Command::Bench(command) => crate::bench::run(&command),
     }

@@ -41,7 +41,7 @@ async fn client_from(c: &Coordinator, source: [u8; 4]) -> Option<WorkerServiceCl
 }
 
 async fn register(client: &mut WorkerServiceClient<Channel>, name: String) -> Result<String, tonic::Status> {
-    let req = pb::RegisterRequest { name, threads: 1, version: "suite".into(), ..Default::default() };
+    let req = pb::RegisterRequest { name, threads: 1, ..tessera_link::build::registration() };
     client.register(req).await.map(|r| r.into_inner().worker_id)
 }
 

@@ -116,7 +116,7 @@ pub async fn connect_worker(url: &str) -> anyhow::Result<WorkerServiceClient<Cha
 
 /// Registers a simulated worker; returns its id.
 pub async fn register(client: &mut WorkerServiceClient<Channel>, name: &str) -> anyhow::Result<String> {
-    let req = pb::RegisterRequest { name: name.into(), threads: 1, version: "bench".into(), ..Default::default() };
+    let req = pb::RegisterRequest { name: name.into(), threads: 1, ..tessera_link::build::registration() };
     Ok(client.register(req).await?.into_inner().worker_id)
 }
 

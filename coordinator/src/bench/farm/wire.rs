@@ -149,7 +149,7 @@ async fn job_phases(
     let mut phases = Vec::new();
     let b0 = snapshot();
     let mut client = connect_worker(&proxy.url).await?;
-    let reg = pb::RegisterRequest { name: "wire".into(), threads: 1, version: "bench".into(), ..Default::default() };
+    let reg = pb::RegisterRequest { name: "wire".into(), threads: 1, ..tessera_link::build::registration() };
     let worker = register(&mut client, "wire").await?;
     let reg_resp =
         pb::RegisterResponse { worker_id: worker.clone(), heartbeat_interval_ms: 7500, lease_timeout_ms: 30000 };

@@ -28,8 +28,14 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         // the address it registers from: failures count against its host too
         let peer = req.extensions().get::<axum::extract::ConnectInfo<Peer>>().map(|c| c.0.addr.ip());
         let req = req.into_inner();
-        if req.version.len() > MAX_VERSION_BYTES {
-            return Err(Status::invalid_argument(format!("field \"version\" is over {MAX_VERSION_BYTES} bytes")));
+        if req.version.len() > MAX_VERSION_BYTES || req.renderer_revision.len() > MAX_VERSION_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "fields \"version\" and \"renderer_revision\" are at most {MAX_VERSION_BYTES} bytes"
+            )));
+        }
+        if let Some(why) = tessera_link::build::mismatch(&req) {
+            tracing::warn!(name = %req.name, version = %req.version, revision = %req.renderer_revision, "worker of another build refused");
+            return Err(Status::failed_precondition(why));
         }
         let svc = self.0.svc.clone();
         let id = blocking(move || {
