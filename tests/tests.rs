@@ -474,6 +474,7 @@ fn image_comparison_notices_a_different_seed() {
 
 mod bad_results;
 mod bounded_memory;
+mod client;
 mod connections;
 mod control;
 mod emis;

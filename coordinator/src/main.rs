@@ -11,7 +11,8 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            // distinct codes per kind of failure (cli/exit.rs)
+            ExitCode::from(tessera_coordinator::cli::exit::code(&e))
         }
     }
 }

@@ -4,7 +4,6 @@
 //! `-D` definitions and scene names. Of EMIS, when to update and which pilot are a user's choice;
 //! the optimiser's research variants are one `--emis-experiment KEY=VALUE`.
 
-use anyhow::{anyhow, bail};
 use clap::ValueEnum;
 use std::collections::HashMap;
 use std::path::Path;
@@ -140,6 +139,11 @@ pub struct JobArgs {
     pub define: Vec<String>,
 }
 
+/// Input a command refuses before rendering or asking anyone (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct InvalidInput(pub String);
+
 impl JobArgs {
     /// The `-D` definitions.
     pub fn defines(&self) -> anyhow::Result<HashMap<String, String>> {
@@ -158,7 +162,7 @@ impl JobArgs {
             ..RenderSettings::default()
         };
         self.mis.apply(&mut settings);
-        settings.validate().map_err(|e| anyhow!(flag_error(e)))?;
+        settings.validate().map_err(|e| InvalidInput(flag_error(e)))?;
         Ok(settings)
     }
 }
@@ -212,7 +216,7 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
         .iter()
         .map(|d| match d.split_once('=') {
             Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
-            _ => bail!("invalid -D \"{d}\": expected NAME=VALUE"),
+            _ => Err(InvalidInput(format!("invalid -D \"{d}\": expected NAME=VALUE")).into()),
         })
         .collect()
 }
@@ -220,7 +224,7 @@ pub fn parse_defines(defines: &[String]) -> anyhow::Result<HashMap<String, Strin
 /// Builds the renderer of `settings` (the rules shared with the farm), naming the command-line
 /// flag of a bad value.
 pub fn make_renderer(settings: &RenderSettings, scene: &Scene) -> anyhow::Result<Renderer> {
-    settings.make_renderer(scene).map_err(|e| anyhow!(flag_error(e)))
+    settings.make_renderer(scene).map_err(|e| InvalidInput(flag_error(e)).into())
 }
 
 /// A settings error, naming the command-line flag of a bad field.

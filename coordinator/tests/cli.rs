@@ -66,13 +66,14 @@ fn default_output_is_named_after_the_scene_folder() {
     assert!(dir.path().join("veach-mis.exr").exists() && dir.path().join("veach-mis.png").exists());
 }
 
+/// Invalid input exits with 2 (`cli/exit.rs`).
 #[test]
-fn bad_scene_gives_one_line_and_exit_code_one() {
+fn bad_scene_gives_one_line_and_exit_code_two() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.xml");
     std::fs::write(&bad, "<scene version=\"3.0.0\">\n  <shape type=\"teapot\"/>\n</scene>\n").unwrap();
     let run = tessera().args(["render"]).arg(&bad).output().unwrap();
-    assert_eq!(run.status.code(), Some(1));
+    assert_eq!(run.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     assert!(stderr.starts_with("error: ") && stderr.contains("bad.xml:2:3") && stderr.contains("teapot"), "{stderr}");
@@ -81,10 +82,10 @@ fn bad_scene_gives_one_line_and_exit_code_one() {
 #[test]
 fn bad_arguments_fail_cleanly() {
     let run = tessera().args(["render"]).arg(scene("cornell-box")).args(["--spp", "0"]).output().unwrap();
-    assert_eq!(run.status.code(), Some(1));
+    assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("--spp must be at least 1"));
     let run = tessera().args(["render", "/nonexistent/scene.xml"]).output().unwrap();
-    assert_eq!(run.status.code(), Some(1));
+    assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/scene.xml"));
     let run =
         tessera().args(["render"]).arg(scene("cornell-box")).args(["--spp", "1", "--time", "1"]).output().unwrap();

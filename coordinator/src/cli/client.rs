@@ -1,6 +1,7 @@
 //! The farm client: the connection to a coordinator shared by `submit`, `status`, `cancel` and
 //! `delete`, and the `status`, `cancel` and `delete` commands, all over gRPC.
 
+use crate::options::InvalidInput;
 use anyhow::{Context, bail};
 use tessera_proto::state_name;
 use tessera_proto::v1 as pb;
@@ -35,7 +36,7 @@ impl Client {
         let channel = tessera_link::connect::endpoint(&args.server, args.ca_cert.as_deref())?
             .connect()
             .await
-            .with_context(|| format!("cannot connect to {}", args.server))?;
+            .map_err(|source| Unreachable { url: args.server.clone(), source })?;
         let jobs = JobServiceClient::new(channel)
             .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
             .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
@@ -48,9 +49,30 @@ impl Client {
     }
 }
 
+/// What the coordinator answered to a call that failed (its code decides the exit code).
+#[derive(Debug, thiserror::Error)]
+#[error("{message} ({code:?})")]
+pub struct Refused {
+    /// The gRPC code.
+    pub code: tonic::Code,
+    /// The coordinator's message.
+    pub message: String,
+}
+
+/// The coordinator cannot be reached.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot connect to {url}")]
+pub struct Unreachable {
+    /// Its URL.
+    pub url: String,
+    /// Why.
+    #[source]
+    pub source: tonic::transport::Error,
+}
+
 /// A gRPC error as a one-line message.
 pub fn status_error(s: tonic::Status) -> anyhow::Error {
-    anyhow::anyhow!("{} ({:?})", s.message(), s.code())
+    Refused { code: s.code(), message: s.message().to_string() }.into()
 }
 
 /// Arguments of `tessera status`.
@@ -65,6 +87,24 @@ pub struct StatusArgs {
     #[arg(long)]
     pub json: bool,
 }
+
+/// Arguments of `tessera list`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ListArgs {
+    /// Only jobs in this state: queued, pilot, optimizing, final, paused, done, failed or
+    /// cancelled.
+    #[arg(long)]
+    pub state: Option<String>,
+    /// Coordinator.
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The state names `--state` takes.
+const STATES: [&str; 8] = ["queued", "pilot", "optimizing", "final", "paused", "done", "failed", "cancelled"];
 
 /// Arguments of `tessera cancel`.
 #[derive(clap::Args, Debug, Clone)]
@@ -119,14 +159,38 @@ pub fn status_command(args: &StatusArgs) -> anyhow::Result<()> {
             ],
             None => c.jobs.list_jobs(c.request(pb::ListJobsRequest {})).await.map_err(status_error)?.into_inner().jobs,
         };
-        if args.json {
+        if args.json && args.job.is_some() {
+            println!("{}", serde_json::to_string_pretty(&job_json(&jobs[0]))?);
+            return Ok(());
+        }
+        print_jobs(&jobs, args.json)
+    })
+}
+
+/// Runs `tessera list`.
+pub fn list_command(args: &ListArgs) -> anyhow::Result<()> {
+    if let Some(s) = args.state.as_deref().filter(|s| !STATES.contains(s)) {
+        return Err(InvalidInput(format!("--state {s}: expected one of {}", STATES.join(", "))).into());
+    }
+    runtime()?.block_on(async {
+        let mut c = Client::connect(&args.server).await?;
+        let jobs = c.jobs.list_jobs(c.request(pb::ListJobsRequest {})).await.map_err(status_error)?.into_inner().jobs;
+        let jobs: Vec<_> =
+            jobs.into_iter().filter(|j| args.state.as_deref().is_none_or(|s| state_name(j.state) == s)).collect();
+        print_jobs(&jobs, args.json)
+    })
+}
+
+/// Prints jobs as a table, or as a JSON array.
+fn print_jobs(jobs: &[pb::Job], json: bool) -> anyhow::Result<()> {
+    {
+        if json {
             let v: Vec<_> = jobs.iter().map(job_json).collect();
-            let out = if args.job.is_some() { v[0].clone() } else { serde_json::Value::Array(v) };
-            println!("{}", serde_json::to_string_pretty(&out)?);
+            println!("{}", serde_json::to_string_pretty(&v)?);
             return Ok(());
         }
         println!("{:<36}  {:<10}  {:>6}  {:>11}  {:<5}  name", "id", "state", "done", "tiles", "integ");
-        for j in &jobs {
+        for j in jobs {
             let integrator = j.settings.as_ref().map_or("", |s| s.integrator.as_str());
             println!(
                 "{:<36}  {:<10}  {:>5.1}%  {:>5}/{:<5}  {:<5}  {}{}",
@@ -141,7 +205,7 @@ pub fn status_command(args: &StatusArgs) -> anyhow::Result<()> {
             );
         }
         Ok(())
-    })
+    }
 }
 
 /// Runs `tessera cancel`.

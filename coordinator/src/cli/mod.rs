@@ -6,6 +6,8 @@
 
 pub mod client;
 pub mod control;
+pub mod exit;
+pub mod fetch;
 pub mod healthcheck;
 pub mod render;
 pub mod submit;
@@ -32,6 +34,13 @@ pub enum Command {
     Submit(submit::SubmitArgs),
     /// Show one job or all jobs of a coordinator.
     Status(client::StatusArgs),
+    /// List a coordinator's jobs, newest first, optionally of one state.
+    List(client::ListArgs),
+    /// Follow a submitted job until it ends and download its outputs (re-attaches after
+    /// `submit --wait` was interrupted).
+    Wait(fetch::FetchArgs),
+    /// Download a done job's outputs.
+    Download(fetch::FetchArgs),
     /// Cancel a job on a coordinator.
     Cancel(client::CancelArgs),
     /// Delete an ended job (done, failed or cancelled) and all its data from a coordinator.
@@ -89,6 +98,9 @@ pub fn run() -> anyhow::Result<()> {
         Command::Serve(args) => crate::serve::app::serve_command(&args),
         Command::Submit(args) => submit::submit_command(&args),
         Command::Status(args) => client::status_command(&args),
+        Command::List(args) => client::list_command(&args),
+        Command::Wait(args) => fetch::wait_command(&args),
+        Command::Download(args) => fetch::download_command(&args),
         Command::Cancel(args) => client::cancel_command(&args),
         Command::Delete(args) => client::delete_command(&args),
         Command::Pause(args) => control::control_command(control::Control::Pause, &args),

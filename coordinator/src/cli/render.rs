@@ -3,7 +3,6 @@
 
 use crate::options::{JobArgs, make_renderer, scene_name};
 use crate::output::{OutputPaths, Outputs, Provenance};
-use anyhow::bail;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -38,7 +37,7 @@ pub struct RenderArgs {
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
     if args.threads == Some(0) {
-        bail!("--threads must be at least 1");
+        return Err(crate::options::InvalidInput("--threads must be at least 1".into()).into());
     }
     let textures = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
     // the user's own scene on the user's own machine: as many triangles and as much memory

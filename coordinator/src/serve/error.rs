@@ -103,7 +103,9 @@ impl From<ServiceError> for ApiError {
     fn from(e: ServiceError) -> Self {
         // no wildcard: a new error variant must be given its code here
         let code = match &e {
-            ServiceError::InvalidArgument(_) | ServiceError::InvalidResult(_) => ErrorCode::InvalidArgument,
+            ServiceError::InvalidArgument(_)
+            | ServiceError::InvalidResult(_)
+            | ServiceError::Transition(TransitionError::AmbiguousPrefix { .. }) => ErrorCode::InvalidArgument,
             ServiceError::TooLarge(_) => ErrorCode::PayloadTooLarge,
             ServiceError::ResourceExhausted(_) => ErrorCode::ResourceExhausted,
             ServiceError::InsufficientStorage(_) => ErrorCode::InsufficientStorage,

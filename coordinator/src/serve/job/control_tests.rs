@@ -101,3 +101,18 @@ fn requeue_with_every_tile_checkpointed_runs_the_barrier() {
     assert_eq!(e.then, vec![Effect::WriteOutputs { job: "a".into(), upto: 4 }]);
     assert_eq!(m.jobs["a"].state, JobState::Finishing);
 }
+
+/// A job is found by its id or a unique prefix of at least six characters; a shorter or
+/// shared prefix is not enough.
+#[test]
+fn jobs_are_found_by_a_unique_prefix_of_six_or_more() {
+    let mut m = JobsModel::default();
+    for id in ["abcdef12-1", "abcdef34-2", "abc"] {
+        m.submit(id, spec(1, 0, None), 0).unwrap();
+    }
+    assert_eq!(m.resolve("abcdef12"), Ok("abcdef12-1"));
+    assert_eq!(m.resolve("abc"), Ok("abc"), "an id is itself, however short");
+    assert_eq!(m.resolve("abcdef"), Err(TransitionError::AmbiguousPrefix { prefix: "abcdef".into(), count: 2 }));
+    assert_eq!(m.resolve("abcd"), Err(TransitionError::UnknownJob("abcd".into())), "too short to be a prefix");
+    assert_eq!(m.resolve("abcdef9"), Err(TransitionError::UnknownJob("abcdef9".into())));
+}

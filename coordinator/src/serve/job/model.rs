@@ -34,6 +34,9 @@ use std::ops::Range;
 use tessera_common::driver::{Driver, Step};
 pub use tessera_common::driver::{Pass, PassKind};
 
+/// The shortest job id prefix that names a job (a uuid has 36 characters).
+pub const MIN_ID_PREFIX: usize = 6;
+
 /// A tile that failed this many times fails its job.
 pub const MAX_TILE_FAILURES: u32 = 6;
 
@@ -303,6 +306,14 @@ pub enum TransitionError {
     /// The job is not waiting for its outputs (it was cancelled meanwhile).
     #[error("job {0} is not finishing")]
     NotFinishing(String),
+    /// A job id prefix that more than one job has.
+    #[error("job id prefix {prefix} matches {count} jobs: give more of the id")]
+    AmbiguousPrefix {
+        /// The prefix.
+        prefix: String,
+        /// How many jobs have it.
+        count: usize,
+    },
     /// Only a failed or cancelled job can be requeued.
     #[error("job {job} is {state}: only a failed or cancelled job can be requeued")]
     NotRequeueable {
@@ -369,6 +380,25 @@ impl JobsModel {
         let mut changes = Changes::new();
         changes.insert(id.to_string(), range.collect());
         Ok(changes)
+    }
+
+    /// The id of the job `id` names: its own id, or a unique prefix of at least
+    /// [`MIN_ID_PREFIX`] characters.
+    pub fn resolve<'a>(&'a self, id: &str) -> Result<&'a str, TransitionError> {
+        if let Some((k, _)) = self.jobs.get_key_value(id) {
+            return Ok(k);
+        }
+        if id.len() >= MIN_ID_PREFIX {
+            let mut matches = self.jobs.range(id.to_string()..).map(|(k, _)| k).take_while(|k| k.starts_with(id));
+            match (matches.next(), matches.count()) {
+                (Some(k), 0) => return Ok(k),
+                (Some(_), more) => {
+                    return Err(TransitionError::AmbiguousPrefix { prefix: id.to_string(), count: more + 1 });
+                }
+                (None, _) => {}
+            }
+        }
+        Err(TransitionError::UnknownJob(id.to_string()))
     }
 
     /// Adds a job rebuilt from storage as it was.

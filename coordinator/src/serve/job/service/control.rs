@@ -9,9 +9,10 @@ use crate::serve::job::view::JobView;
 impl JobService {
     /// Applies a control event to `job`, commits it and answers with the job's view; workers
     /// waiting for work look again (a resumed or reprioritised job may be theirs now).
-    fn control(&self, job: &str, event: Event<'_>, now_ms: u64) -> Result<JobView, ServiceError> {
+    fn control(&self, job: &str, event: impl FnOnce(&str) -> Event<'_>, now_ms: u64) -> Result<JobView, ServiceError> {
         let mut inner = self.lock();
-        let effects = inner.model.apply(event, now_ms).map_err(super::retention::refused)?;
+        let job = &Self::resolve(&inner, job)?;
+        let effects = inner.model.apply(event(job), now_ms).map_err(super::retention::refused)?;
         self.persist(&mut inner, &effects.changes, &[])?;
         self.sync(&inner)?;
         self.work.notify_waiters();
@@ -21,21 +22,21 @@ impl JobService {
     /// Pauses a job: no tile of it is leased until it is resumed; tiles leased already are
     /// rendered and merged.
     pub fn pause(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
-        let view = self.control(job, Event::Pause { job }, now_ms)?;
+        let view = self.control(job, |job| Event::Pause { job }, now_ms)?;
         tracing::info!(job_id = %job, "job paused");
         Ok(view)
     }
 
     /// Resumes a paused job.
     pub fn resume_job(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
-        let view = self.control(job, Event::Resume { job }, now_ms)?;
+        let view = self.control(job, |job| Event::Resume { job }, now_ms)?;
         tracing::info!(job_id = %job, "job resumed");
         Ok(view)
     }
 
     /// Gives a job a new priority (higher runs first).
     pub fn set_priority(&self, job: &str, priority: i32, now_ms: u64) -> Result<JobView, ServiceError> {
-        let view = self.control(job, Event::SetPriority { job, priority }, now_ms)?;
+        let view = self.control(job, |job| Event::SetPriority { job, priority }, now_ms)?;
         tracing::info!(job_id = %job, priority, "job priority changed");
         Ok(view)
     }
@@ -45,6 +46,7 @@ impl JobService {
     pub fn requeue(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         self.check_space()?;
         let mut inner = self.lock();
+        let job = &Self::resolve(&inner, job)?;
         check_requeueable(&inner, job)?;
         // the checkpoint the database names, with everything queued before it committed
         self.sync(&inner)?;

@@ -416,6 +416,11 @@ impl JobService {
         }
     }
 
+    /// The full id of the job a client named by its id or a unique prefix of it.
+    fn resolve(inner: &Inner, id: &str) -> Result<String, ServiceError> {
+        inner.model.resolve(id).map(str::to_string).map_err(retention::refused)
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
         // a panic while holding the lock leaves a model that was persisted transition by
         // transition, so carrying on with it is safe

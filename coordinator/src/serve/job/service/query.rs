@@ -71,6 +71,7 @@ impl JobService {
     pub fn cancel(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         self.disk.make_room();
         let mut inner = self.lock();
+        let job = &Self::resolve(&inner, job)?;
         let effects = inner.model.apply(Event::Cancel { job }, now_ms).map_err(super::retention::refused)?;
         self.persist(&mut inner, &effects.changes, &[])?;
         self.sync(&inner)?;
@@ -86,8 +87,8 @@ impl JobService {
     /// crash could take back.
     pub fn get(&self, job: &str, now_ms: u64) -> Result<JobView, ServiceError> {
         let inner = self.lock();
-        let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-        let view = self.view(&inner, &j.id, now_ms);
+        let job = &Self::resolve(&inner, job)?;
+        let view = self.view(&inner, job, now_ms);
         let ticket = inner.ticket;
         drop(inner);
         self.commits.wait(ticket)?;
@@ -119,6 +120,7 @@ impl JobService {
     pub fn output(&self, job: &str, kind: OutputKind) -> Result<Vec<u8>, ServiceError> {
         let digest = {
             let inner = self.lock();
+            let job = &Self::resolve(&inner, job)?;
             let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
             let integrator = j.spec.settings.integrator;
             if kind.emis_only() && integrator.emis_method().is_none() {

@@ -55,7 +55,8 @@ impl JobService {
     pub fn delete(&self, job: &str) -> Result<(), ServiceError> {
         self.disk.make_room();
         let mut inner = self.lock();
-        self.remove_jobs(&mut inner, &[job.to_string()])?;
+        let job = &Self::resolve(&inner, job)?;
+        self.remove_jobs(&mut inner, std::slice::from_ref(job))?;
         tracing::info!(job_id = %job, "job deleted");
         drop(inner);
         self.disk.restore_ballast();
