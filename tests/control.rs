@@ -101,3 +101,41 @@ fn a_requeued_cancelled_job_finishes_with_the_local_image() {
     let (status, body) = rest::post(&format!("{}/requeue", job_url(&c, &a)), None);
     assert_eq!(status, 409, "{body}");
 }
+
+/// A chain a → b → c submitted with `--after` (by id prefix): while a is cancelled, b and c
+/// are blocked naming why; a requeued runs, then b, then c, all as local renders.
+#[test]
+fn a_dependency_chain_waits_blocks_and_runs_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let cornell = scene("cornell-box");
+    let cli_submit = |seed: &str, after: &str| {
+        let mut args = vec!["submit", cornell.to_str().unwrap(), "--server", &c.url, "--integrator", "pt"];
+        args.extend(["--spp", "2", "--seed", seed, "--priority", "5"]);
+        if !after.is_empty() {
+            args.extend(["--after", after]);
+        }
+        let (ok, out, err) = tessera(&args);
+        assert!(ok, "{err}");
+        out.trim().to_string()
+    };
+    let a = submit(&c, 8, 1);
+    let b = cli_submit("2", &a[..8]);
+    let c_id = cli_submit("3", &b);
+    assert_eq!(job(&c, &b)["phase"], format!("waiting for job {a}"));
+    control(&c, &["cancel", &a]);
+    let (b_now, c_now) = (job(&c, &b), job(&c, &c_id));
+    assert_eq!((b_now["state"].as_str(), c_now["state"].as_str()), (Some("blocked"), Some("blocked")));
+    assert_eq!(b_now["phase"], format!("blocked: job {a} was cancelled"));
+    assert_eq!(c_now["phase"], format!("blocked: job {b} is blocked"));
+    let (ok, _, err) = tessera(&["submit", cornell.to_str().unwrap(), "--server", &c.url, "--after", "nosuchjob"]);
+    assert!(!ok && err.contains("after"), "{err}");
+    control(&c, &["requeue", &a]);
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &[]);
+    let last = wait_done(&c, &c_id, None);
+    let (a_done, b_done) = (job(&c, &a), job(&c, &b));
+    assert_eq!((a_done["state"].as_str(), b_done["state"].as_str()), (Some("done"), Some("done")), "{last}");
+    for (id, seed) in [(&b, 2), (&c_id, 3)] {
+        assert_like_local(&c, dir.path(), id, 2, seed);
+    }
+}

@@ -70,6 +70,7 @@ pub fn state_name(state: i32) -> &'static str {
         S::Failed => "failed",
         S::Cancelled => "cancelled",
         S::Paused => "paused",
+        S::Blocked => "blocked",
         S::Unspecified => "unknown",
     }
 }

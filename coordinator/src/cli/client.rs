@@ -91,8 +91,8 @@ pub struct StatusArgs {
 /// Arguments of `tessera list`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ListArgs {
-    /// Only jobs in this state: queued, pilot, optimizing, final, paused, done, failed or
-    /// cancelled.
+    /// Only jobs in this state: queued, pilot, optimizing, final, paused, blocked, done, failed
+    /// or cancelled.
     #[arg(long)]
     pub state: Option<String>,
     /// Coordinator.
@@ -104,7 +104,8 @@ pub struct ListArgs {
 }
 
 /// The state names `--state` takes.
-const STATES: [&str; 8] = ["queued", "pilot", "optimizing", "final", "paused", "done", "failed", "cancelled"];
+const STATES: [&str; 9] =
+    ["queued", "pilot", "optimizing", "final", "paused", "blocked", "done", "failed", "cancelled"];
 
 /// Arguments of `tessera cancel`.
 #[derive(clap::Args, Debug, Clone)]

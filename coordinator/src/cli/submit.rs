@@ -22,6 +22,10 @@ pub struct SubmitArgs {
     /// Higher priorities run first.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub priority: i32,
+    /// Start only once these jobs are done (ids or unique prefixes, comma-separated); until
+    /// then the job is queued, and blocked if one of them fails or is cancelled.
+    #[arg(long, value_delimiter = ',', value_name = "JOB")]
+    pub after: Vec<String>,
     /// Job name [default: the scene's name].
     #[arg(long)]
     pub name: Option<String>,
@@ -48,6 +52,7 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
             settings: Some(tessera_link::convert::settings_to_pb(&settings)),
             bundle: Some(pb::SceneBundle { scene_path: bundle.scene_path.clone(), files: vec![] }),
             priority: args.priority,
+            after: args.after.clone(),
             name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),
         };
         let parts = tokio_stream::iter(submission_parts(header, bundle));

@@ -71,13 +71,13 @@ impl StreamedBundle {
         mut self,
         scene_path: String,
         settings: RenderSettings,
-        priority: i32,
+        placement: crate::serve::job::spec::Placement,
         name: Option<String>,
     ) -> Result<JobView, ApiError> {
         self.flush().await?;
         let upload = self.upload.take().ok_or_else(|| ApiError::from(spent()))?;
         let svc = self.svc.clone();
-        blocking(move || svc.submit_upload(upload, &scene_path, settings, priority, name, now_ms())).await
+        blocking(move || svc.submit_upload(upload, &scene_path, settings, placement, name, now_ms())).await
     }
 }
 

@@ -71,6 +71,7 @@ fn state_to_pb(s: JobState) -> pb::JobState {
         JobState::Failed => pb::JobState::Failed,
         JobState::Cancelled => pb::JobState::Cancelled,
         JobState::Paused => pb::JobState::Paused,
+        JobState::Blocked => pb::JobState::Blocked,
     }
 }
 

@@ -4,6 +4,7 @@
 use super::convert::{job_to_pb, settings_from_pb};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::job::service::OutputKind;
+use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
 use std::pin::Pin;
 use std::sync::Arc;
@@ -27,7 +28,8 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.start_file(file.path).await?;
             bundle.write(&file.data).await?;
         }
-        let view = bundle.submit(b.scene_path, settings, req.priority, Some(req.name)).await?;
+        let placement = Placement { priority: req.priority, after: req.after };
+        let view = bundle.submit(b.scene_path, settings, placement, Some(req.name)).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
 
@@ -49,7 +51,8 @@ impl pb::job_service_server::JobService for JobApi {
             }
             bundle.write(&part.data).await?;
         }
-        let view = bundle.submit(scene_path, settings, header.priority, Some(header.name)).await?;
+        let placement = Placement { priority: header.priority, after: header.after };
+        let view = bundle.submit(scene_path, settings, placement, Some(header.name)).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
 

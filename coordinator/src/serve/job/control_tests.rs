@@ -116,3 +116,30 @@ fn jobs_are_found_by_a_unique_prefix_of_six_or_more() {
     assert_eq!(m.resolve("abcd"), Err(TransitionError::UnknownJob("abcd".into())), "too short to be a prefix");
     assert_eq!(m.resolve("abcdef9"), Err(TransitionError::UnknownJob("abcdef9".into())));
 }
+
+/// A job that waits for others is not leased until they are done; one that failed blocks it
+/// (and, down the chain, the jobs waiting for it) until it is requeued and done.
+#[test]
+fn a_job_after_others_starts_when_they_are_done_and_is_blocked_when_one_fails() {
+    let mut m = JobsModel::default();
+    m.submit("a", spec(1, 0, None), 0).unwrap();
+    m.submit("b", JobSpec { after: vec!["a".into()], ..spec(1, 9, None) }, 0).unwrap();
+    m.submit("c", JobSpec { after: vec!["b".into()], ..spec(1, 9, None) }, 0).unwrap();
+    let waiting = |m: &JobsModel, id: &str| m.waiting(&m.jobs[id]);
+    assert_eq!(waiting(&m, "b"), Some(Waiting::For("a".into())));
+    let (first, _) = m.lease("w", 4, 1, TTL);
+    assert!(first.iter().all(|l| l.job == "a"), "b and c rank higher but wait");
+    m.cancel("a", 2).unwrap();
+    assert_eq!(waiting(&m, "b"), Some(Waiting::Blocked { job: "a".into(), why: "was cancelled" }));
+    assert_eq!(waiting(&m, "c"), Some(Waiting::Blocked { job: "b".into(), why: "is blocked" }));
+    assert!(m.lease("w", 4, 3, TTL).0.is_empty());
+    m.requeue("a", 0, 4).unwrap();
+    assert_eq!(waiting(&m, "c"), Some(Waiting::For("b".into())));
+    for l in m.lease("w", 4, 5, TTL).0 {
+        assert_eq!(l.job, "a");
+        m.result("w", &l, Ok(()), 6);
+    }
+    m.merged("a", 4, 7);
+    assert_eq!((m.jobs["a"].state, waiting(&m, "b")), (JobState::Done, None));
+    assert_eq!(m.lease("w", 1, 8, TTL).0[0].job, "b");
+}

@@ -14,6 +14,7 @@
 //! Job life: `Queued → (Pilot → Optimizing →) Final → Finishing → Done | Failed | Cancelled`,
 //! then removed (by a client or the retention sweep, see `retention.rs`).
 
+mod after;
 #[cfg(test)]
 pub(crate) mod calls;
 mod control;
@@ -23,6 +24,7 @@ mod index;
 mod leasing;
 
 pub use super::spec::{JobSpec, TileSpec};
+pub use after::Waiting;
 pub use event::{Effect, Effects, Event};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
 use failures::{fail_tile, host_of};
@@ -63,6 +65,8 @@ pub enum JobState {
     /// Shown for a job a client paused (the model keeps the state it runs in beside
     /// [`Job::paused_ms`]).
     Paused,
+    /// Shown for a queued job that waits for one that failed or was cancelled (see `after.rs`).
+    Blocked,
 }
 
 impl JobState {
@@ -92,6 +96,7 @@ impl JobState {
             JobState::Failed => "failed",
             JobState::Cancelled => "cancelled",
             JobState::Paused => "paused",
+            JobState::Blocked => "blocked",
         }
     }
 }

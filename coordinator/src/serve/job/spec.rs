@@ -36,6 +36,28 @@ pub struct JobSpec {
     pub scene_path: String,
     /// The film's reconstruction filter.
     pub filter: FilterKind,
+    /// Jobs that must be done before this one starts (`--after`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub after: Vec<String>,
+}
+
+/// The most jobs one job may wait for.
+pub const MAX_AFTER: usize = 64;
+
+/// Where and when a job runs, beside what it renders: its priority and the jobs it waits for
+/// (ids or unique prefixes, as the client gave them).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Placement {
+    /// Higher runs first.
+    pub priority: i32,
+    /// Jobs that must be done first.
+    pub after: Vec<String>,
+}
+
+impl From<i32> for Placement {
+    fn from(priority: i32) -> Placement {
+        Placement { priority, ..Placement::default() }
+    }
 }
 
 impl JobSpec {
@@ -66,6 +88,7 @@ impl JobSpec {
             bundle_digest: "d".into(),
             scene_path: "scene.xml".into(),
             filter: FilterKind::Box,
+            after: Vec::new(),
         }
     }
 

@@ -23,6 +23,7 @@ fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
         bundle_digest: "digest".into(),
         scene_path: "scene.xml".into(),
         filter: tessera_common::film::filter::FilterKind::Box,
+        after: Vec::new(),
     }
 }
 

@@ -4,6 +4,7 @@ use super::dto::{JobDto, WorkerDto};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::error::{ApiError, ErrorCode};
 use crate::serve::job::service::OutputKind;
+use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
 use axum::Json;
 use axum::extract::{Multipart, Path, Query, State};
@@ -27,8 +28,8 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     }
 }
 
-/// Splits the `settings` JSON into render settings, priority and name.
-fn parse_settings(text: &str) -> Result<(RenderSettings, i32, Option<String>), ApiError> {
+/// Splits the `settings` JSON into render settings, placement (`priority`, `after`) and name.
+fn parse_settings(text: &str) -> Result<(RenderSettings, Placement, Option<String>), ApiError> {
     let mut value: serde_json::Value =
         serde_json::from_str(text).map_err(|e| invalid(format!("field \"settings\" is not JSON: {e}")))?;
     let obj = value.as_object_mut().ok_or_else(|| invalid("field \"settings\" must be a JSON object"))?;
@@ -39,10 +40,16 @@ fn parse_settings(text: &str) -> Result<(RenderSettings, i32, Option<String>), A
             .and_then(|p| i32::try_from(p).ok())
             .ok_or_else(|| invalid("settings field \"priority\" must be an integer"))?,
     };
+    let after = match obj.remove("after") {
+        None => Vec::new(),
+        Some(a) => {
+            serde_json::from_value(a).map_err(|_| invalid("settings field \"after\" must be an array of job ids"))?
+        }
+    };
     let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
     tessera_common::settings::strip_retired(obj).map_err(|e| invalid(e.to_string()))?;
     let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
-    Ok((settings, priority, name))
+    Ok((settings, Placement { priority, after }, name))
 }
 
 /// Most bytes the `settings` part may have.
@@ -54,7 +61,7 @@ const MAX_SETTINGS_BYTES: usize = 1 << 20;
 pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoResponse, ApiError> {
     let mut bundle = StreamedBundle::begin(st.svc.clone(), st.max_upload_bytes as u64).await?;
     let mut scene_path = None;
-    let mut settings = (RenderSettings::default(), 0, None);
+    let mut settings = (RenderSettings::default(), Placement::default(), None);
     while let Some(mut field) = form.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
         let file_name = field.file_name().map(str::to_string);
@@ -83,8 +90,8 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
         }
     }
     let scene_path = scene_path.ok_or_else(|| invalid("field \"scene\" is missing (the scene XML file)"))?;
-    let (settings, priority, name) = settings;
-    let view = bundle.submit(scene_path, settings, priority, name).await?;
+    let (settings, placement, name) = settings;
+    let view = bundle.submit(scene_path, settings, placement, name).await?;
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 
@@ -237,8 +244,11 @@ mod tests {
 
     #[test]
     fn settings_json_names_the_bad_field() {
-        let (s, p, n) = parse_settings(r#"{"integrator":"vcm","spp":2,"priority":3,"name":"x"}"#).unwrap();
-        assert_eq!((s.spp, p, n.as_deref()), (Some(2), 3, Some("x")));
+        let (s, p, n) =
+            parse_settings(r#"{"integrator":"vcm","spp":2,"priority":3,"name":"x","after":["j1"]}"#).unwrap();
+        assert_eq!((s.spp, p, n.as_deref()), (Some(2), Placement { priority: 3, after: vec!["j1".into()] }, Some("x")));
+        let e = parse_settings(r#"{"after":"j1"}"#).unwrap_err();
+        assert!(e.message.contains("after"), "{}", e.message);
         let e = parse_settings(r#"{"integrator":"vcm","spq":2}"#).unwrap_err();
         assert!(e.message.contains("spq"), "{}", e.message);
         let e = parse_settings(r#"{"priority":"high"}"#).unwrap_err();

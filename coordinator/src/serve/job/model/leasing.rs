@@ -48,6 +48,7 @@ impl JobsModel {
             .filter(|j| {
                 matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final) && j.paused_ms.is_none()
             })
+            .filter(|j| self.upstream_done(j))
             .filter(|j| !j.is_blocklisted_on(worker, host))
             .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
@@ -127,6 +128,7 @@ impl JobsModel {
             .jobs
             .values()
             .filter(|j| !j.state.is_terminal() && j.paused_ms.is_none() && !live.is_empty())
+            .filter(|j| self.upstream_done(j))
             .filter(|j| !j.index.queued.is_empty())
             // by the workers' own failures: a host blocklisted for workers that registered
             // afresh before each failure (one token holder lying) leaves the job waiting for

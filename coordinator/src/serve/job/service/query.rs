@@ -2,7 +2,7 @@
 //! outputs, blobs, the workers' list and the figures behind `/metrics`.
 
 use super::{Counters, Inner, JobService, ServiceError};
-use crate::serve::job::model::{Event, JobState};
+use crate::serve::job::model::{Event, JobState, Waiting};
 use crate::serve::job::view::{JobView, WorkerView};
 use std::collections::BTreeMap;
 
@@ -63,6 +63,12 @@ impl JobService {
     pub(super) fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
         let j = inner.model.jobs.get(job).expect("invariant: callers check the job exists");
         let mut view = JobView::of(j, now_ms);
+        if let Some(waiting) = inner.model.waiting(j) {
+            if matches!(waiting, Waiting::Blocked { .. }) && j.paused_ms.is_none() {
+                view.state = JobState::Blocked;
+            }
+            view.phase = waiting.phase();
+        }
         view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
         view
     }

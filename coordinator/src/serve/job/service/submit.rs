@@ -6,6 +6,7 @@ use super::upload::BundleUpload;
 use super::{Bundle, JobService, ServiceError};
 use crate::serve::job::model::{Event, JobSpec};
 use crate::serve::job::spec::TILE_SIZE;
+use crate::serve::job::spec::{MAX_AFTER, Placement};
 use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::scene::{LoadOptions, Scene};
@@ -18,7 +19,7 @@ impl JobService {
         &self,
         bundle: Bundle,
         settings: RenderSettings,
-        priority: i32,
+        placement: impl Into<Placement>,
         name: Option<String>,
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
@@ -28,7 +29,7 @@ impl JobService {
             upload.write(data)?;
         }
         drop(bundle.files);
-        self.submit_upload(upload, &bundle.scene_path, settings, priority, name, now_ms)
+        self.submit_upload(upload, &bundle.scene_path, settings, placement, name, now_ms)
     }
 
     /// Validates and stores a received bundle (its scene at `scene_path`) and settings, and
@@ -39,11 +40,14 @@ impl JobService {
         mut upload: BundleUpload,
         scene_path: &str,
         settings: RenderSettings,
-        priority: i32,
+        placement: impl Into<Placement>,
         name: Option<String>,
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        let mut placement = placement.into();
+        // the jobs waited for must exist now (and so cannot wait for this one)
+        placement.after = self.resolve_after(&placement.after)?;
         // the bundle just received may have taken the last of the reserve
         self.check_space()?;
         let blob = self.blobs.temp_path(".bundle");
@@ -62,7 +66,7 @@ impl JobService {
             .put_file_digested(&blob, &digest)
             .map_err(ServiceError::from)
             .and_then(|()| upload.unpack_to(&self.scenes_dir.join(&digest)));
-        let spec = stored.and_then(|()| self.check_scene(scene_path, &digest, settings, priority, name));
+        let spec = stored.and_then(|()| self.check_scene(scene_path, &digest, settings, placement, name));
         let spec = match spec {
             Ok(spec) => spec,
             Err(e) => {
@@ -95,6 +99,25 @@ impl JobService {
         Ok(self.view(&inner, &id, now_ms))
     }
 
+    /// The full ids of the jobs a submission waits for: each must exist (by its id or a
+    /// unique prefix), at most [`MAX_AFTER`] of them, each once.
+    fn resolve_after(&self, after: &[String]) -> Result<Vec<String>, ServiceError> {
+        if after.len() > MAX_AFTER {
+            return Err(ServiceError::InvalidArgument(format!("field \"after\" names more than {MAX_AFTER} jobs")));
+        }
+        let inner = self.lock();
+        let mut ids = Vec::new();
+        for id in after {
+            let full = inner.model.resolve(id).map_err(|e| {
+                ServiceError::InvalidArgument(format!("field \"after\": {}", super::retention::refused(e)))
+            })?;
+            if !ids.iter().any(|i: &String| i == full) {
+                ids.push(full.to_string());
+            }
+        }
+        Ok(ids)
+    }
+
     /// Loads the stored bundle's scene (see [`JobService::load_unpacked`]) and checks it against
     /// the settings and limits: the job's description.
     fn check_scene(
@@ -102,7 +125,7 @@ impl JobService {
         scene_path: &str,
         digest: &str,
         settings: RenderSettings,
-        priority: i32,
+        placement: Placement,
         name: Option<String>,
     ) -> Result<JobSpec, ServiceError> {
         let scene = self.load_unpacked(scene_path, digest, &settings)?;
@@ -138,7 +161,8 @@ impl JobService {
         })?;
         Ok(JobSpec {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(scene_path)),
-            priority,
+            priority: placement.priority,
+            after: placement.after,
             full_frame,
             settings: integrator_settings,
             width: scene.camera.width,
