@@ -22,6 +22,7 @@ fn streamed_parts(xml: Vec<u8>, big: usize) -> Vec<pb::SubmitJobPart> {
         priority: 0,
         name: "big".into(),
         after: Vec::new(),
+        require_tags: Vec::new(),
     };
     let mut parts = vec![
         pb::SubmitJobPart { header: Some(header), ..Default::default() },

@@ -50,6 +50,14 @@ pub struct Args {
     /// Name shown by the coordinator [default: the host name].
     #[arg(long)]
     pub name: Option<String>,
+    /// Tags of this worker, comma-separated: jobs submitted with `--require-tags` go only to
+    /// workers that have all of them (e.g. `big-memory,gpu-free`).
+    #[arg(long, value_delimiter = ',', value_name = "TAG")]
+    pub tags: Vec<String>,
+    /// Exit (with status 0) once the coordinator drains this worker and the tiles it holds are
+    /// uploaded; without it a drained worker idles until it is enabled again.
+    #[arg(long)]
+    pub exit_when_drained: bool,
     /// Image tiles leased at once [default: the thread count].
     #[arg(long)]
     pub max_tiles: Option<u32>,
@@ -137,6 +145,8 @@ mod tests {
             ("cache-limit", "512"),
             ("name", "\"node-7\""),
             ("max-tiles", "2"),
+            ("tags", "[\"big\", \"fast\"]"),
+            ("exit-when-drained", "true"),
             ("texture-budget", "256"),
             ("max-triangles", "2000000"),
             ("max-tile-memory", "4096"),

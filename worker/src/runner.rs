@@ -73,6 +73,7 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                     threads: threads as u32,
                     worker_id: identity.id.clone(),
                     worker_secret: identity.secret.clone(),
+                    tags: args.tags.clone(),
                     ..tessera_link::build::registration()
                 }))
                 .await
@@ -97,8 +98,8 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                 reg.heartbeat_interval_ms,
                 held.clone(),
             ));
-            let result =
-                work_loop(&mut client, &reg.worker_id, max_tiles, &pool, &mut cache, &held, drain.clone()).await;
+            let until = Until { drain: drain.clone(), exit_when_drained: args.exit_when_drained };
+            let result = work_loop(&mut client, &reg.worker_id, max_tiles, &pool, &mut cache, &held, until).await;
             heartbeat.abort();
             result
         };
@@ -120,6 +121,16 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// When the work loop stops: on SIGTERM (`drain`), and when the coordinator drains this worker
+/// if it was started with `--exit-when-drained`.
+struct Until {
+    drain: watch::Receiver<bool>,
+    exit_when_drained: bool,
+}
+
+/// How often a worker the coordinator drained asks whether it may work again.
+const DRAINED_POLL: Duration = Duration::from_secs(2);
+
 /// Leases, renders and uploads until draining (Ok) or the connection fails (Err).
 async fn work_loop(
     client: &mut Client,
@@ -128,10 +139,10 @@ async fn work_loop(
     pool: &Arc<rayon::ThreadPool>,
     cache: &mut SceneCache,
     held: &Arc<Mutex<Held>>,
-    drain: watch::Receiver<bool>,
+    until: Until,
 ) -> anyhow::Result<()> {
     loop {
-        if *drain.borrow() {
+        if *until.drain.borrow() {
             return Ok(());
         }
         let req =
@@ -139,11 +150,24 @@ async fn work_loop(
         // a lease request is never abandoned, not even to drain: the coordinator may already
         // have granted it, and a dropped grant would sit idle until its lease expires
         let timeout = Duration::from_millis(LEASE_WAIT_MS as u64) + Duration::from_secs(10);
-        let leases = tokio::time::timeout(timeout, client.inner.lease_tile(req))
+        let answer = tokio::time::timeout(timeout, client.inner.lease_tile(req))
             .await
             .map_err(|_| anyhow::anyhow!("lease request timed out"))??
-            .into_inner()
-            .leases;
+            .into_inner();
+        let leases = answer.leases;
+        if answer.drain && leases.is_empty() {
+            // it holds nothing: this worker is drained
+            if until.exit_when_drained {
+                tracing::info!("drained by the coordinator: exiting");
+                return Ok(());
+            }
+            let mut d = until.drain.clone();
+            tokio::select! {
+                _ = tokio::time::sleep(DRAINED_POLL) => {}
+                _ = d.wait_for(|v| *v) => {}
+            }
+            continue;
+        }
         if leases.is_empty() {
             continue;
         }

@@ -53,6 +53,12 @@ pub enum Command {
     Requeue(control::JobControlArgs),
     /// Give a job a new priority (higher runs first).
     Priority(control::PriorityArgs),
+    /// List a coordinator's workers with their state (idle, busy, disabled, draining,
+    /// offline) and tags.
+    Workers(control::WorkersArgs),
+    /// Disable, enable or drain a worker from the server.
+    #[command(subcommand)]
+    Worker(control::WorkerCommand),
     /// Print this build: its version and renderer revision (workers must match the
     /// coordinator's).
     Version,
@@ -107,6 +113,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Resume(args) => control::control_command(control::Control::Resume, &args),
         Command::Requeue(args) => control::control_command(control::Control::Requeue, &args),
         Command::Priority(args) => control::priority_command(&args),
+        Command::Workers(args) => control::workers_command(&args),
+        Command::Worker(command) => control::worker_command(&command),
         Command::Version => {
             println!("tessera {}", tessera_common::build_id());
             Ok(())

@@ -26,6 +26,10 @@ pub struct SubmitArgs {
     /// then the job is queued, and blocked if one of them fails or is cancelled.
     #[arg(long, value_delimiter = ',', value_name = "JOB")]
     pub after: Vec<String>,
+    /// Render only on workers that have all these tags (`tessera-worker --tags`),
+    /// comma-separated; until one is up the job waits.
+    #[arg(long, value_delimiter = ',', value_name = "TAG")]
+    pub require_tags: Vec<String>,
     /// Job name [default: the scene's name].
     #[arg(long)]
     pub name: Option<String>,
@@ -53,6 +57,7 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
             bundle: Some(pb::SceneBundle { scene_path: bundle.scene_path.clone(), files: vec![] }),
             priority: args.priority,
             after: args.after.clone(),
+            require_tags: args.require_tags.clone(),
             name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),
         };
         let parts = tokio_stream::iter(submission_parts(header, bundle));

@@ -522,7 +522,7 @@ mod tests {
         };
         let job = svc.submit(bundle, settings_from_pb(req.settings).unwrap(), 0, None, 1).unwrap();
         assert_eq!((job.width, job.height), (width, height), "the -D size overrides reach the scene");
-        let worker = svc.register("sim", 1, None, None, 1).unwrap();
+        let worker = svc.register("sim", 1, &[], None, None, 1).unwrap();
         let mut tiles = 0;
         loop {
             let grants = svc.lease(&worker, 3, 2).unwrap();

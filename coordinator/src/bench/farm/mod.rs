@@ -145,6 +145,7 @@ pub fn generated_job(
         priority: 0,
         name: name.into(),
         after: Vec::new(),
+        require_tags: Vec::new(),
     }
 }
 

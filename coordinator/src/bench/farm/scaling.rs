@@ -85,6 +85,7 @@ pub fn scaling_command(args: &FarmArgs) -> anyhow::Result<()> {
                 priority: 0,
                 name: format!("scaling {config}"),
                 after: Vec::new(),
+                require_tags: Vec::new(),
             };
             let id = jobs.submit_job(req).await?.into_inner().id;
             let mut workers = Vec::new();

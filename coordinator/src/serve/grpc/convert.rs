@@ -3,7 +3,7 @@
 
 use crate::serve::job::emis::{MergeSpec, TileStrategy};
 use crate::serve::job::model::{JobState, LeaseRef};
-use crate::serve::job::service::{JobView, LeaseGrant};
+use crate::serve::job::service::{JobView, LeaseGrant, WorkerView};
 use tessera_common::emis::CandidateSet;
 use tessera_common::film::Rect;
 use tessera_common::settings::RenderSettings;
@@ -58,6 +58,19 @@ fn strategy_to_pb(s: &TileStrategy) -> pb::TileStrategy {
         collect_moments: s.collect,
         reduced_candidates: s.candidates == CandidateSet::Reduced,
         connection_mask_digest: s.connection_mask.clone().unwrap_or_default(),
+    }
+}
+
+/// A worker's view as sent to clients.
+pub fn worker_to_pb(w: &WorkerView) -> pb::Worker {
+    pb::Worker {
+        id: w.id.clone(),
+        name: w.name.clone(),
+        threads: w.threads,
+        state: w.state.into(),
+        tags: w.tags.clone(),
+        last_seen_s_ago: w.last_seen_s_ago,
+        leases: w.leases as u64,
     }
 }
 

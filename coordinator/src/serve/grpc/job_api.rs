@@ -1,11 +1,12 @@
 //! `tessera.v1.JobService`: decode → call the [`JobService`](crate::serve::job::service::JobService)
 //! → encode.
 
-use super::convert::{job_to_pb, settings_from_pb};
+use super::convert::{job_to_pb, settings_from_pb, worker_to_pb};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::job::service::OutputKind;
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
+use crate::serve::storage::WorkerMode;
 use std::pin::Pin;
 use std::sync::Arc;
 use tessera_proto::v1 as pb;
@@ -28,7 +29,7 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.start_file(file.path).await?;
             bundle.write(&file.data).await?;
         }
-        let placement = Placement { priority: req.priority, after: req.after };
+        let placement = Placement { priority: req.priority, after: req.after, require_tags: req.require_tags };
         let view = bundle.submit(b.scene_path, settings, placement, Some(req.name)).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
@@ -51,7 +52,7 @@ impl pb::job_service_server::JobService for JobApi {
             }
             bundle.write(&part.data).await?;
         }
-        let placement = Placement { priority: header.priority, after: header.after };
+        let placement = Placement { priority: header.priority, after: header.after, require_tags: header.require_tags };
         let view = bundle.submit(scene_path, settings, placement, Some(header.name)).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
@@ -95,6 +96,27 @@ impl pb::job_service_server::JobService for JobApi {
         })
         .await?;
         Ok(Response::new(job_to_pb(&view)))
+    }
+
+    async fn list_workers(
+        &self,
+        _: Request<pb::ListWorkersRequest>,
+    ) -> Result<Response<pb::ListWorkersResponse>, Status> {
+        let svc = self.0.svc.clone();
+        let workers = blocking(move || Ok(svc.workers(now_ms()))).await?;
+        Ok(Response::new(pb::ListWorkersResponse { workers: workers.iter().map(worker_to_pb).collect() }))
+    }
+
+    async fn disable_worker(&self, req: Request<pb::WorkerRef>) -> Result<Response<pb::Worker>, Status> {
+        self.worker_mode(req, WorkerMode::Disabled).await
+    }
+
+    async fn enable_worker(&self, req: Request<pb::WorkerRef>) -> Result<Response<pb::Worker>, Status> {
+        self.worker_mode(req, WorkerMode::Enabled).await
+    }
+
+    async fn drain_worker(&self, req: Request<pb::WorkerRef>) -> Result<Response<pb::Worker>, Status> {
+        self.worker_mode(req, WorkerMode::Draining).await
     }
 
     async fn delete_job(&self, req: Request<pb::DeleteJobRequest>) -> Result<Response<pb::DeleteJobResponse>, Status> {
@@ -149,5 +171,12 @@ impl pb::job_service_server::JobService for JobApi {
         let svc = self.0.svc.clone();
         let bytes = blocking(move || svc.output(&req.id, kind)).await?;
         Ok(Response::new(Box::pin(super::chunk_stream(bytes))))
+    }
+}
+
+impl JobApi {
+    async fn worker_mode(&self, req: Request<pb::WorkerRef>, mode: WorkerMode) -> Result<Response<pb::Worker>, Status> {
+        let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
+        Ok(Response::new(worker_to_pb(&blocking(move || svc.set_worker_mode(&id, mode, now_ms())).await?)))
     }
 }

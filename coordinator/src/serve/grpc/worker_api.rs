@@ -40,7 +40,7 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
         let svc = self.0.svc.clone();
         let id = blocking(move || {
             let identity = (!req.worker_id.is_empty()).then_some((req.worker_id.as_str(), req.worker_secret.as_str()));
-            svc.register(&req.name, req.threads, identity, peer, now_ms())
+            svc.register(&req.name, req.threads, &req.tags, identity, peer, now_ms())
         })
         .await?;
         let ttl = self.0.svc.lease_timeout_ms();
@@ -72,8 +72,11 @@ impl pb::worker_service_server::WorkerService for WorkerApi {
             let (svc, worker) = (self.0.svc.clone(), req.worker_id.clone());
             let grants = blocking(move || svc.lease(&worker, max, now_ms())).await?;
             self.0.telemetry.lease_seconds.observe(started.elapsed().as_secs_f64());
-            if !grants.is_empty() || tokio::time::Instant::now() >= deadline {
-                return Ok(Response::new(pb::LeaseTileResponse { leases: grants.iter().map(grant_to_pb).collect() }));
+            // a drained worker hears it at once, so that it can stop when it holds nothing
+            let drain = grants.is_empty() && self.0.svc.draining(&req.worker_id);
+            if !grants.is_empty() || drain || tokio::time::Instant::now() >= deadline {
+                let leases = grants.iter().map(grant_to_pb).collect();
+                return Ok(Response::new(pb::LeaseTileResponse { leases, drain }));
             }
             let _ = tokio::time::timeout_at(deadline, notified).await;
         }

@@ -143,3 +143,20 @@ fn a_job_after_others_starts_when_they_are_done_and_is_blocked_when_one_fails() 
     assert_eq!((m.jobs["a"].state, waiting(&m, "b")), (JobState::Done, None));
     assert_eq!(m.lease("w", 1, 8, TTL).0[0].job, "b");
 }
+
+/// A job that requires tags is leased only to workers with all of them; workers without them
+/// neither get it nor strand it (it waits), and a tagged worker blocklisted for it does.
+#[test]
+fn required_tags_pick_the_workers_and_a_job_nobody_serves_waits() {
+    let mut m = JobsModel::default();
+    let tags = |t: &[&str]| t.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    for (w, t) in [("plain", tags(&[])), ("big", tags(&["big", "fast"]))] {
+        m.apply(Event::Register { worker: w, host: None, tags: t }, 0).unwrap();
+    }
+    m.submit("a", JobSpec { require_tags: tags(&["big"]), ..spec(1, 0, None) }, 0).unwrap();
+    assert!(m.lease("plain", 4, 1, TTL).0.is_empty());
+    assert!(m.fail_stranded(&["plain"], 2).0.is_empty(), "nobody can serve it: it waits");
+    assert_eq!(m.lease("big", 1, 3, TTL).0.len(), 1);
+    m.apply(Event::Register { worker: "big", host: None, tags: vec![] }, 4).unwrap();
+    assert!(m.lease("big", 4, 5, TTL).0.is_empty(), "re-registered without its tags");
+}

@@ -37,7 +37,7 @@ fn a_failed_commit_acknowledges_nothing_and_a_restart_merges_each_tile_once() {
     let (job, worker, leases) = {
         let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
         let job = svc.submit(bundle, settings(), 0, None, 1_000).unwrap().id;
-        let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+        let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
         let leases: Vec<_> = svc.lease(&worker, 3, 1_000).unwrap().into_iter().map(|g| g.lease).collect();
         assert_eq!(upload(&svc, &scene, &worker, &leases[0], 1_100).unwrap(), ResultOutcome::Accepted);
         svc.fail_commits_after(0);
@@ -71,7 +71,7 @@ fn unreadable_results_and_rows_fail_their_job_and_the_others_go_on() {
         let broken = svc.submit(bundle.clone(), settings(), 2, None, 1_000).unwrap().id;
         let unreadable = svc.submit(bundle.clone(), settings(), 1, None, 1_000).unwrap().id;
         let fine = svc.submit(bundle, settings(), 0, None, 1_000).unwrap().id;
-        let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+        let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
         // `broken` (highest priority) gets tiles 1 and 2 accepted and stored, tile 0 not yet
         let leases: Vec<_> = svc.lease(&worker, 3, 1_000).unwrap().into_iter().map(|g| g.lease).collect();
         assert!(leases.iter().all(|l| l.job == broken));

@@ -353,6 +353,16 @@ pub struct JobsModel {
     /// The address each worker registered from: failures count against it as well as against
     /// the worker, so that registering afresh does not escape them.
     pub hosts: BTreeMap<String, String>,
+    /// The tags of each worker that has any: a job that requires tags goes only to workers
+    /// with all of them.
+    pub tags: BTreeMap<String, BTreeSet<String>>,
+}
+
+impl JobsModel {
+    /// Whether `worker` has every tag `job` requires.
+    pub fn serves(&self, worker: &str, job: &Job) -> bool {
+        job.spec.require_tags.iter().all(|t| self.tags.get(worker).is_some_and(|have| have.contains(t)))
+    }
 }
 
 impl JobsModel {

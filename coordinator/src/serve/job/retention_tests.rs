@@ -103,7 +103,7 @@ fn cancel_and_delete_mid_emis_frees_memory_rows_and_files() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let svc = JobService::open(&data, CFG, 1_000).unwrap();
-    let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+    let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
     // a finished pt job with a bundle of its own
     let (big, big_scene) = cornell();
     let done = svc.submit(big, settings(IntegratorName::Pt, 1), 5, None, 1_000).unwrap();
@@ -247,7 +247,7 @@ fn a_finished_emis_job_keeps_its_strategy_outputs_across_a_restart_until_deleted
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let svc = JobService::open(&data, CFG, 1_000).unwrap();
-    let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+    let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
     let (small, scene) = small_cornell(dir.path());
     let pt = svc.submit(small.clone(), settings(IntegratorName::Pt, 1), 0, None, 1_000).unwrap();
     let not_emis = |svc: &JobService, job: &str| {

@@ -72,7 +72,7 @@ fn service_holds_early_results_across_a_restart_and_merges_each_once() {
         let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
         let job = svc.submit(bundle.clone(), settings.clone(), 0, None, 1_000).unwrap();
         assert_eq!(job.tiles_total, 16);
-        let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+        let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
         let leases: Vec<_> = svc.lease(&worker, 3, 1_000).unwrap().into_iter().map(|g| g.lease).collect();
         // tiles 1 and 2 arrive before tile 0: accepted, held, not merged
         for l in &leases[1..] {
@@ -121,7 +121,7 @@ fn results_stored_as_files_survive_a_restart_and_go_when_done() {
         let (job, worker, leases) = {
             let svc = JobService::open(dir.path(), cfg.clone(), 1_000).unwrap();
             let job = svc.submit(bundle.clone(), settings.clone(), 0, None, 1_000).unwrap().id;
-            let worker = svc.register("w", 1, None, None, 1_000).unwrap();
+            let worker = svc.register("w", 1, &[], None, None, 1_000).unwrap();
             let leases: Vec<_> = svc.lease(&worker, 3, 1_000).unwrap().into_iter().map(|g| g.lease).collect();
             for l in &leases[1..] {
                 assert_eq!(upload(&svc, &scene, &worker, l, 1_100).unwrap(), ResultOutcome::Accepted);
@@ -218,8 +218,9 @@ fn a_job_no_live_worker_may_serve_fails_with_the_reason() {
     let (bundle, _) = cornell();
     let settings = RenderSettings { spp: Some(1), ..Default::default() };
     let job = svc.submit(bundle, settings, 0, None, 1_000).unwrap().id;
-    let quiet = svc.register("quiet", 1, None, None, 1_000).unwrap();
-    let workers: Vec<String> = (0..2).map(|i| svc.register(&format!("w{i}"), 1, None, None, 20_000).unwrap()).collect();
+    let quiet = svc.register("quiet", 1, &[], None, None, 1_000).unwrap();
+    let workers: Vec<String> =
+        (0..2).map(|i| svc.register(&format!("w{i}"), 1, &[], None, None, 20_000).unwrap()).collect();
     let now = 20_100;
     let blocklist = crate::serve::job::model::BLOCKLIST_AFTER_FAILURES as usize;
     for (k, w) in workers.iter().enumerate() {
@@ -249,7 +250,7 @@ fn a_coordinator_stall_is_not_held_against_its_workers() {
     let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();
     let (bundle, _) = cornell();
     svc.submit(bundle, RenderSettings { spp: Some(1), ..Default::default() }, 0, None, 1_000).unwrap();
-    let w = svc.register("w", 1, None, None, 1_000).unwrap();
+    let w = svc.register("w", 1, &[], None, None, 1_000).unwrap();
     let lease = svc.lease(&w, 1, 1_000).unwrap().remove(0).lease;
     svc.expire(1_000).unwrap();
     svc.expire(61_000).unwrap();
@@ -285,7 +286,7 @@ fn emis_state_is_made_when_the_job_first_runs() {
     };
     let svc = JobService::open(dir.path(), CFG, 2_000).unwrap();
     assert!(!svc.holds_emis_state(&job), "allocated again at a restart");
-    let w = svc.register("w", 1, None, None, 2_000).unwrap();
+    let w = svc.register("w", 1, &[], None, None, 2_000).unwrap();
     assert_eq!(svc.lease(&w, 1, 2_000).unwrap().len(), 1);
     assert!(svc.holds_emis_state(&job));
 }

@@ -39,6 +39,31 @@ pub struct JobSpec {
     /// Jobs that must be done before this one starts (`--after`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub after: Vec<String>,
+    /// Tags a worker must all have to be given this job's tiles (`--require-tags`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub require_tags: Vec<String>,
+}
+
+/// The most tags a worker may have or a job may require, and their longest length.
+pub const MAX_TAGS: usize = 32;
+/// The longest tag.
+pub const MAX_TAG_BYTES: usize = 64;
+
+/// Checks tags: at most [`MAX_TAGS`], each 1 to [`MAX_TAG_BYTES`] letters, digits, `-`, `_`
+/// or `.`; `field` names them in the error.
+pub fn check_tags(field: &str, tags: &[String]) -> Result<(), String> {
+    if tags.len() > MAX_TAGS {
+        return Err(format!("field \"{field}\" has more than {MAX_TAGS} tags"));
+    }
+    let good = |t: &String| {
+        (1..=MAX_TAG_BYTES).contains(&t.len()) && t.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b))
+    };
+    match tags.iter().find(|t| !good(t)) {
+        Some(t) => {
+            Err(format!("field \"{field}\": tag \"{t}\" must be 1 to {MAX_TAG_BYTES} letters, digits, '-', '_' or '.'"))
+        }
+        None => Ok(()),
+    }
 }
 
 /// The most jobs one job may wait for.
@@ -52,6 +77,8 @@ pub struct Placement {
     pub priority: i32,
     /// Jobs that must be done first.
     pub after: Vec<String>,
+    /// Tags the workers that render it must have.
+    pub require_tags: Vec<String>,
 }
 
 impl From<i32> for Placement {
@@ -89,6 +116,7 @@ impl JobSpec {
             scene_path: "scene.xml".into(),
             filter: FilterKind::Box,
             after: Vec::new(),
+            require_tags: Vec::new(),
         }
     }
 

@@ -24,6 +24,7 @@ fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
         scene_path: "scene.xml".into(),
         filter: tessera_common::film::filter::FilterKind::Box,
         after: Vec::new(),
+        require_tags: Vec::new(),
     }
 }
 

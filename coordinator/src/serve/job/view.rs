@@ -146,4 +146,8 @@ pub struct WorkerView {
     pub last_seen_s_ago: f64,
     /// Leases held.
     pub leases: usize,
+    /// `idle`, `busy`, `disabled`, `draining` or `offline`.
+    pub state: &'static str,
+    /// Its tags.
+    pub tags: Vec<String>,
 }

@@ -83,11 +83,16 @@ pub struct WorkerDto {
     pub last_seen_s_ago: f64,
     /// Leases held.
     pub leases: usize,
+    /// `idle`, `busy`, `disabled`, `draining` or `offline`.
+    pub state: &'static str,
+    /// Its tags.
+    pub tags: Vec<String>,
 }
 
 impl From<WorkerView> for WorkerDto {
     fn from(w: WorkerView) -> Self {
-        WorkerDto { id: w.id, name: w.name, threads: w.threads, last_seen_s_ago: w.last_seen_s_ago, leases: w.leases }
+        let (id, name, threads, last_seen_s_ago, leases) = (w.id, w.name, w.threads, w.last_seen_s_ago, w.leases);
+        WorkerDto { id, name, threads, last_seen_s_ago, leases, state: w.state, tags: w.tags }
     }
 }
 

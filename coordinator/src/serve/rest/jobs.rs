@@ -6,6 +6,7 @@ use crate::serve::error::{ApiError, ErrorCode};
 use crate::serve::job::service::OutputKind;
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
+use crate::serve::storage::WorkerMode;
 use axum::Json;
 use axum::extract::{Multipart, Path, Query, State};
 use axum::http::header;
@@ -40,16 +41,17 @@ fn parse_settings(text: &str) -> Result<(RenderSettings, Placement, Option<Strin
             .and_then(|p| i32::try_from(p).ok())
             .ok_or_else(|| invalid("settings field \"priority\" must be an integer"))?,
     };
-    let after = match obj.remove("after") {
-        None => Vec::new(),
-        Some(a) => {
-            serde_json::from_value(a).map_err(|_| invalid("settings field \"after\" must be an array of job ids"))?
-        }
+    let mut list = |field: &str, what: &str| match obj.remove(field) {
+        None => Ok(Vec::new()),
+        Some(a) => serde_json::from_value(a)
+            .map_err(|_| invalid(format!("settings field \"{field}\" must be an array of {what}"))),
     };
+    let after = list("after", "job ids")?;
+    let require_tags = list("require_tags", "tags")?;
     let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
     tessera_common::settings::strip_retired(obj).map_err(|e| invalid(e.to_string()))?;
     let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
-    Ok((settings, Placement { priority, after }, name))
+    Ok((settings, Placement { priority, after, require_tags }, name))
 }
 
 /// Most bytes the `settings` part may have.
@@ -232,6 +234,21 @@ pub async fn workers(State(st): St) -> Result<Json<Vec<WorkerDto>>, ApiError> {
     Ok(Json(workers.into_iter().map(WorkerDto::from).collect()))
 }
 
+/// `POST /api/v1/workers/{id}/disable`, `/enable`, `/drain`.
+pub async fn worker_mode(
+    State(st): St,
+    Path((id, action)): Path<(String, String)>,
+) -> Result<Json<WorkerDto>, ApiError> {
+    let mode = match action.as_str() {
+        "disable" => WorkerMode::Disabled,
+        "enable" => WorkerMode::Enabled,
+        "drain" => WorkerMode::Draining,
+        other => return Err(ApiError::new(ErrorCode::NotFound, format!("no worker action \"{other}\""))),
+    };
+    let svc = st.svc.clone();
+    Ok(Json(blocking(move || svc.set_worker_mode(&id, mode, now_ms())).await?.into()))
+}
+
 /// `GET /metrics`: the OpenMetrics text format, which Prometheus reads.
 pub async fn metrics(State(st): St) -> impl IntoResponse {
     let body = tokio::task::spawn_blocking(move || st.telemetry.encode()).await.unwrap_or_default();
@@ -246,7 +263,8 @@ mod tests {
     fn settings_json_names_the_bad_field() {
         let (s, p, n) =
             parse_settings(r#"{"integrator":"vcm","spp":2,"priority":3,"name":"x","after":["j1"]}"#).unwrap();
-        assert_eq!((s.spp, p, n.as_deref()), (Some(2), Placement { priority: 3, after: vec!["j1".into()] }, Some("x")));
+        let placement = Placement { priority: 3, after: vec!["j1".into()], require_tags: vec![] };
+        assert_eq!((s.spp, p, n.as_deref()), (Some(2), placement, Some("x")));
         let e = parse_settings(r#"{"after":"j1"}"#).unwrap_err();
         assert!(e.message.contains("after"), "{}", e.message);
         let e = parse_settings(r#"{"integrator":"vcm","spq":2}"#).unwrap_err();

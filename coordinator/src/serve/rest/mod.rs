@@ -11,7 +11,8 @@
 //! | `DELETE /api/v1/jobs/{id}` | delete an ended job and all its data (204; 409 while it is active) |
 //! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job (409 before) |
 //! | `GET /api/v1/jobs/{id}/strategy.png`, `/emis.json` | a done EMIS job's strategy picture and report (404 for other integrators) |
-//! | `GET /api/v1/workers` | registered workers |
+//! | `GET /api/v1/workers` | registered workers: state (idle, busy, disabled, draining, offline), tags, leases |
+//! | `POST /api/v1/workers/{id}/disable`, `/enable`, `/drain` | no new tiles; tiles again; no new tiles and stop when idle |
 //! | `GET /api/v1/server` | the coordinator's disk: free bytes, reserve, whether it is below it (`disk.low`) |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
 //! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
@@ -40,6 +41,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/v1/jobs/{id}/strategy.png", get(jobs::strategy_png))
         .route("/api/v1/jobs/{id}/emis.json", get(jobs::emis_json))
         .route("/api/v1/workers", get(jobs::workers))
+        .route("/api/v1/workers/{id}/{action}", post(jobs::worker_mode))
         .route("/api/v1/server", get(jobs::server))
         .route("/", get(dashboard))
         .route("/dashboard", get(dashboard))

@@ -11,4 +11,4 @@ pub mod space;
 pub mod sqlite;
 
 pub use blobs::{BlobStore, Live};
-pub use sqlite::{Extra, JobFiles, OutputDigests, Store, StoreError, WorkerRow};
+pub use sqlite::{Extra, JobFiles, OutputDigests, Store, StoreError, WorkerMode, WorkerRow};

@@ -120,25 +120,6 @@ pub enum Extra {
     },
 }
 
-/// A registered worker.
-#[derive(Clone, Debug, PartialEq)]
-pub struct WorkerRow {
-    /// Id.
-    pub id: String,
-    /// Host name or label.
-    pub name: String,
-    /// Render threads.
-    pub threads: u32,
-    /// Registration time.
-    pub registered_ms: u64,
-    /// Last contact.
-    pub last_seen_ms: u64,
-    /// SHA-256 (hex) of the secret a worker that keeps its identity registered with.
-    pub secret_sha256: Option<String>,
-    /// The address it registered from, which its failures are also counted against.
-    pub host: Option<String>,
-}
-
 /// The database.
 pub struct Store {
     pub(super) conn: Connection,
@@ -161,7 +142,8 @@ CREATE TABLE IF NOT EXISTS results (
     payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
 CREATE TABLE IF NOT EXISTS workers (
     id TEXT PRIMARY KEY, name TEXT NOT NULL, threads INTEGER NOT NULL,
-    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL, secret_sha256 TEXT, host TEXT);
+    registered_ms INTEGER NOT NULL, last_seen_ms INTEGER NOT NULL, secret_sha256 TEXT, host TEXT, tags TEXT,
+    mode TEXT);
 ";
 
 /// The rows of one transition, taken from the model under the service's lock and written
@@ -303,7 +285,8 @@ impl Store {
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.execute_batch(SCHEMA)?;
         // databases from before workers kept their identity and address, before EMIS jobs
-        // stored their strategy PNG and report, and before jobs could be paused or reprioritised
+        // stored their strategy PNG and report, before jobs could be paused or reprioritised, and
+        // before workers had tags and could be disabled
         let added = [
             ("workers", "secret_sha256", "TEXT"),
             ("workers", "host", "TEXT"),
@@ -311,6 +294,8 @@ impl Store {
             ("jobs", "emis_json", "TEXT"),
             ("jobs", "paused_ms", "INTEGER"),
             ("jobs", "priority", "INTEGER"),
+            ("workers", "tags", "TEXT"),
+            ("workers", "mode", "TEXT"),
         ];
         for (table, column, kind) in added {
             let exists =
@@ -413,41 +398,6 @@ impl Store {
             .optional()?)
     }
 
-    /// Registers or refreshes a worker.
-    pub fn save_worker(&self, w: &WorkerRow) -> Result<(), StoreError> {
-        self.conn.execute(
-            "INSERT OR REPLACE INTO workers (id, name, threads, registered_ms, last_seen_ms, secret_sha256, host)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-            params![w.id, w.name, w.threads, w.registered_ms as i64, w.last_seen_ms as i64, w.secret_sha256, w.host],
-        )?;
-        Ok(())
-    }
-
-    /// Forgets the worker `id`.
-    pub fn delete_worker(&self, id: &str) -> Result<(), StoreError> {
-        self.conn.execute("DELETE FROM workers WHERE id = ?1", params![id])?;
-        Ok(())
-    }
-
-    /// Every registered worker.
-    pub fn load_workers(&self) -> Result<Vec<WorkerRow>, StoreError> {
-        let mut stmt = self
-            .conn
-            .prepare("SELECT id, name, threads, registered_ms, last_seen_ms, secret_sha256, host FROM workers")?;
-        let rows = stmt.query_map([], |r| {
-            Ok(WorkerRow {
-                id: r.get(0)?,
-                name: r.get(1)?,
-                threads: r.get(2)?,
-                registered_ms: r.get::<_, i64>(3)? as u64,
-                last_seen_ms: r.get::<_, i64>(4)? as u64,
-                secret_sha256: r.get(5)?,
-                host: r.get(6)?,
-            })
-        })?;
-        Ok(rows.collect::<Result<_, _>>()?)
-    }
-
     /// The stored files of a job.
     pub fn job_files(&self, job: &str) -> Result<Option<JobFiles>, StoreError> {
         Ok(self
@@ -470,6 +420,9 @@ impl Store {
 }
 
 mod load;
+mod workers;
+
+pub use workers::{WorkerMode, WorkerRow};
 
 #[cfg(test)]
 #[path = "sqlite_tests.rs"]

@@ -47,7 +47,7 @@ pub(crate) trait Calls {
 
 impl Calls for JobsModel {
     fn submit(&mut self, id: &str, spec: JobSpec, now_ms: u64) -> Result<Changes, TransitionError> {
-        self.apply(Event::Submit { id, spec }, now_ms).map(|e| e.changes)
+        self.apply(Event::Submit { id, spec: Box::new(spec) }, now_ms).map(|e| e.changes)
     }
 
     fn lease(&mut self, worker: &str, max_tiles: usize, now_ms: u64, ttl_ms: u64) -> (Vec<LeaseRef>, Changes) {

@@ -24,14 +24,17 @@ pub enum Event<'a> {
         /// Its id.
         id: &'a str,
         /// What to render.
-        spec: JobSpec,
+        spec: Box<JobSpec>,
     },
-    /// A worker registered from `host`: the leases its earlier process held fail now.
+    /// A worker registered from `host` with `tags`: the leases its earlier process held fail
+    /// now.
     Register {
         /// The worker.
         worker: &'a str,
         /// Where it registered from, if known.
         host: Option<String>,
+        /// Its tags.
+        tags: Vec<String>,
     },
     /// A worker was forgotten (silent, holding nothing).
     Forget {
@@ -255,10 +258,11 @@ impl JobsModel {
     /// the event changed that has ended now ended by it: [`Effect::Ended`] says so.
     pub fn apply(&mut self, event: Event<'_>, now_ms: u64) -> Result<Effects, TransitionError> {
         let mut effects = match event {
-            Event::Submit { id, spec } => Effects::of(self.submit(id, spec, now_ms)?),
-            Event::Register { worker, host } => self.register(worker, host, now_ms),
+            Event::Submit { id, spec } => Effects::of(self.submit(id, *spec, now_ms)?),
+            Event::Register { worker, host, tags } => self.register(worker, host, tags, now_ms),
             Event::Forget { worker } => {
                 self.hosts.remove(worker);
+                self.tags.remove(worker);
                 Effects::default()
             }
             Event::Lease { worker, max_tiles, ttl_ms } => {
@@ -308,7 +312,7 @@ impl JobsModel {
 
     /// A worker (re-)registered: the leases its earlier process held go back to the queue,
     /// each counted as a failure, as their expiry would have.
-    fn register(&mut self, worker: &str, host: Option<String>, now_ms: u64) -> Effects {
+    fn register(&mut self, worker: &str, host: Option<String>, tags: Vec<String>, now_ms: u64) -> Effects {
         let mut effects = Effects::default();
         for lease in self.leases_of(worker) {
             effects.extend(Effects::of(self.report_failure(worker, &lease, "the worker restarted", now_ms)));
@@ -316,6 +320,10 @@ impl JobsModel {
         match host {
             Some(host) => self.hosts.insert(worker.to_string(), host),
             None => self.hosts.remove(worker),
+        };
+        match tags.is_empty() {
+            true => self.tags.remove(worker),
+            false => self.tags.insert(worker.to_string(), tags.into_iter().collect()),
         };
         effects
     }

@@ -48,7 +48,7 @@ impl JobsModel {
             .filter(|j| {
                 matches!(j.state, JobState::Queued | JobState::Pilot | JobState::Final) && j.paused_ms.is_none()
             })
-            .filter(|j| self.upstream_done(j))
+            .filter(|j| self.upstream_done(j) && self.serves(worker, j))
             .filter(|j| !j.is_blocklisted_on(worker, host))
             .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
             .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
@@ -120,8 +120,9 @@ impl JobsModel {
         changes
     }
 
-    /// Fails the jobs with work left whose every live worker (`live`, not empty) is
-    /// blocklisted for them: nobody would ever render them. Returns the failed jobs.
+    /// Fails the jobs with work left whose every live worker (`live`) with the tags they
+    /// require is blocklisted for them: nobody would ever render them. A job no live worker has
+    /// the tags for waits for one. Returns the failed jobs.
     pub(super) fn fail_stranded(&mut self, live: &[&str], now_ms: u64) -> (Vec<String>, Changes) {
         let mut changes = Changes::new();
         let stranded: Vec<String> = self
@@ -133,13 +134,16 @@ impl JobsModel {
             // by the workers' own failures: a host blocklisted for workers that registered
             // afresh before each failure (one token holder lying) leaves the job waiting for
             // a worker elsewhere
-            .filter(|j| live.iter().all(|w| j.is_blocklisted(w)))
+            .filter(|j| {
+                let mut able = live.iter().filter(|w| self.serves(w, j)).peekable();
+                able.peek().is_some() && able.all(|w| j.is_blocklisted(w))
+            })
             .map(|j| j.id.clone())
             .collect();
         for id in &stranded {
+            let able = live.iter().filter(|w| self.serves(w, &self.jobs[id])).count();
             let mut error = format!(
-                "no eligible worker is left: each of the {} live workers failed {BLOCKLIST_AFTER_FAILURES} of its tiles",
-                live.len()
+                "no eligible worker is left: each of the {able} live workers failed {BLOCKLIST_AFTER_FAILURES} of its tiles"
             );
             if let Some(last) = &self.jobs[id].last_failure {
                 error += &format!("; the last failure: {last}");

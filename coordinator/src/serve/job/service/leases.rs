@@ -6,8 +6,9 @@ use super::runtime::JobRuntime;
 use super::{Inner, JobService, LeaseGrant, ServiceError};
 use crate::serve::job::emis::MergeSpec;
 use crate::serve::job::model::{Effects, Event, LeaseRef, ResultOutcome, TileSpec, TileState};
+use crate::serve::job::spec::check_tags;
 use crate::serve::job::validate::ResultClaim;
-use crate::serve::storage::{Extra, WorkerRow};
+use crate::serve::storage::{Extra, WorkerMode, WorkerRow};
 use std::collections::HashMap;
 use tessera_common::film::Rect;
 
@@ -21,11 +22,13 @@ impl JobService {
         &self,
         name: &str,
         threads: u32,
+        tags: &[String],
         identity: Option<(&str, &str)>,
         peer: Option<std::net::IpAddr>,
         now_ms: u64,
     ) -> Result<String, ServiceError> {
         check_registration(name, threads)?;
+        check_tags("tags", tags).map_err(ServiceError::InvalidArgument)?;
         let mut inner = self.lock();
         let (id, secret_sha256) = match identity {
             None => (uuid::Uuid::new_v4().to_string(), None),
@@ -49,13 +52,16 @@ impl JobService {
                 self.cfg.forget_workers_ms / 1000
             )));
         }
-        let registered_ms = inner.workers.get(&id).map_or(now_ms, |w| w.registered_ms);
+        // an operator's disable or drain outlives the worker's restarts
+        let (registered_ms, mode) =
+            inner.workers.get(&id).map_or((now_ms, WorkerMode::Enabled), |w| (w.registered_ms, w.mode));
         let host = peer.map(host_of_address);
-        let row =
-            WorkerRow { id, name: name.to_string(), threads, registered_ms, last_seen_ms: now_ms, secret_sha256, host };
+        let (name, tags) = (name.to_string(), tags.to_vec());
+        let row = WorkerRow { id, name, threads, registered_ms, last_seen_ms: now_ms, secret_sha256, host, tags, mode };
         self.commits.store().save_worker(&row)?;
         let orphaned = inner.model.leases_of(&row.id).len();
-        let effects = inner.model.apply(Event::Register { worker: &row.id, host: row.host.clone() }, now_ms)?;
+        let event = Event::Register { worker: &row.id, host: row.host.clone(), tags: row.tags.clone() };
+        let effects = inner.model.apply(event, now_ms)?;
         if !effects.changes.is_empty() {
             tracing::warn!(worker_id = %row.id, tiles = orphaned, "worker restarted: its leases are re-queued");
             self.persist(&mut inner, &effects.changes, &[])?;
@@ -110,6 +116,10 @@ impl JobService {
     pub fn lease(&self, worker: &str, max_tiles: usize, now_ms: u64) -> Result<Vec<LeaseGrant>, ServiceError> {
         let mut inner = self.lock();
         self.seen(&mut inner, worker, now_ms)?;
+        if inner.workers.get(worker).is_some_and(|w| w.mode != WorkerMode::Enabled) {
+            // disabled or draining by an operator: what it holds it finishes
+            return Ok(Vec::new());
+        }
         if self.disk.refusal().is_some() {
             // no new work below the reserve: what is leased already may still come back
             return Ok(Vec::new());

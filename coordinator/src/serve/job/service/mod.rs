@@ -21,6 +21,7 @@ mod retention;
 mod runtime;
 mod submit;
 mod upload;
+mod workers;
 
 use super::emis::{EmisJob, TileStrategy};
 pub use super::model::LeaseLifetime;
@@ -264,6 +265,9 @@ impl JobService {
         for w in store.load_workers()? {
             if let Some(host) = &w.host {
                 inner.model.hosts.insert(w.id.clone(), host.clone());
+            }
+            if !w.tags.is_empty() {
+                inner.model.tags.insert(w.id.clone(), w.tags.iter().cloned().collect());
             }
             inner.workers.insert(w.id.clone(), w);
         }

@@ -3,7 +3,7 @@
 
 use super::{Counters, Inner, JobService, ServiceError};
 use crate::serve::job::model::{Event, JobState, Waiting};
-use crate::serve::job::view::{JobView, WorkerView};
+use crate::serve::job::view::JobView;
 use std::collections::BTreeMap;
 
 /// Which finished output.
@@ -68,6 +68,8 @@ impl JobService {
                 view.state = JobState::Blocked;
             }
             view.phase = waiting.phase();
+        } else if !j.spec.require_tags.is_empty() && !j.state.is_terminal() && !self.anyone_serves(inner, j, now_ms) {
+            view.phase = format!("waiting for a worker with tags {}", j.spec.require_tags.join(", "));
         }
         view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
         view
@@ -160,23 +162,6 @@ impl JobService {
     /// A blob's bytes, read whole and checked against the digest.
     pub fn blob(&self, digest: &str) -> Result<Vec<u8>, ServiceError> {
         self.blobs.get(digest)?.ok_or_else(|| ServiceError::NotFound(format!("blob {digest} not found")))
-    }
-
-    /// Registered workers with their current leases.
-    pub fn workers(&self, now_ms: u64) -> Vec<WorkerView> {
-        let inner = self.lock();
-        let leases = inner.model.lease_counts();
-        inner
-            .workers
-            .values()
-            .map(|w| WorkerView {
-                id: w.id.clone(),
-                name: w.name.clone(),
-                threads: w.threads,
-                last_seen_s_ago: now_ms.saturating_sub(w.last_seen_ms) as f64 / 1000.0,
-                leases: leases.get(w.id.as_str()).copied().unwrap_or(0),
-            })
-            .collect()
     }
 
     /// Counters and gauges for `/metrics`.

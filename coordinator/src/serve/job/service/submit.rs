@@ -6,7 +6,7 @@ use super::upload::BundleUpload;
 use super::{Bundle, JobService, ServiceError};
 use crate::serve::job::model::{Event, JobSpec};
 use crate::serve::job::spec::TILE_SIZE;
-use crate::serve::job::spec::{MAX_AFTER, Placement};
+use crate::serve::job::spec::{MAX_AFTER, Placement, check_tags};
 use crate::serve::job::view::JobView;
 use std::path::Path;
 use tessera_common::scene::{LoadOptions, Scene};
@@ -46,6 +46,7 @@ impl JobService {
     ) -> Result<JobView, ServiceError> {
         settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
         let mut placement = placement.into();
+        check_tags("require_tags", &placement.require_tags).map_err(ServiceError::InvalidArgument)?;
         // the jobs waited for must exist now (and so cannot wait for this one)
         placement.after = self.resolve_after(&placement.after)?;
         // the bundle just received may have taken the last of the reserve
@@ -79,7 +80,7 @@ impl JobService {
         };
         let id = uuid::Uuid::new_v4().to_string();
         let mut inner = self.lock();
-        let changes = inner.model.apply(Event::Submit { id: &id, spec: spec.clone() }, now_ms)?.changes;
+        let changes = inner.model.apply(Event::Submit { id: &id, spec: Box::new(spec.clone()) }, now_ms)?.changes;
         drop(pin);
         self.persist(&mut inner, &changes, &[])?;
         self.sync(&inner)?;
@@ -163,6 +164,7 @@ impl JobService {
             name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| default_name(scene_path)),
             priority: placement.priority,
             after: placement.after,
+            require_tags: placement.require_tags,
             full_frame,
             settings: integrator_settings,
             width: scene.camera.width,
