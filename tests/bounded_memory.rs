@@ -21,8 +21,7 @@ fn streamed_parts(xml: Vec<u8>, big: usize) -> Vec<pb::SubmitJobPart> {
         bundle: Some(pb::SceneBundle { scene_path: "scene.xml".into(), files: vec![] }),
         priority: 0,
         name: "big".into(),
-        after: Vec::new(),
-        require_tags: Vec::new(),
+        ..Default::default()
     };
     let mut parts = vec![
         pb::SubmitJobPart { header: Some(header), ..Default::default() },

@@ -479,6 +479,7 @@ mod connections;
 mod control;
 mod emis;
 mod faults;
+mod frames;
 mod hostile;
 mod logs;
 mod scale;

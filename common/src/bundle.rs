@@ -54,8 +54,23 @@ pub enum BundleError {
 /// the deepest folder that holds the scene and all of them (the scene's own folder when nothing
 /// lies outside it), so the scene's relative names work unchanged inside the bundle.
 pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, BundleError> {
+    pack_many(&[(scene.to_path_buf(), defines.clone())], scene)
+}
+
+/// Packs several scenes (the frames of an animation: one file per frame, or one file with
+/// per-frame `defines`) and every file each references into one bundle, each file once, rooted
+/// as [`pack`] roots one scene. The bundle's scene path is `name`'s (a frame-numbered name
+/// such as `shot.####.xml` need not exist).
+pub fn pack_many(scenes: &[(PathBuf, HashMap<String, String>)], name: &Path) -> Result<Bundle, BundleError> {
     let read = |path: &Path| std::fs::read(path).map_err(|source| BundleError::Read { path: path.into(), source });
-    let referenced = referenced_files(scene, defines)?;
+    let mut referenced: Vec<PathBuf> = Vec::new();
+    for (scene, defines) in scenes {
+        for file in std::iter::once(scene.clone()).chain(referenced_files(scene, defines)?) {
+            if !referenced.contains(&file) {
+                referenced.push(file);
+            }
+        }
+    }
     let absolute = |p: &Path| std::path::absolute(p).map(|a| normalize(&a)).unwrap_or_else(|_| normalize(p));
     // `scene.xml`'s parent is the empty path, which is the current folder
     let parent_of = |p: &Path| {
@@ -63,22 +78,23 @@ pub fn pack(scene: &Path, defines: &HashMap<String, String>) -> Result<Bundle, B
             Some(p.parent().unwrap_or(Path::new(""))).filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")),
         )
     };
-    let mut folder = parent_of(scene);
+    let mut folder = parent_of(name);
     for file in &referenced {
         let parent = parent_of(file);
         while !parent.starts_with(&folder) && folder.pop() {}
     }
     let folder = folder.as_path();
     let outside = |file: &Path| BundleError::Outside { file: file.into(), folder: folder.into() };
-    let scene_path = relative_to(&absolute(scene), folder)
-        .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
-        .ok_or_else(|| outside(scene))?;
-    let mut files = vec![(scene_path.clone(), read(scene)?)];
-    for file in referenced {
-        let relative = relative_to(&absolute(&file), folder)
+    let in_bundle = |file: &Path| {
+        relative_to(&absolute(file), folder)
             .and_then(|r| r.to_str().map(|s| s.replace('\\', "/")))
             .filter(|r| safe_relative_path(r).is_some())
-            .ok_or_else(|| outside(&file))?;
+            .ok_or_else(|| outside(file))
+    };
+    let scene_path = in_bundle(name)?;
+    let mut files: Vec<(String, Vec<u8>)> = Vec::new();
+    for file in referenced {
+        let relative = in_bundle(&file)?;
         if !files.iter().any(|(p, _)| *p == relative) {
             files.push((relative, read(&file)?));
         }

@@ -17,4 +17,5 @@ pub mod build;
 pub mod bundle;
 pub mod connect;
 pub mod convert;
+pub mod frames;
 pub mod payload;

@@ -229,7 +229,7 @@ async fn render_and_upload(
     let first = &leases[0];
     let prepared = async {
         let settings = convert::settings(first.settings.as_ref()).map_err(anyhow::Error::msg)?;
-        let scene = cache.get(client, &first.bundle_digest, &settings.define_map()).await?;
+        let scene = cache.get(client, &first.bundle_digest, &first.scene_path, &settings.define_map()).await?;
         // the coordinator checked the settings; this worker checks them against itself before
         // it allocates anything for the tile
         settings.check_work(scene.camera.width, scene.camera.height, &cache.work_limits)?;

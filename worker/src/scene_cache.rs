@@ -30,7 +30,7 @@ pub const DEFAULT_CACHE_LIMIT_MIB: u64 = 4096;
 /// it is complete, and its modification time is the bundle's last use.
 const MARKER: &str = ".scene_path";
 
-/// A loaded scene's identity: bundle digest and sorted defines.
+/// A loaded scene's identity: `DIGEST/SCENE_PATH` and the sorted defines.
 type SceneKey = (String, Vec<(String, String)>);
 
 /// The cache.
@@ -70,21 +70,30 @@ impl SceneCache {
         }
     }
 
-    /// The scene of bundle `digest` loaded with `defines`, fetching and unpacking it if needed.
+    /// The scene `scene_path` of bundle `digest` (empty: the bundle's own) loaded with
+    /// `defines`, fetching and unpacking the bundle if needed.
     pub async fn get(
         &mut self,
         client: &mut Client,
         digest: &str,
+        scene_path: &str,
         defines: &HashMap<String, String>,
     ) -> anyhow::Result<Arc<Scene>> {
         let mut key_defines: Vec<_> = defines.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
         key_defines.sort();
-        let key = (digest.to_string(), key_defines);
+        let key = (format!("{digest}/{scene_path}"), key_defines);
         if let Some((_, scene)) = self.loaded.iter().find(|(k, _)| *k == key) {
             touch(&self.dir, digest);
             return Ok(scene.clone());
         }
-        let scene_file = self.unpack_retrying(client, digest).await?;
+        let own_scene = self.unpack_retrying(client, digest).await?;
+        let scene_file = match scene_path {
+            "" => own_scene,
+            path => self.dir.join(digest).join(
+                tessera_common::bundle::safe_relative_path(path)
+                    .ok_or_else(|| anyhow::anyhow!("unsafe scene path {path:?}"))?,
+            ),
+        };
         touch(&self.dir, digest);
         // the scene may name only files of its own bundle, whatever the coordinator checked
         let options =

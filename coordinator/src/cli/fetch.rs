@@ -52,13 +52,13 @@ pub fn download_command(args: &FetchArgs) -> anyhow::Result<()> {
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
         let job = get(&mut c, &args.job).await?;
-        if job.state != pb::JobState::Done as i32 {
+        if job.state != pb::JobState::Done as i32 && !(job.frames_total > 0 && is_final(&job)) {
             if is_final(&job) {
                 return Err(ended(job).into());
             }
             anyhow::bail!("job {} is {}, not done: `tessera wait` waits for it", job.id, state_name(job.state));
         }
-        download_all(&mut c, &job, &output_of(args, &job)).await
+        download_done(&mut c, &job, &output_of(args, &job)).await
     })
 }
 
@@ -68,10 +68,45 @@ async fn get(c: &mut Client, id: &str) -> anyhow::Result<pb::Job> {
 }
 
 /// `-o`, or the job's name in the working directory (its id if the name is no file name).
-fn output_of(args: &FetchArgs, job: &pb::Job) -> OutputPaths {
+fn output_of(args: &FetchArgs, job: &pb::Job) -> PathBuf {
     let plain = !job.name.is_empty() && !job.name.contains(['/', '\\']) && !job.name.starts_with('.');
     let name = if plain { job.name.clone() } else { job.id.clone() };
-    OutputPaths::new(&args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{name}.exr"))))
+    args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{name}.exr")))
+}
+
+/// Where frame `number` goes: `output` with its runs of `#` the frame number (`.####` before
+/// the extension when it has none).
+fn frame_path(output: &Path, number: u32) -> PathBuf {
+    let text = output.to_string_lossy();
+    if tessera_link::frames::is_pattern(&text) {
+        return PathBuf::from(tessera_link::frames::expand(&text, number));
+    }
+    let stem = output.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let ext = output.extension().map_or_else(|| "exr".into(), |e| e.to_string_lossy().into_owned());
+    output.with_file_name(format!("{stem}.{number:04}.{ext}"))
+}
+
+/// Writes what a job made: a still's outputs, or each done frame's (then fails with
+/// [`JobEnded`] naming the frames that did not end done).
+async fn download_done(c: &mut Client, job: &pb::Job, output: &Path) -> anyhow::Result<()> {
+    if job.frames_total == 0 {
+        return download_all(c, job, &OutputPaths::new(output)).await;
+    }
+    let mut missing = Vec::new();
+    for frame in &job.frames {
+        if frame.state != pb::JobState::Done as i32 {
+            missing.push(frame.number.to_string());
+            continue;
+        }
+        let frame_job = get(c, &frame.job_id).await?;
+        download_all(c, &frame_job, &OutputPaths::new(&frame_path(output, frame.number))).await?;
+    }
+    let unplanned = job.frames_total as usize - job.frames.len();
+    if missing.is_empty() && unplanned == 0 {
+        return Ok(());
+    }
+    let reason = format!(": frames {} did not finish, {unplanned} not started", missing.join(", "));
+    Err(JobEnded { id: job.id.clone(), state: state_name(job.state), reason }.into())
 }
 
 fn ended(job: pb::Job) -> JobEnded {
@@ -79,14 +114,14 @@ fn ended(job: pb::Job) -> JobEnded {
     JobEnded { id: job.id, state: state_name(job.state), reason }
 }
 
-/// Follows job `id` until it ends; writes its outputs if it is done, else fails with
-/// [`JobEnded`].
-pub async fn wait_and_download(c: &mut Client, id: &str, output: &OutputPaths) -> anyhow::Result<()> {
+/// Follows job `id` until it ends; writes its outputs (each done frame's, for a job of
+/// frames) if it is done, else fails with [`JobEnded`].
+pub async fn wait_and_download(c: &mut Client, id: &str, output: &Path) -> anyhow::Result<()> {
     let last = follow(c, id).await?;
-    if last.state != pb::JobState::Done as i32 {
+    if last.state != pb::JobState::Done as i32 && last.frames_total == 0 {
         return Err(ended(last).into());
     }
-    download_all(c, &last, output).await
+    download_done(c, &last, output).await
 }
 
 /// Writes a done job's outputs: the EXR and PNG, and for EMIS the strategy PNG and report.

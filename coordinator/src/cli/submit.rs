@@ -3,8 +3,7 @@
 //! for EMIS the strategy PNG and JSON report), named as `tessera render` names them.
 
 use super::client::{Client, ServerArgs, runtime, status_error};
-use crate::options::{JobArgs, scene_name};
-use crate::output::OutputPaths;
+use crate::options::{InvalidInput, JobArgs, scene_name};
 use std::path::PathBuf;
 use tessera_proto::v1 as pb;
 
@@ -41,15 +40,36 @@ pub struct SubmitArgs {
     /// scene's name].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Render these frames as one job (`1-240`, `1-240:2`, `1,5,10-20`): frame N sets the
+    /// scene parameter `--frame-param` to N, as `-D frame=N` would. A scene name with runs of
+    /// `#` (`shot.####.xml`) is one file per frame. `-o` names the frames' files with `#`
+    /// runs too [default: SCENE.####.exr].
+    #[arg(long, value_name = "FRAMES")]
+    pub frames: Option<String>,
+    /// The scene parameter that carries the frame number.
+    #[arg(long, default_value = "frame", value_name = "NAME")]
+    pub frame_param: String,
+    /// Frame N renders with the seed plus N (as `tessera render --seed S+N`), not all with S.
+    #[arg(long)]
+    pub seed_per_frame: bool,
 }
 
 /// Runs `tessera submit`.
 pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
-    let bundle = tessera_common::bundle::pack(&args.scene, &settings.define_map())?;
-    let output = OutputPaths::new(
-        &args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene)))),
-    );
+    let frames = match &args.frames {
+        Some(spec) => Some(tessera_link::frames::parse(spec).map_err(InvalidInput)?),
+        None => None,
+    };
+    let bundle = match &frames {
+        None => tessera_common::bundle::pack(&args.scene, &settings.define_map())?,
+        Some(frames) => pack_frames(&args.scene, &settings, &args.frame_param, frames)?,
+    };
+    let name = scene_name(&args.scene).replace('#', "").trim_matches('.').to_string();
+    let output = args.output.clone().unwrap_or_else(|| match frames {
+        Some(_) => PathBuf::from(format!("{name}.####.exr")),
+        None => PathBuf::from(format!("{name}.exr")),
+    });
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
         let header = pb::SubmitJobRequest {
@@ -58,7 +78,10 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
             priority: args.priority,
             after: args.after.clone(),
             require_tags: args.require_tags.clone(),
-            name: args.name.clone().unwrap_or_else(|| scene_name(&args.scene)),
+            name: args.name.clone().unwrap_or(name),
+            frames: args.frames.clone().unwrap_or_default(),
+            frame_param: args.frame_param.clone(),
+            seed_per_frame: args.seed_per_frame,
         };
         let parts = tokio_stream::iter(submission_parts(header, bundle));
         let job = c.jobs.submit_job_stream(c.request(parts)).await.map_err(status_error)?.into_inner();
@@ -68,6 +91,30 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         }
         super::fetch::wait_and_download(&mut c, &job.id, &output).await
     })
+}
+
+/// One bundle of every frame's scene and what each references, each file once: a frame's
+/// scene is its own file where the name has runs of `#`, else the scene with the frame's
+/// parameter set (a file name may depend on it).
+fn pack_frames(
+    scene: &std::path::Path,
+    settings: &tessera_common::settings::RenderSettings,
+    param: &str,
+    frames: &[u32],
+) -> anyhow::Result<tessera_common::bundle::Bundle> {
+    let pattern = scene.to_string_lossy();
+    let per_file = tessera_link::frames::is_pattern(&pattern);
+    let scenes: Vec<_> = frames
+        .iter()
+        .map(|&n| {
+            let mut defines = settings.define_map();
+            if !per_file {
+                defines.insert(param.to_string(), n.to_string());
+            }
+            (PathBuf::from(tessera_link::frames::expand(&pattern, n)), defines)
+        })
+        .collect();
+    Ok(tessera_common::bundle::pack_many(&scenes, scene)?)
 }
 
 /// A streamed submission: the header, then each file in chunks, its first chunk naming it.

@@ -110,8 +110,13 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 loop {
                     tick.tick().await;
                     let svc = svc.clone();
-                    if let Ok(Err(e)) = tokio::task::spawn_blocking(move || svc.expire(now_ms())).await {
-                        tracing::error!(error = %e, "lease expiry failed");
+                    let run = move || {
+                        // jobs of frames plan the next frames as earlier ones end
+                        svc.plan_frames(now_ms()).map_err(|e| ("frame planning", e))?;
+                        svc.expire(now_ms()).map_err(|e| ("lease expiry", e))
+                    };
+                    if let Ok(Err((what, e))) = tokio::task::spawn_blocking(run).await {
+                        tracing::error!(error = %e, "{what} failed");
                     }
                 }
             })

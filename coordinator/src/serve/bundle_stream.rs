@@ -73,11 +73,16 @@ impl StreamedBundle {
         settings: RenderSettings,
         placement: crate::serve::job::spec::Placement,
         name: Option<String>,
+        frames: Option<crate::serve::job::service::FramesRequest>,
     ) -> Result<JobView, ApiError> {
         self.flush().await?;
         let upload = self.upload.take().ok_or_else(|| ApiError::from(spent()))?;
         let svc = self.svc.clone();
-        blocking(move || svc.submit_upload(upload, &scene_path, settings, placement, name, now_ms())).await
+        blocking(move || match frames {
+            None => svc.submit_upload(upload, &scene_path, settings, placement, name, now_ms()),
+            Some(frames) => svc.submit_frames(upload, &scene_path, settings, placement, name, frames, now_ms()),
+        })
+        .await
     }
 }
 

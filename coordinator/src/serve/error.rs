@@ -117,9 +117,11 @@ impl From<ServiceError> for ApiError {
                 | TransitionError::NotOptimizing(_)
                 | TransitionError::NotFinishing(_)
                 | TransitionError::NotRequeueable { .. }
+                | TransitionError::OfFrames(_)
+                | TransitionError::SceneRefused(_)
                 | TransitionError::Ended { .. },
             ) => ErrorCode::FailedPrecondition,
-            ServiceError::Transition(TransitionError::DuplicateJob(_))
+            ServiceError::Transition(TransitionError::DuplicateJob(_) | TransitionError::NotPlanning { .. })
             | ServiceError::Corrupt { .. }
             | ServiceError::Emis { .. }
             | ServiceError::Storage(_)

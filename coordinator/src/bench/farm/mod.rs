@@ -144,8 +144,7 @@ pub fn generated_job(
         bundle: Some(tessera_link::bundle::to_pb(&bundle)),
         priority: 0,
         name: name.into(),
-        after: Vec::new(),
-        require_tags: Vec::new(),
+        ..Default::default()
     }
 }
 

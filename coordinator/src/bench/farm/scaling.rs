@@ -84,8 +84,7 @@ pub fn scaling_command(args: &FarmArgs) -> anyhow::Result<()> {
                 bundle: Some(tessera_link::bundle::to_pb(&bundle)),
                 priority: 0,
                 name: format!("scaling {config}"),
-                after: Vec::new(),
-                require_tags: Vec::new(),
+                ..Default::default()
             };
             let id = jobs.submit_job(req).await?.into_inner().id;
             let mut workers = Vec::new();

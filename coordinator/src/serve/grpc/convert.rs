@@ -43,6 +43,7 @@ pub fn grant_to_pb(g: &LeaseGrant) -> pb::TileLease {
         sample_begin: g.tile.samples.start,
         sample_end: g.tile.samples.end,
         strategy: g.strategy.as_ref().map(strategy_to_pb),
+        scene_path: g.job.scene_path.clone(),
     }
 }
 
@@ -114,5 +115,18 @@ pub fn job_to_pb(j: &JobView) -> pb::Job {
             updates: s.updates.len() as u32,
             mean_connections: s.mean_connections,
         }),
+        frames_total: j.frames_total,
+        frames: j
+            .frames
+            .iter()
+            .map(|f| pb::Frame {
+                number: f.number,
+                job_id: f.job_id.clone(),
+                state: state_to_pb(f.state) as i32,
+                progress: f.progress,
+                eta_s: f.eta_s,
+                error: f.error.clone(),
+            })
+            .collect(),
     }
 }

@@ -3,7 +3,7 @@
 
 use super::convert::{job_to_pb, settings_from_pb, worker_to_pb};
 use crate::serve::bundle_stream::StreamedBundle;
-use crate::serve::job::service::OutputKind;
+use crate::serve::job::service::{FramesRequest, OutputKind};
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
 use crate::serve::storage::WorkerMode;
@@ -30,7 +30,8 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.write(&file.data).await?;
         }
         let placement = Placement { priority: req.priority, after: req.after, require_tags: req.require_tags };
-        let view = bundle.submit(b.scene_path, settings, placement, Some(req.name)).await?;
+        let frames = frames_from_pb(&req.frames, &req.frame_param, req.seed_per_frame)?;
+        let view = bundle.submit(b.scene_path, settings, placement, Some(req.name), frames).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
 
@@ -53,7 +54,8 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.write(&part.data).await?;
         }
         let placement = Placement { priority: header.priority, after: header.after, require_tags: header.require_tags };
-        let view = bundle.submit(scene_path, settings, placement, Some(header.name)).await?;
+        let frames = frames_from_pb(&header.frames, &header.frame_param, header.seed_per_frame)?;
+        let view = bundle.submit(scene_path, settings, placement, Some(header.name), frames).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
 
@@ -179,4 +181,15 @@ impl JobApi {
         let (svc, id) = (self.0.svc.clone(), req.into_inner().id);
         Ok(Response::new(worker_to_pb(&blocking(move || svc.set_worker_mode(&id, mode, now_ms())).await?)))
     }
+}
+
+/// A submission's frames, if it asks for any (`frame_param` defaults to `frame`).
+fn frames_from_pb(frames: &str, param: &str, seed_per_frame: bool) -> Result<Option<FramesRequest>, Status> {
+    if frames.is_empty() {
+        return Ok(None);
+    }
+    let frames =
+        tessera_link::frames::parse(frames).map_err(|e| Status::invalid_argument(format!("field \"frames\": {e}")))?;
+    let param = if param.is_empty() { "frame".to_string() } else { param.to_string() };
+    Ok(Some(FramesRequest { frames, param, seed_per_frame }))
 }

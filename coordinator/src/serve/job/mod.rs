@@ -17,6 +17,8 @@ mod control_tests;
 #[cfg(test)]
 mod fault_tests;
 #[cfg(test)]
+mod frames_tests;
+#[cfg(test)]
 mod retention_tests;
 #[cfg(test)]
 pub(crate) mod service_tests;

@@ -18,18 +18,22 @@ mod after;
 #[cfg(test)]
 pub(crate) mod calls;
 mod control;
+mod error;
 mod event;
 mod failures;
 mod index;
 mod leasing;
+mod sequence;
 
 pub use super::spec::{JobSpec, TileSpec};
 pub use after::Waiting;
+pub use error::TransitionError;
 pub use event::{Effect, Effects, Event};
 pub use failures::{BLOCKLIST_AFTER_FAILURES, HOST_BLOCKLIST_AFTER_FAILURES, MAX_FAILURES_PER_HOST};
 use failures::{fail_tile, host_of};
 pub use index::TileIndex;
 pub use leasing::LeaseLifetime;
+pub use sequence::{FRAMES_IN_FLIGHT, FrameRef, Sequence, SequenceSpec};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
@@ -295,56 +299,6 @@ pub enum ResultOutcome {
     Refused(String),
 }
 
-/// Why a call was refused outright.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum TransitionError {
-    /// No such job.
-    #[error("job {0} not found")]
-    UnknownJob(String),
-    /// A job with this id exists.
-    #[error("job {0} already exists")]
-    DuplicateJob(String),
-    /// The job is not waiting for the optimiser.
-    #[error("job {0} is not at an optimisation barrier")]
-    NotOptimizing(String),
-    /// The job is not waiting for its outputs (it was cancelled meanwhile).
-    #[error("job {0} is not finishing")]
-    NotFinishing(String),
-    /// A job id prefix that more than one job has.
-    #[error("job id prefix {prefix} matches {count} jobs: give more of the id")]
-    AmbiguousPrefix {
-        /// The prefix.
-        prefix: String,
-        /// How many jobs have it.
-        count: usize,
-    },
-    /// Only a failed or cancelled job can be requeued.
-    #[error("job {job} is {state}: only a failed or cancelled job can be requeued")]
-    NotRequeueable {
-        /// The job.
-        job: String,
-        /// Its state.
-        state: &'static str,
-    },
-    /// Only a job that has not ended can be paused or resumed.
-    #[error("job {job} is {state}: it has ended")]
-    Ended {
-        /// The job.
-        job: String,
-        /// Its state.
-        state: &'static str,
-    },
-    /// Only a finished, failed or cancelled job can be removed.
-    #[error("job {job} is {state}: cancel it before deleting it")]
-    Unfinished {
-        /// The job.
-        job: String,
-        /// Its state.
-        state: &'static str,
-    },
-}
-
 /// All jobs.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct JobsModel {
@@ -356,6 +310,8 @@ pub struct JobsModel {
     /// The tags of each worker that has any: a job that requires tags goes only to workers
     /// with all of them.
     pub tags: BTreeMap<String, BTreeSet<String>>,
+    /// Jobs of many frames, by id (each frame is a job in `jobs`).
+    pub sequences: BTreeMap<String, Sequence>,
 }
 
 impl JobsModel {
@@ -371,7 +327,7 @@ impl JobsModel {
         if self.jobs.contains_key(id) {
             return Err(TransitionError::DuplicateJob(id.to_string()));
         }
-        let seq = self.jobs.values().map(|j| j.seq + 1).max().unwrap_or(0);
+        let seq = self.next_seq();
         let (driver, first) = Driver::new(spec.shape());
         let mut job = Job {
             id: id.to_string(),
@@ -403,8 +359,14 @@ impl JobsModel {
         if let Some((k, _)) = self.jobs.get_key_value(id) {
             return Ok(k);
         }
+        if let Some((k, _)) = self.sequences.get_key_value(id) {
+            return Ok(k);
+        }
         if id.len() >= MIN_ID_PREFIX {
-            let mut matches = self.jobs.range(id.to_string()..).map(|(k, _)| k).take_while(|k| k.starts_with(id));
+            // a frame is named by its whole id: a prefix names its sequence
+            let sequences = self.sequences.range(id.to_string()..).map(|(k, _)| k).take_while(|k| k.starts_with(id));
+            let jobs = self.jobs.range(id.to_string()..).filter(|(_, j)| j.spec.frame.is_none()).map(|(k, _)| k);
+            let mut matches = sequences.chain(jobs.take_while(|k| k.starts_with(id)));
             match (matches.next(), matches.count()) {
                 (Some(k), 0) => return Ok(k),
                 (Some(_), more) => {

@@ -8,7 +8,7 @@
 //! model.expired(now_ms, 24 * 3_600_000) // ended a day or more ago, oldest first
 //! ```
 
-use super::model::{Job, JobsModel, TransitionError};
+use super::model::{Job, JobState, JobsModel, TransitionError};
 
 impl JobsModel {
     /// Removes a finished, failed or cancelled job and returns it.
@@ -20,17 +20,25 @@ impl JobsModel {
         Ok(self.jobs.remove(job).expect("invariant: the job was just found"))
     }
 
-    /// The jobs that ended at least `retain_ms` before `now_ms`, oldest first.
+    /// The jobs that ended at least `retain_ms` before `now_ms`, oldest first: a job of frames
+    /// when its last frame ended, never a frame alone.
     pub fn expired(&self, now_ms: u64, retain_ms: u64) -> Vec<String> {
-        let mut ended: Vec<(u64, &str)> = self
+        let stills = self
             .jobs
             .values()
-            .filter(|j| j.state.is_terminal())
+            .filter(|j| j.state.is_terminal() && j.spec.frame.is_none())
             // a terminal job always has `finished_ms`; one restored without it counts from its
             // creation, so it still expires
-            .map(|j| (j.finished_ms.unwrap_or(j.created_ms), j.id.as_str()))
-            .filter(|(at, _)| now_ms.saturating_sub(*at) >= retain_ms)
-            .collect();
+            .map(|j| (j.finished_ms.unwrap_or(j.created_ms), j.id.as_str()));
+        let sequences =
+            self.sequences.values().filter(|s| self.sequence_state(&s.id).is_some_and(JobState::is_terminal)).map(
+                |s| {
+                    let last = self.frames_of(&s.id).iter().filter_map(|j| j.finished_ms).max();
+                    (last.unwrap_or(s.created_ms), s.id.as_str())
+                },
+            );
+        let mut ended: Vec<(u64, &str)> =
+            stills.chain(sequences).filter(|(at, _)| now_ms.saturating_sub(*at) >= retain_ms).collect();
         ended.sort();
         ended.into_iter().map(|(_, id)| id.to_string()).collect()
     }

@@ -42,6 +42,9 @@ pub struct JobSpec {
     /// Tags a worker must all have to be given this job's tiles (`--require-tags`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub require_tags: Vec<String>,
+    /// The frame of a sequence this job renders (see `model/sequence.rs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<super::model::FrameRef>,
 }
 
 /// The most tags a worker may have or a job may require, and their longest length.
@@ -117,6 +120,7 @@ impl JobSpec {
             filter: FilterKind::Box,
             after: Vec::new(),
             require_tags: Vec::new(),
+            frame: None,
         }
     }
 

@@ -25,6 +25,7 @@ fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
         filter: tessera_common::film::filter::FilterKind::Box,
         after: Vec::new(),
         require_tags: Vec::new(),
+        frame: None,
     }
 }
 

@@ -74,6 +74,27 @@ pub struct JobView {
     pub scene_digest: String,
     /// EMIS decisions once known (filled in by the service, which holds them).
     pub strategy: Option<StrategyView>,
+    /// A job of frames: how many (0 for a still).
+    pub frames_total: u64,
+    /// A job of frames: those planned so far.
+    pub frames: Vec<FrameView>,
+}
+
+/// One frame of a job of frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameView {
+    /// Its number.
+    pub number: u32,
+    /// The id of its job (for its outputs).
+    pub job_id: String,
+    /// Its state.
+    pub state: JobState,
+    /// 0..1.
+    pub progress: f64,
+    /// Estimated seconds left.
+    pub eta_s: Option<f64>,
+    /// Why it failed.
+    pub error: Option<String>,
 }
 
 /// The fraction of a sample-budget job's samples merged, never decreasing: passes are planned
@@ -129,6 +150,8 @@ impl JobView {
             created_ms: job.created_ms,
             scene_digest: job.spec.bundle_digest.clone(),
             strategy: None,
+            frames_total: 0,
+            frames: Vec::new(),
         }
     }
 }

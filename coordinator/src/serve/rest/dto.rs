@@ -44,6 +44,13 @@ pub struct JobDto {
     pub created_unix_ms: u64,
     /// Bundle digest.
     pub scene_digest: String,
+    /// A job of frames: how many (absent for a still).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames_total: Option<u64>,
+    /// A job of frames: those planned so far, each `{number, job_id, state, progress, eta_s,
+    /// error}`; a frame's outputs are its job's.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<serde_json::Value>,
 }
 
 impl From<JobView> for JobDto {
@@ -66,6 +73,15 @@ impl From<JobView> for JobDto {
             height: j.height,
             created_unix_ms: j.created_ms,
             scene_digest: j.scene_digest,
+            frames_total: (j.frames_total > 0).then_some(j.frames_total),
+            frames: j
+                .frames
+                .into_iter()
+                .map(|f| {
+                    serde_json::json!({"number": f.number, "job_id": f.job_id, "state": f.state.as_str(),
+                        "progress": f.progress, "eta_s": f.eta_s, "error": f.error})
+                })
+                .collect(),
         }
     }
 }

@@ -3,7 +3,7 @@
 use super::dto::{JobDto, WorkerDto};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::error::{ApiError, ErrorCode};
-use crate::serve::job::service::OutputKind;
+use crate::serve::job::service::{FramesRequest, OutputKind};
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
 use crate::serve::storage::WorkerMode;
@@ -29,8 +29,12 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     }
 }
 
-/// Splits the `settings` JSON into render settings, placement (`priority`, `after`) and name.
-fn parse_settings(text: &str) -> Result<(RenderSettings, Placement, Option<String>), ApiError> {
+/// What a submission's `settings` part holds besides the render settings.
+type Submission = (RenderSettings, Placement, Option<String>, Option<FramesRequest>);
+
+/// Splits the `settings` JSON into render settings, placement (`priority`, `after`,
+/// `require_tags`), name and frames (`frames`, `frame_param`, `seed_per_frame`).
+fn parse_settings(text: &str) -> Result<Submission, ApiError> {
     let mut value: serde_json::Value =
         serde_json::from_str(text).map_err(|e| invalid(format!("field \"settings\" is not JSON: {e}")))?;
     let obj = value.as_object_mut().ok_or_else(|| invalid("field \"settings\" must be a JSON object"))?;
@@ -48,10 +52,29 @@ fn parse_settings(text: &str) -> Result<(RenderSettings, Placement, Option<Strin
     };
     let after = list("after", "job ids")?;
     let require_tags = list("require_tags", "tags")?;
+    let frames = frames_of(obj)?;
     let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
     tessera_common::settings::strip_retired(obj).map_err(|e| invalid(e.to_string()))?;
     let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
-    Ok((settings, Placement { priority, after, require_tags }, name))
+    Ok((settings, Placement { priority, after, require_tags }, name, frames))
+}
+
+/// The settings' `frames` (`"1-240"`), `frame_param` and `seed_per_frame`, if it asks for any.
+fn frames_of(obj: &mut serde_json::Map<String, serde_json::Value>) -> Result<Option<FramesRequest>, ApiError> {
+    let mut text = |field: &str| match obj.remove(field) {
+        None => Ok(None),
+        Some(serde_json::Value::String(s)) => Ok(Some(s)),
+        Some(_) => Err(invalid(format!("settings field \"{field}\" must be a string"))),
+    };
+    let (frames, param) = (text("frames")?, text("frame_param")?);
+    let seed_per_frame = match obj.remove("seed_per_frame") {
+        None => false,
+        Some(v) => v.as_bool().ok_or_else(|| invalid("settings field \"seed_per_frame\" must be true or false"))?,
+    };
+    let Some(frames) = frames else { return Ok(None) };
+    let frames =
+        tessera_link::frames::parse(&frames).map_err(|e| invalid(format!("settings field \"frames\": {e}")))?;
+    Ok(Some(FramesRequest { frames, param: param.unwrap_or_else(|| "frame".into()), seed_per_frame }))
 }
 
 /// Most bytes the `settings` part may have.
@@ -63,7 +86,7 @@ const MAX_SETTINGS_BYTES: usize = 1 << 20;
 pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoResponse, ApiError> {
     let mut bundle = StreamedBundle::begin(st.svc.clone(), st.max_upload_bytes as u64).await?;
     let mut scene_path = None;
-    let mut settings = (RenderSettings::default(), Placement::default(), None);
+    let mut settings = (RenderSettings::default(), Placement::default(), None, None);
     while let Some(mut field) = form.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
         let file_name = field.file_name().map(str::to_string);
@@ -92,8 +115,8 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
         }
     }
     let scene_path = scene_path.ok_or_else(|| invalid("field \"scene\" is missing (the scene XML file)"))?;
-    let (settings, placement, name) = settings;
-    let view = bundle.submit(scene_path, settings, placement, name).await?;
+    let (settings, placement, name, frames) = settings;
+    let view = bundle.submit(scene_path, settings, placement, name, frames).await?;
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 
@@ -261,7 +284,7 @@ mod tests {
 
     #[test]
     fn settings_json_names_the_bad_field() {
-        let (s, p, n) =
+        let (s, p, n, _) =
             parse_settings(r#"{"integrator":"vcm","spp":2,"priority":3,"name":"x","after":["j1"]}"#).unwrap();
         let placement = Placement { priority: 3, after: vec!["j1".into()], require_tags: vec![] };
         assert_eq!((s.spp, p, n.as_deref()), (Some(2), placement, Some("x")));
@@ -272,7 +295,7 @@ mod tests {
         let e = parse_settings(r#"{"priority":"high"}"#).unwrap_err();
         assert!(e.message.contains("priority"));
         // retired settings: their old default accepted, a retired variant refused by name
-        let (s, _, _) = parse_settings(r#"{"integrator":"emis-vcm","merge_ratio":"principled"}"#).unwrap();
+        let (s, _, _, _) = parse_settings(r#"{"integrator":"emis-vcm","merge_ratio":"principled"}"#).unwrap();
         assert_eq!(s.integrator, tessera_common::settings::IntegratorName::EmisVcm);
         let e = parse_settings(r#"{"integrator":"emis-vcm","cost_model":"reference"}"#).unwrap_err();
         assert!(e.message.contains("cost_model") && e.message.contains("retired"), "{}", e.message);

@@ -137,6 +137,9 @@ CREATE TABLE IF NOT EXISTS tiles (
     x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, s0 INTEGER NOT NULL, s1 INTEGER NOT NULL,
     epoch INTEGER NOT NULL, state TEXT NOT NULL, worker TEXT, failures INTEGER NOT NULL,
     PRIMARY KEY (job_id, idx));
+CREATE TABLE IF NOT EXISTS sequences (
+    id TEXT PRIMARY KEY, seq INTEGER NOT NULL, spec TEXT NOT NULL, created_ms INTEGER NOT NULL,
+    cancelled INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS results (
     job_id TEXT NOT NULL, idx INTEGER NOT NULL, epoch INTEGER NOT NULL, non_finite INTEGER NOT NULL,
     payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
@@ -153,6 +156,8 @@ pub struct Batch {
     jobs: Vec<JobRow>,
     tiles: Vec<TileRow>,
     extras: Vec<Extra>,
+    /// Sequences (jobs of many frames) whose row changed.
+    sequences: Vec<(String, i64, String, i64, bool)>,
     /// Jobs whose rows go, after the rest of the batch.
     deletes: Vec<String>,
 }
@@ -190,6 +195,9 @@ impl Batch {
     pub fn of(model: &JobsModel, changes: &Changes, extras: &[Extra]) -> Batch {
         let mut batch = Batch { extras: extras.to_vec(), ..Batch::default() };
         for (id, tiles) in changes {
+            if let Some(s) = model.sequences.get(id) {
+                batch.sequences.push((s.id.clone(), s.seq as i64, json(&s.spec), s.created_ms as i64, s.cancelled));
+            }
             let Some(job) = model.jobs.get(id) else { continue };
             batch.jobs.push(JobRow {
                 id: job.id.clone(),
@@ -235,7 +243,11 @@ impl Batch {
 
     /// Whether there is nothing to write.
     pub fn is_empty(&self) -> bool {
-        self.jobs.is_empty() && self.tiles.is_empty() && self.extras.is_empty() && self.deletes.is_empty()
+        self.jobs.is_empty()
+            && self.tiles.is_empty()
+            && self.extras.is_empty()
+            && self.deletes.is_empty()
+            && self.sequences.is_empty()
     }
 }
 
@@ -363,11 +375,18 @@ impl Store {
             for extra in &batch.extras {
                 write_extra(&tx, extra)?;
             }
+            for (id, seq, spec, created_ms, cancelled) in &batch.sequences {
+                tx.prepare_cached(
+                    "INSERT OR REPLACE INTO sequences (id, seq, spec, created_ms, cancelled) VALUES (?1, ?2, ?3, ?4, ?5)",
+                )?
+                .execute(params![id, seq, spec, created_ms, cancelled])?;
+            }
             for job in &batch.deletes {
                 for sql in [
                     "DELETE FROM results WHERE job_id = ?1",
                     "DELETE FROM tiles WHERE job_id = ?1",
                     "DELETE FROM jobs WHERE id = ?1",
+                    "DELETE FROM sequences WHERE id = ?1",
                 ] {
                     tx.prepare_cached(sql)?.execute([job])?;
                 }

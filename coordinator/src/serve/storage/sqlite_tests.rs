@@ -23,6 +23,7 @@ fn store_round_trips_the_model_and_pairs_merged_with_its_checkpoint() {
         filter: tessera_common::film::filter::FilterKind::Gaussian { stddev: 0.5 },
         after: Vec::new(),
         require_tags: Vec::new(),
+        frame: None,
     };
     let c = m.submit("a", spec, 5).unwrap();
     store.persist(&m, &c, &[]).unwrap();

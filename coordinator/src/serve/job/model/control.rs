@@ -36,6 +36,9 @@ impl Job {
 
 impl JobsModel {
     fn active(&mut self, job: &str) -> Result<&mut Job, TransitionError> {
+        if self.sequences.contains_key(job) {
+            return Err(TransitionError::OfFrames(job.to_string()));
+        }
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state.is_terminal() {
             return Err(TransitionError::Ended { job: job.to_string(), state: j.state.as_str() });
@@ -65,8 +68,21 @@ impl JobsModel {
         Ok(changes)
     }
 
-    /// Sets a job's priority (ended jobs too: it is only shown then).
+    /// Sets a job's priority (ended jobs too: it is only shown then); a job of frames's
+    /// frames, planned and to come.
     pub(super) fn set_priority(&mut self, job: &str, priority: i32) -> Result<Changes, TransitionError> {
+        if let Some(s) = self.sequences.get_mut(job) {
+            s.spec.priority = priority;
+            let frames: Vec<String> = s.frame_ids().collect();
+            let mut changes = Changes::new();
+            touch(&mut changes, job, None);
+            for f in &frames {
+                if self.jobs.contains_key(f) {
+                    changes.extend(self.set_priority(f, priority)?);
+                }
+            }
+            return Ok(changes);
+        }
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         let mut changes = Changes::new();
         if j.spec.priority != priority {
@@ -82,6 +98,9 @@ impl JobsModel {
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if !matches!(j.state, JobState::Failed | JobState::Cancelled) {
             return Err(TransitionError::NotRequeueable { job: job.to_string(), state: j.shown_state().as_str() });
+        }
+        if j.spec.frame.as_ref().is_some_and(|f| f.refused) {
+            return Err(TransitionError::SceneRefused(job.to_string()));
         }
         let mut changes = Changes::new();
         let merged = merged.min(j.merged);

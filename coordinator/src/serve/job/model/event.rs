@@ -12,7 +12,9 @@
 //! ```
 
 use super::TransitionError;
-use super::{BarrierAction, Changes, JobSpec, JobState, JobsModel, LeaseLifetime, LeaseRef, ResultOutcome};
+use super::{
+    BarrierAction, Changes, JobSpec, JobState, JobsModel, LeaseLifetime, LeaseRef, ResultOutcome, SequenceSpec,
+};
 use std::ops::Range;
 use tessera_common::emis::RestartTotal;
 
@@ -25,6 +27,25 @@ pub enum Event<'a> {
         id: &'a str,
         /// What to render.
         spec: Box<JobSpec>,
+    },
+    /// A client submitted a job of many frames (planned later, by [`Event::PlanFrame`]).
+    SubmitSequence {
+        /// Its id.
+        id: &'a str,
+        /// What to render.
+        spec: Box<SequenceSpec>,
+    },
+    /// The service loaded frame `index`'s scene: the frame is a job of `spec`, or fails with
+    /// `error` when its scene did not load.
+    PlanFrame {
+        /// The sequence.
+        sequence: &'a str,
+        /// The frame's position.
+        index: usize,
+        /// Its job.
+        spec: Box<JobSpec>,
+        /// Why its scene did not load.
+        error: Option<String>,
     },
     /// A worker registered from `host` with `tags`: the leases its earlier process held fail
     /// now.
@@ -259,6 +280,10 @@ impl JobsModel {
     pub fn apply(&mut self, event: Event<'_>, now_ms: u64) -> Result<Effects, TransitionError> {
         let mut effects = match event {
             Event::Submit { id, spec } => Effects::of(self.submit(id, *spec, now_ms)?),
+            Event::SubmitSequence { id, spec } => Effects::of(self.submit_sequence(id, *spec, now_ms)?),
+            Event::PlanFrame { sequence, index, spec, error } => {
+                Effects::of(self.plan_frame(sequence, index, *spec, error, now_ms)?)
+            }
             Event::Register { worker, host, tags } => self.register(worker, host, tags, now_ms),
             Event::Forget { worker } => {
                 self.hosts.remove(worker);
@@ -288,6 +313,7 @@ impl JobsModel {
             Event::Pause { job } => Effects::of(self.pause(job, now_ms)?),
             Event::Resume { job } => Effects::of(self.resume_paused(job, now_ms)?),
             Event::SetPriority { job, priority } => Effects::of(self.set_priority(job, priority)?),
+            Event::Requeue { job, .. } if self.sequences.contains_key(job) => Effects::of(self.resume_planning(job)?),
             Event::Requeue { job, merged } => {
                 let mut effects = Effects::of(self.requeue(job, merged)?);
                 effects.extend(self.restored(job, now_ms));
@@ -299,6 +325,9 @@ impl JobsModel {
                 Effects { changes, then: vec![Effect::PassPlanned { job: job.to_string() }] }
             }
             Event::OutputsWritten { job } => Effects::of(self.outputs_written(job, now_ms)?),
+            Event::Cancel { job } if self.sequences.contains_key(job) => {
+                Effects::of(self.cancel_sequence(job, now_ms)?)
+            }
             Event::Cancel { job } => Effects::of(self.cancel(job, now_ms)?),
             Event::Fail { job, error } => Effects::of(self.fail(job, error, now_ms)),
         };

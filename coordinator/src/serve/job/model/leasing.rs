@@ -51,7 +51,11 @@ impl JobsModel {
             .filter(|j| self.upstream_done(j) && self.serves(worker, j))
             .filter(|j| !j.is_blocklisted_on(worker, host))
             .filter(|j| j.index.queued.range(j.leasable()).next().is_some())
-            .max_by_key(|j| (j.spec.priority, std::cmp::Reverse(j.seq)))
+            // a sequence's frames share its seq: the earliest frame first
+            .max_by_key(|j| {
+                let frame = j.spec.frame.as_ref().map_or(0, |f| f.index);
+                (j.spec.priority, std::cmp::Reverse(j.seq), std::cmp::Reverse(frame))
+            })
             .map(|j| j.id.clone());
         let Some(id) = candidate else { return (Vec::new(), changes) };
         let job = self.jobs.get_mut(&id).expect("invariant: candidate job exists");

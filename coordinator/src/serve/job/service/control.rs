@@ -47,6 +47,10 @@ impl JobService {
         self.check_space()?;
         let mut inner = self.lock();
         let job = &Self::resolve(&inner, job)?;
+        if inner.model.sequences.contains_key(job) {
+            drop(inner);
+            return self.requeue_frames(job, now_ms);
+        }
         check_requeueable(&inner, job)?;
         // the checkpoint the database names, with everything queued before it committed
         self.sync(&inner)?;
@@ -71,9 +75,37 @@ impl JobService {
     }
 }
 
+impl JobService {
+    /// Requeues a job of frames: the frames not planned yet will be, and each failed or
+    /// cancelled frame runs on from its checkpoint.
+    fn requeue_frames(&self, id: &str, now_ms: u64) -> Result<JobView, ServiceError> {
+        let frames = {
+            let mut inner = self.lock();
+            let effects = inner.model.apply(Event::Requeue { job: id, merged: 0 }, now_ms)?;
+            self.persist(&mut inner, &effects.changes, &[])?;
+            let ended = |j: &&crate::serve::job::model::Job| {
+                matches!(j.state, JobState::Failed | JobState::Cancelled)
+                    && !j.spec.frame.as_ref().is_some_and(|f| f.refused)
+            };
+            inner.model.frames_of(id).into_iter().filter(ended).map(|j| j.id.clone()).collect::<Vec<_>>()
+        };
+        for frame in &frames {
+            self.requeue(frame, now_ms)?;
+        }
+        self.plan_frames(now_ms)?;
+        tracing::info!(job_id = %id, frames = frames.len(), "job of frames requeued");
+        let inner = self.lock();
+        self.sync(&inner)?;
+        Ok(self.view(&inner, id, now_ms))
+    }
+}
+
 /// Refuses a requeue before the job's checkpoint is read.
 fn check_requeueable(inner: &Inner, job: &str) -> Result<(), ServiceError> {
     let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
+    if j.spec.frame.as_ref().is_some_and(|f| f.refused) {
+        return Err(TransitionError::SceneRefused(job.to_string()).into());
+    }
     match j.state {
         JobState::Failed | JobState::Cancelled => Ok(()),
         _ => Err(TransitionError::NotRequeueable { job: job.to_string(), state: j.shown_state().as_str() }.into()),

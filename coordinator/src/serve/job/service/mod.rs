@@ -14,6 +14,7 @@
 
 mod control;
 mod events;
+mod frames;
 mod leases;
 mod merge;
 mod query;
@@ -38,6 +39,7 @@ use std::sync::Mutex;
 use tessera_common::film::Film;
 
 pub use super::view::{JobView, StrategyView, WorkerView};
+pub use frames::FramesRequest;
 pub use merge::CHECKPOINT_SPACING;
 pub use query::{Metrics, OutputKind};
 pub use tessera_common::bundle::Bundle;
@@ -311,6 +313,10 @@ impl JobService {
             }
             inner.jobs.insert(job.id.clone(), runtime);
             inner.model.restore(job);
+        }
+        // after their frames' jobs: a sequence planned as many frames as there are
+        for s in store.load_sequences()? {
+            inner.model.restore_sequence(s);
         }
         let svc = JobService {
             disk: Disk::open(data_dir, cfg.min_free_bytes),

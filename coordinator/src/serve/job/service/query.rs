@@ -61,6 +61,9 @@ pub struct Metrics {
 impl JobService {
     /// A job's view with its EMIS decisions (kept after the job ends).
     pub(super) fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
+        if inner.model.sequences.contains_key(job) {
+            return self.sequence_view(inner, job, now_ms);
+        }
         let j = inner.model.jobs.get(job).expect("invariant: callers check the job exists");
         let mut view = JobView::of(j, now_ms);
         if let Some(waiting) = inner.model.waiting(j) {
@@ -112,7 +115,9 @@ impl JobService {
     /// only the page's views are built.
     pub fn list_page(&self, now_ms: u64, offset: usize, limit: usize) -> Result<(Vec<JobView>, usize), ServiceError> {
         let inner = self.lock();
-        let mut jobs: Vec<_> = inner.model.jobs.values().map(|j| (j.seq, &j.id)).collect();
+        // a job of frames is one entry: its frames are in its view
+        let stills = inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| (j.seq, &j.id));
+        let mut jobs: Vec<_> = stills.chain(inner.model.sequences.values().map(|s| (s.seq, &s.id))).collect();
         jobs.sort_unstable_by_key(|&(seq, _)| std::cmp::Reverse(seq));
         let total = jobs.len();
         let views = jobs.into_iter().skip(offset).take(limit).map(|(_, id)| self.view(&inner, id, now_ms)).collect();
@@ -129,6 +134,11 @@ impl JobService {
         let digest = {
             let inner = self.lock();
             let job = &Self::resolve(&inner, job)?;
+            if inner.model.sequences.contains_key(job) {
+                return Err(ServiceError::FailedPrecondition(format!(
+                    "job {job} is a job of frames: each frame's outputs are its frame job's (`frames[].job_id`)"
+                )));
+            }
             let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
             let integrator = j.spec.settings.integrator;
             if kind.emis_only() && integrator.emis_method().is_none() {

@@ -11,7 +11,7 @@
 use super::runtime::JobRuntime;
 use super::{Inner, JobService, ServiceError};
 use crate::serve::job::emis::MergeSpec;
-use crate::serve::job::model::{Job, TransitionError};
+use crate::serve::job::model::{Job, Sequence, TransitionError};
 use crate::serve::storage::blobs::remove_all;
 use crate::serve::storage::{Live, sqlite::Batch};
 use std::collections::{BTreeSet, HashSet};
@@ -83,23 +83,46 @@ impl JobService {
     }
 
     /// Removes ended jobs from memory, deletes their rows (one transaction), then their files.
+    /// A job of frames goes with its frames.
     fn remove_jobs(&self, inner: &mut Inner, ids: &[String]) -> Result<(), ServiceError> {
         let mut removed: Vec<(Job, JobRuntime)> = Vec::new();
+        let mut sequences = Vec::new();
+        // the jobs (a sequence's frames in its place) and then the sequences
+        let (mut jobs, mut all) = (Vec::new(), Vec::new());
         for id in ids {
+            let frames = inner.model.sequences.get(id).map(|s| s.frame_ids().collect::<Vec<_>>());
+            match frames {
+                Some(frames) => {
+                    match inner.model.remove_sequence(id) {
+                        Ok(s) => sequences.push(s),
+                        Err(e) => {
+                            restore(inner, removed, sequences);
+                            return Err(refused(e));
+                        }
+                    }
+                    jobs.extend(frames.into_iter().filter(|f| inner.model.jobs.contains_key(f)));
+                    all.push(id.clone());
+                }
+                None => jobs.push(id.clone()),
+            }
+        }
+        all.extend(jobs.iter().cloned());
+        for id in &jobs {
             match inner.model.remove(id) {
                 Ok(job) => removed.push((job, inner.jobs.remove(id).unwrap_or_default())),
                 Err(e) => {
-                    restore(inner, removed);
+                    restore(inner, removed, sequences);
                     return Err(refused(e));
                 }
             }
         }
-        inner.ticket = self.commits.enqueue(Batch::deleting(ids));
+        inner.ticket = self.commits.enqueue(Batch::deleting(&all));
         if let Err(e) = self.sync(inner) {
             // the rows are still there, and so is the job
-            restore(inner, removed);
+            restore(inner, removed, sequences);
             return Err(e);
         }
+        let bundles = sequences.into_iter().map(|s| s.spec.bundle_digest);
         self.changed.send_modify(|v| *v += 1);
         let mut blobs = BTreeSet::new();
         for (job, runtime) in removed {
@@ -112,6 +135,7 @@ impl JobService {
             blobs.extend(runtime.files.outputs().cloned().chain(runtime.masks));
             blobs.insert(job.spec.bundle_digest);
         }
+        blobs.extend(bundles);
         self.remove_unused_blobs(inner, blobs);
         match self.commits.store().reclaim() {
             Ok(pages) => tracing::debug!(pages, "database space given back"),
@@ -186,17 +210,22 @@ impl JobService {
 }
 
 /// Puts jobs whose removal could not be committed back.
-fn restore(inner: &mut Inner, removed: Vec<(Job, JobRuntime)>) {
+fn restore(inner: &mut Inner, removed: Vec<(Job, JobRuntime)>, sequences: Vec<Sequence>) {
     for (job, runtime) in removed {
         inner.jobs.insert(job.id.clone(), runtime);
         inner.model.restore(job);
+    }
+    for s in sequences {
+        inner.model.restore_sequence(s);
     }
 }
 
 /// Every blob a job in `inner` names: bundles, outputs (EMIS strategy PNGs and reports
 /// included), merge masks.
 fn live_blobs(inner: &Inner) -> HashSet<String> {
-    let bundles = inner.model.jobs.values().map(|j| j.spec.bundle_digest.clone());
+    // a job of frames plans its next frames from its bundle
+    let sequences = inner.model.sequences.values().map(|s| s.spec.bundle_digest.clone());
+    let bundles = inner.model.jobs.values().map(|j| j.spec.bundle_digest.clone()).chain(sequences);
     let files = inner.jobs.values().flat_map(|r| r.files.outputs().chain(&r.masks).cloned().collect::<Vec<_>>());
     bundles.chain(files).collect()
 }

@@ -44,39 +44,11 @@ impl JobService {
         name: Option<String>,
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
-        settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
-        let mut placement = placement.into();
-        check_tags("require_tags", &placement.require_tags).map_err(ServiceError::InvalidArgument)?;
-        // the jobs waited for must exist now (and so cannot wait for this one)
-        placement.after = self.resolve_after(&placement.after)?;
-        // the bundle just received may have taken the last of the reserve
-        self.check_space()?;
-        let blob = self.blobs.temp_path(".bundle");
-        let digest = match upload.finish(scene_path, &blob) {
-            Ok(digest) => digest,
-            Err(e) => {
-                let _ = std::fs::remove_file(&blob);
-                return Err(e);
-            }
-        };
-        // pinned until the job is in the model, so that a delete of another job with this
-        // bundle leaves it alone meanwhile
-        let pin = self.pin_bundle(&digest);
-        let stored = self
-            .blobs
-            .put_file_digested(&blob, &digest)
-            .map_err(ServiceError::from)
-            .and_then(|()| upload.unpack_to(&self.scenes_dir.join(&digest)));
-        let spec = stored.and_then(|()| self.check_scene(scene_path, &digest, settings, placement, name));
-        let spec = match spec {
+        let placement = self.check_placement(&settings, placement.into())?;
+        let (digest, pin) = self.store_upload(&mut upload, scene_path)?;
+        let spec = match self.check_scene(scene_path, &digest, settings, placement, name) {
             Ok(spec) => spec,
-            Err(e) => {
-                // a refused scene leaves no files behind (unless a job or submission uses them)
-                let _ = std::fs::remove_file(&blob);
-                drop(pin);
-                self.remove_unused_blobs(&self.lock(), [digest].into());
-                return Err(e);
-            }
+            Err(e) => return Err(self.refused_bundle(e, pin, digest)),
         };
         let id = uuid::Uuid::new_v4().to_string();
         let mut inner = self.lock();
@@ -100,6 +72,58 @@ impl JobService {
         Ok(self.view(&inner, &id, now_ms))
     }
 
+    /// Checks a submission's settings and placement; the jobs waited for must exist now (and
+    /// so cannot wait for this one), named by their full ids afterwards.
+    pub(super) fn check_placement(
+        &self,
+        settings: &RenderSettings,
+        mut placement: Placement,
+    ) -> Result<Placement, ServiceError> {
+        settings.validate().map_err(|e| ServiceError::InvalidArgument(e.to_string()))?;
+        check_tags("require_tags", &placement.require_tags).map_err(ServiceError::InvalidArgument)?;
+        placement.after = self.resolve_after(&placement.after)?;
+        Ok(placement)
+    }
+
+    /// Stores a received bundle as a blob and unpacked; returns its digest, pinned until the
+    /// job using it is in the model (so that a delete of another job with this bundle leaves
+    /// it alone meanwhile).
+    pub(super) fn store_upload(
+        &self,
+        upload: &mut BundleUpload,
+        scene_path: &str,
+    ) -> Result<(String, super::retention::BundlePin<'_>), ServiceError> {
+        // the bundle just received may have taken the last of the reserve
+        self.check_space()?;
+        let blob = self.blobs.temp_path(".bundle");
+        let digest = match upload.finish(scene_path, &blob) {
+            Ok(digest) => digest,
+            Err(e) => {
+                let _ = std::fs::remove_file(&blob);
+                return Err(e);
+            }
+        };
+        let pin = self.pin_bundle(&digest);
+        let stored = self.blobs.put_file_digested(&blob, &digest).map_err(ServiceError::from);
+        let _ = std::fs::remove_file(&blob);
+        match stored.and_then(|()| upload.unpack_to(&self.scenes_dir.join(&digest))) {
+            Ok(()) => Ok((digest, pin)),
+            Err(e) => Err(self.refused_bundle(e, pin, digest)),
+        }
+    }
+
+    /// A refused submission leaves no files behind (unless a job or submission uses them).
+    pub(super) fn refused_bundle(
+        &self,
+        e: ServiceError,
+        pin: super::retention::BundlePin<'_>,
+        digest: String,
+    ) -> ServiceError {
+        drop(pin);
+        self.remove_unused_blobs(&self.lock(), [digest].into());
+        e
+    }
+
     /// The full ids of the jobs a submission waits for: each must exist (by its id or a
     /// unique prefix), at most [`MAX_AFTER`] of them, each once.
     fn resolve_after(&self, after: &[String]) -> Result<Vec<String>, ServiceError> {
@@ -121,7 +145,7 @@ impl JobService {
 
     /// Loads the stored bundle's scene (see [`JobService::load_unpacked`]) and checks it against
     /// the settings and limits: the job's description.
-    fn check_scene(
+    pub(super) fn check_scene(
         &self,
         scene_path: &str,
         digest: &str,
@@ -165,6 +189,7 @@ impl JobService {
             priority: placement.priority,
             after: placement.after,
             require_tags: placement.require_tags,
+            frame: None,
             full_frame,
             settings: integrator_settings,
             width: scene.camera.width,
@@ -192,7 +217,7 @@ impl JobService {
     }
 }
 
-fn default_name(scene_path: &str) -> String {
+pub(super) fn default_name(scene_path: &str) -> String {
     let p = Path::new(scene_path);
     let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("job");
     match (stem, p.parent().and_then(|d| d.file_name()).and_then(|s| s.to_str())) {

@@ -3,7 +3,7 @@
 //! the others from loading).
 
 use super::{JobFiles, Store, StoreError};
-use crate::serve::job::model::{Job, JobSpec, JobState, Pass, Tile, TileSpec, TileState};
+use crate::serve::job::model::{Job, JobSpec, JobState, Pass, Sequence, Tile, TileSpec, TileState};
 use rusqlite::OptionalExtension;
 use tessera_common::driver::Driver;
 use tessera_common::film::Rect;
@@ -151,5 +151,32 @@ impl Store {
     pub fn checkpointed(&self, job: &str) -> Result<Option<usize>, StoreError> {
         let merged = self.conn.query_row("SELECT merged FROM jobs WHERE id = ?1", [job], |r| r.get::<_, i64>(0));
         Ok(merged.optional()?.map(|m| m as usize))
+    }
+
+    /// Every sequence (job of many frames) as committed, with no frame planned: the caller
+    /// counts the frames loaded as jobs. A row that does not decode is skipped and logged (its
+    /// frames still load as jobs).
+    pub fn load_sequences(&self) -> Result<Vec<Sequence>, StoreError> {
+        let mut stmt = self.conn.prepare("SELECT id, seq, spec, created_ms, cancelled FROM sequences ORDER BY seq")?;
+        let rows = stmt.query_map([], |r| {
+            let row: (String, i64, String, i64, bool) = (r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?);
+            Ok(row)
+        })?;
+        let mut out = Vec::new();
+        for row in rows {
+            let (id, seq, spec, created_ms, cancelled) = row?;
+            match serde_json::from_str(&spec) {
+                Ok(spec) => out.push(Sequence {
+                    id,
+                    seq: seq as u64,
+                    spec,
+                    created_ms: created_ms as u64,
+                    planned: 0,
+                    cancelled,
+                }),
+                Err(e) => tracing::error!(sequence = %id, error = %e, "cannot load a sequence's row"),
+            }
+        }
+        Ok(out)
     }
 }

@@ -1,0 +1,177 @@
+//! Jobs of many frames on the service's side (the model's `sequence.rs` says what they are):
+//! submitting one, planning its frames as room frees up (each frame's scene is loaded first,
+//! without the lock, and a frame whose scene does not load fails alone), and what clients see
+//! of it: one job whose state, progress and ETA cover its frames, with a line per frame.
+
+use super::upload::BundleUpload;
+use super::{Inner, JobService, ServiceError};
+use crate::serve::job::model::{Event, JobSpec, JobState, SequenceSpec};
+use crate::serve::job::spec::Placement;
+use crate::serve::job::view::{FrameView, JobView};
+use tessera_common::settings::RenderSettings;
+
+/// How a submission asks for frames.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FramesRequest {
+    /// The frame numbers (`tessera_link::frames::parse`).
+    pub frames: Vec<u32>,
+    /// The scene parameter that carries the frame number.
+    pub param: String,
+    /// Frame N renders with the seed plus N.
+    pub seed_per_frame: bool,
+}
+
+impl JobService {
+    /// Validates and stores a received bundle and queues a job of `frames`: the first frame's
+    /// scene must load (the others are loaded as they are planned); `scene_path` may hold runs
+    /// of `#`, the frame number (one scene file per frame).
+    #[allow(clippy::too_many_arguments)]
+    pub fn submit_frames(
+        &self,
+        mut upload: BundleUpload,
+        scene_path: &str,
+        settings: RenderSettings,
+        placement: Placement,
+        name: Option<String>,
+        frames: FramesRequest,
+        now_ms: u64,
+    ) -> Result<JobView, ServiceError> {
+        check_frames(&frames)?;
+        let placement = self.check_placement(&settings, placement)?;
+        // the bundle's own scene is the first frame's (its file, when each frame has one)
+        let first = tessera_link::frames::expand(scene_path, frames.frames[0]);
+        let (digest, pin) = self.store_upload(&mut upload, &first)?;
+        let spec = SequenceSpec {
+            name: name.filter(|n| !n.is_empty()).unwrap_or_else(|| super::submit::default_name(scene_path)),
+            priority: placement.priority,
+            settings,
+            frames: frames.frames,
+            frame_param: frames.param,
+            seed_per_frame: frames.seed_per_frame,
+            scene_path: scene_path.to_string(),
+            bundle_digest: digest.clone(),
+            after: placement.after,
+            require_tags: placement.require_tags,
+        };
+        if let Err(e) = self.frame_spec(&spec, 0) {
+            return Err(self.refused_bundle(e, pin, digest));
+        }
+        let id = uuid::Uuid::new_v4().to_string();
+        let mut inner = self.lock();
+        let event = Event::SubmitSequence { id: &id, spec: Box::new(spec.clone()) };
+        let changes = inner.model.apply(event, now_ms)?.changes;
+        drop(pin);
+        self.persist(&mut inner, &changes, &[])?;
+        self.sync(&inner)?;
+        tracing::info!(job_id = %id, name = %spec.name, frames = spec.frames.len(), "job of frames submitted");
+        drop(inner);
+        self.plan_frames(now_ms)?;
+        Ok(self.view(&self.lock(), &id, now_ms))
+    }
+
+    /// Frame `index`'s job, from its scene (loaded now).
+    fn frame_spec(&self, s: &SequenceSpec, index: usize) -> Result<JobSpec, ServiceError> {
+        let (scene_path, settings) = s.frame(index);
+        let placement =
+            Placement { priority: s.priority, after: s.after.clone(), require_tags: s.require_tags.clone() };
+        let name = format!("{} frame {}", s.name, s.frames[index]);
+        self.check_scene(&scene_path, &s.bundle_digest, settings, placement, Some(name))
+    }
+
+    /// Plans the frames every sequence has room for (the timer calls it too): loads each
+    /// frame's scene without the lock, then adds it as a job, or failed with the scene's
+    /// error.
+    pub fn plan_frames(&self, now_ms: u64) -> Result<(), ServiceError> {
+        let due = self.lock().model.frames_due();
+        if due.is_empty() {
+            return Ok(());
+        }
+        for (sequence, indices) in due {
+            for index in indices {
+                let Some(s) = self.lock().model.sequences.get(&sequence).map(|s| s.spec.clone()) else { break };
+                let (spec, error) = match self.frame_spec(&s, index) {
+                    Ok(spec) => (spec, None),
+                    Err(e) => {
+                        let (scene_path, settings) = s.frame(index);
+                        let spec = JobSpec {
+                            settings,
+                            scene_path,
+                            ..JobSpec::bare(&s.name, s.settings.integrator, Some(1), 1, 1)
+                        };
+                        (spec, Some(format!("frame {}: {e}", s.frames[index])))
+                    }
+                };
+                let mut inner = self.lock();
+                let event = Event::PlanFrame { sequence: &sequence, index, spec: Box::new(spec), error };
+                // a cancel or delete in between: the sequence plans no more
+                let Ok(effects) = inner.model.apply(event, now_ms) else { break };
+                self.persist(&mut inner, &effects.changes, &[])?;
+                self.ended(&mut inner, &effects);
+            }
+        }
+        self.sync(&self.lock())?;
+        self.work.notify_waiters();
+        Ok(())
+    }
+
+    /// The view of a sequence: its frames' work summed, a line per frame.
+    pub(super) fn sequence_view(&self, inner: &Inner, id: &str, now_ms: u64) -> JobView {
+        let s = &inner.model.sequences[id];
+        let frames = inner.model.frames_of(id);
+        let views: Vec<JobView> = frames.iter().map(|j| self.view(inner, &j.id, now_ms)).collect();
+        let total = s.spec.frames.len();
+        let progress = views.iter().map(|v| v.progress).sum::<f64>() / total.max(1) as f64;
+        let count = |state: JobState| views.iter().filter(|v| v.state == state).count();
+        let (done, failed) = (count(JobState::Done), count(JobState::Failed));
+        let state = inner.model.sequence_state(id).unwrap_or(JobState::Queued);
+        let elapsed_s = now_ms.saturating_sub(s.created_ms) as f64 / 1000.0;
+        let first = views.first();
+        JobView {
+            id: id.to_string(),
+            name: s.spec.name.clone(),
+            state,
+            phase: format!("frames: {done} of {total} done, {failed} failed"),
+            progress,
+            tiles_done: views.iter().map(|v| v.tiles_done).sum(),
+            tiles_total: views.iter().map(|v| v.tiles_total).sum(),
+            samples_done: views.iter().map(|v| v.samples_done).sum(),
+            eta_s: (!state.is_terminal() && progress > 0.0).then(|| elapsed_s * (1.0 - progress) / progress),
+            error: views.iter().find_map(|v| v.error.clone()),
+            priority: s.spec.priority,
+            settings: first.map_or_else(|| s.spec.settings.clone(), |v| v.settings.clone()),
+            width: first.map_or(0, |v| v.width),
+            height: first.map_or(0, |v| v.height),
+            created_ms: s.created_ms,
+            scene_digest: s.spec.bundle_digest.clone(),
+            strategy: None,
+            frames_total: total as u64,
+            frames: views
+                .into_iter()
+                .zip(&s.spec.frames)
+                .map(|(v, &number)| FrameView {
+                    number,
+                    job_id: v.id,
+                    state: v.state,
+                    progress: v.progress,
+                    eta_s: v.eta_s,
+                    error: v.error,
+                })
+                .collect(),
+        }
+    }
+}
+
+fn check_frames(f: &FramesRequest) -> Result<(), ServiceError> {
+    let invalid = |m: String| Err(ServiceError::InvalidArgument(m));
+    if f.frames.is_empty() {
+        return invalid("field \"frames\" names no frame".into());
+    }
+    if f.frames.len() > tessera_link::frames::MAX_FRAMES {
+        return invalid(format!("field \"frames\" names more than {} frames", tessera_link::frames::MAX_FRAMES));
+    }
+    let good = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    if f.param.is_empty() || f.param.len() > 64 || !f.param.chars().all(good) {
+        return invalid(format!("field \"frame_param\" \"{}\" must be 1 to 64 letters, digits or '_'", f.param));
+    }
+    Ok(())
+}

@@ -1,0 +1,170 @@
+//! Jobs of many frames on a real farm: a camera move (the frame number rotates the camera) on
+//! three workers equals the local render of each frame bit for bit, with the seed fixed or
+//! varying per frame; one scene file per frame; a frame whose scene does not load fails alone,
+//! and a cancelled frame is retried alone.
+
+use super::*;
+use std::path::PathBuf;
+
+/// cornell-box with the camera turned by `$frame` degrees about the vertical axis.
+fn camera_move(dir: &Path) -> PathBuf {
+    let xml = std::fs::read_to_string(scene("cornell-box")).unwrap();
+    let lookat = r#"<lookat origin="0, 0, 3.9" target="0, 0, 0" up="0, 1, 0"/>"#;
+    assert!(xml.contains(lookat));
+    let xml = xml.replacen(lookat, &format!(r#"{lookat}<rotate y="1" angle="$frame"/>"#), 1);
+    let xml =
+        xml.replacen(r#"<scene version="3.0.0">"#, r#"<scene version="3.0.0"><default name="frame" value="0"/>"#, 1);
+    let path = dir.join("move.xml");
+    std::fs::write(&path, xml).unwrap();
+    path
+}
+
+fn local_frame(dir: &Path, scene: &Path, frame: u32, seed: u64) -> PathBuf {
+    let define = format!("frame={frame}");
+    let out = dir.join(format!("local-{frame}-{seed}.exr"));
+    let (ok, _, err) = tessera(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--integrator",
+        "pt",
+        "--spp",
+        "2",
+        "--seed",
+        &seed.to_string(),
+        "-D",
+        &define,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    out
+}
+
+/// 12 frames of a camera move on three workers, each equal to `tessera render -D frame=N`.
+#[test]
+fn a_camera_move_on_three_workers_equals_twelve_local_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _workers) = farm(dir.path(), 3);
+    let scene = camera_move(dir.path());
+    let out = dir.path().join("out/move.####.exr");
+    let (ok, _, err) = tessera(&[
+        "submit",
+        scene.to_str().unwrap(),
+        "--server",
+        &c.url,
+        "--integrator",
+        "pt",
+        "--spp",
+        "2",
+        "--seed",
+        "5",
+        "--frames",
+        "1-12",
+        "--wait",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    for n in 1..=12 {
+        let farm = dir.path().join(format!("out/move.{n:04}.exr"));
+        assert_same_image(&farm, &local_frame(dir.path(), &scene, n, 5));
+        assert!(farm.with_extension("png").exists());
+    }
+    let (_, jobs) = rest::get_json(&format!("{}/api/v1/jobs", c.url), None);
+    let job = &jobs.as_array().unwrap()[0];
+    assert_eq!((job["state"].as_str(), job["frames_total"].as_u64()), (Some("done"), Some(12)), "{job}");
+    assert_eq!(jobs.as_array().unwrap().len(), 1, "one job, its frames inside it");
+}
+
+/// One file per frame and a seed per frame: frame N equals the local render of its own file
+/// with seed S + N. A frame whose scene does not load on the coordinator fails alone; a frame
+/// cancelled alone is requeued alone and finishes.
+#[test]
+fn per_frame_files_seed_per_frame_and_frames_that_fail_or_are_retried_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _workers) = farm(dir.path(), 2);
+    let base = std::fs::read_to_string(camera_move(dir.path())).unwrap();
+    for n in 1..=4 {
+        let mut xml = base.replace("$frame", &(n * 10).to_string());
+        if n == 3 {
+            // over the coordinator's film limit: this frame's scene is refused, the file packs
+            xml = xml
+                .replace(r#"name="width" value="256""#, r#"name="width" value="20000""#)
+                .replace(r#"name="height" value="256""#, r#"name="height" value="20000""#);
+        }
+        std::fs::write(dir.path().join(format!("shot.{n:02}.xml")), xml).unwrap();
+    }
+    let pattern = dir.path().join("shot.##.xml");
+    let (ok, id, err) = tessera(&[
+        "submit",
+        pattern.to_str().unwrap(),
+        "--server",
+        &c.url,
+        "--integrator",
+        "pt",
+        "--spp",
+        "2",
+        "--seed",
+        "7",
+        "--frames",
+        "1-4",
+        "--seed-per-frame",
+    ]);
+    assert!(ok, "{err}");
+    let id = id.trim().to_string();
+    let job = wait_for(TIMEOUT, "the frames to end", || {
+        let (_, job) = rest::get_json(&job_url(&c, &id), None);
+        ["done", "failed"].contains(&job["state"].as_str()?).then_some(job)
+    });
+    assert_eq!(job["state"], "failed", "{job}");
+    let frames = job["frames"].as_array().unwrap();
+    let states: Vec<_> = frames.iter().map(|f| f["state"].as_str().unwrap()).collect();
+    assert_eq!(states, ["done", "done", "failed", "done"], "{job}");
+    assert!(frames[2]["error"].as_str().unwrap().contains("limit"), "{job}");
+    for (i, n) in [(0, 1u32), (1, 2), (3, 4)] {
+        let frame_id = frames[i]["job_id"].as_str().unwrap();
+        let farm = dir.path().join(format!("farm-{n}.exr"));
+        let (status, bytes) = rest::get(&format!("{}/result.exr", job_url(&c, frame_id)), None);
+        assert_eq!(status, 200);
+        std::fs::write(&farm, bytes).unwrap();
+        let own = dir.path().join(format!("shot.{n:02}.xml"));
+        assert_same_image(&farm, &local_render(dir.path(), &own, "pt", 2, 7 + u64::from(n)));
+    }
+    // the refused frame cannot be mended by a requeue; a cancelled one is retried alone
+    let refused = frames[2]["job_id"].as_str().unwrap();
+    let (status, _) = rest::post(&format!("{}/requeue", job_url(&c, refused)), None);
+    assert_eq!(status, 409);
+    let (ok, again, err) = tessera(&[
+        "submit",
+        pattern.to_str().unwrap(),
+        "--server",
+        &c.url,
+        "--integrator",
+        "pt",
+        "--spp",
+        "256",
+        "--seed",
+        "7",
+        "--frames",
+        "1-2",
+    ]);
+    assert!(ok, "{err}");
+    let again = again.trim();
+    let first = wait_for(TIMEOUT, "the first frame", || {
+        let (_, job) = rest::get_json(&job_url(&c, again), None);
+        job["frames"][0]["job_id"].as_str().map(str::to_string)
+    });
+    control_cancel_and_requeue(&c, &first);
+    let done = wait_for(TIMEOUT, "the requeued frame's job", || {
+        let (_, job) = rest::get_json(&job_url(&c, again), None);
+        (job["state"] == "done").then_some(job)
+    });
+    assert_eq!(done["frames"][0]["state"], "done", "{done}");
+}
+
+fn control_cancel_and_requeue(c: &Coordinator, frame: &str) {
+    let (status, _) = rest::post(&format!("{}/cancel", job_url(c, frame)), None);
+    assert_eq!(status, 200);
+    let (status, body) = rest::post(&format!("{}/requeue", job_url(c, frame)), None);
+    assert_eq!(status, 200, "{body}");
+}
