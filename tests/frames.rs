@@ -19,6 +19,16 @@ fn camera_move(dir: &Path) -> PathBuf {
     path
 }
 
+/// `tessera submit SCENE` of `pt` at (spp, seed) with `more` flags; its output (the job id).
+fn submit(c: &Coordinator, scene: &str, (spp, seed): (u32, u64), more: &[&str]) -> String {
+    let (spp, seed) = (spp.to_string(), seed.to_string());
+    let mut args = vec!["submit", scene, "--server", &c.url, "--integrator", "pt", "--spp", &spp, "--seed", &seed];
+    args.extend(more);
+    let (ok, out, err) = tessera(&args);
+    assert!(ok, "{err}");
+    out
+}
+
 fn local_frame(dir: &Path, scene: &Path, frame: u32, seed: u64) -> PathBuf {
     let define = format!("frame={frame}");
     let out = dir.join(format!("local-{frame}-{seed}.exr"));
@@ -47,24 +57,7 @@ fn a_camera_move_on_three_workers_equals_twelve_local_renders() {
     let (c, _workers) = farm(dir.path(), 3);
     let scene = camera_move(dir.path());
     let out = dir.path().join("out/move.####.exr");
-    let (ok, _, err) = tessera(&[
-        "submit",
-        scene.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--integrator",
-        "pt",
-        "--spp",
-        "2",
-        "--seed",
-        "5",
-        "--frames",
-        "1-12",
-        "--wait",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    submit(&c, scene.to_str().unwrap(), (2, 5), &["--frames", "1-12", "--wait", "-o", out.to_str().unwrap()]);
     for n in 1..=12 {
         let farm = dir.path().join(format!("out/move.{n:04}.exr"));
         assert_same_image(&farm, &local_frame(dir.path(), &scene, n, 5));
@@ -95,22 +88,7 @@ fn per_frame_files_seed_per_frame_and_frames_that_fail_or_are_retried_alone() {
         std::fs::write(dir.path().join(format!("shot.{n:02}.xml")), xml).unwrap();
     }
     let pattern = dir.path().join("shot.##.xml");
-    let (ok, id, err) = tessera(&[
-        "submit",
-        pattern.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--integrator",
-        "pt",
-        "--spp",
-        "2",
-        "--seed",
-        "7",
-        "--frames",
-        "1-4",
-        "--seed-per-frame",
-    ]);
-    assert!(ok, "{err}");
+    let id = submit(&c, pattern.to_str().unwrap(), (2, 7), &["--frames", "1-4", "--seed-per-frame"]);
     let id = id.trim().to_string();
     let job = wait_for(TIMEOUT, "the frames to end", || {
         let (_, job) = rest::get_json(&job_url(&c, &id), None);
@@ -134,21 +112,7 @@ fn per_frame_files_seed_per_frame_and_frames_that_fail_or_are_retried_alone() {
     let refused = frames[2]["job_id"].as_str().unwrap();
     let (status, _) = rest::post(&format!("{}/requeue", job_url(&c, refused)), None);
     assert_eq!(status, 409);
-    let (ok, again, err) = tessera(&[
-        "submit",
-        pattern.to_str().unwrap(),
-        "--server",
-        &c.url,
-        "--integrator",
-        "pt",
-        "--spp",
-        "256",
-        "--seed",
-        "7",
-        "--frames",
-        "1-2",
-    ]);
-    assert!(ok, "{err}");
+    let again = submit(&c, pattern.to_str().unwrap(), (256, 7), &["--frames", "1-2"]);
     let again = again.trim();
     let first = wait_for(TIMEOUT, "the first frame", || {
         let (_, job) = rest::get_json(&job_url(&c, again), None);
