@@ -117,7 +117,6 @@ impl From<ServiceError> for ApiError {
                 | TransitionError::NotOptimizing(_)
                 | TransitionError::NotFinishing(_)
                 | TransitionError::NotRequeueable { .. }
-                | TransitionError::OfFrames(_)
                 | TransitionError::SceneRefused(_)
                 | TransitionError::Ended { .. },
             ) => ErrorCode::FailedPrecondition,

@@ -59,6 +59,24 @@ fn frames_are_planned_lazily_in_order_with_their_parameter_and_seed() {
     assert_eq!(m.sequence_state("s"), Some(JobState::Final));
 }
 
+/// Pausing a job of frames pauses its frames, those planned meanwhile too; resuming resumes
+/// them all.
+#[test]
+fn pausing_a_job_of_frames_pauses_its_frames_planned_and_to_come() {
+    let mut m = JobsModel::default();
+    m.apply(Event::SubmitSequence { id: "s", spec: Box::new(sequence((1..=20).collect(), false)) }, 0).unwrap();
+    plan(&mut m);
+    m.pause("s", 1).unwrap();
+    assert!(m.lease("w", 4, 2, TTL).0.is_empty());
+    m.cancel(&SequenceSpec::frame_id("s", 0), 3).unwrap();
+    plan(&mut m);
+    let last = &m.jobs[&SequenceSpec::frame_id("s", FRAMES_IN_FLIGHT)];
+    assert_eq!(last.shown_state(), JobState::Paused, "planned while paused");
+    m.resume("s", 4).unwrap();
+    assert!(m.frames_of("s").iter().filter(|j| !j.state.is_terminal()).all(|j| j.paused_ms.is_none()));
+    assert_eq!(m.lease("w", 1, 5, TTL).0.len(), 1);
+}
+
 /// A frame whose scene did not load fails alone and cannot be requeued; cancelling the
 /// sequence plans no more and ends it; a done sequence is done.
 #[test]

@@ -139,7 +139,7 @@ CREATE TABLE IF NOT EXISTS tiles (
     PRIMARY KEY (job_id, idx));
 CREATE TABLE IF NOT EXISTS sequences (
     id TEXT PRIMARY KEY, seq INTEGER NOT NULL, spec TEXT NOT NULL, created_ms INTEGER NOT NULL,
-    cancelled INTEGER NOT NULL DEFAULT 0);
+    cancelled INTEGER NOT NULL DEFAULT 0, paused_ms INTEGER);
 CREATE TABLE IF NOT EXISTS results (
     job_id TEXT NOT NULL, idx INTEGER NOT NULL, epoch INTEGER NOT NULL, non_finite INTEGER NOT NULL,
     payload BLOB NOT NULL, PRIMARY KEY (job_id, idx, epoch));
@@ -149,6 +149,9 @@ CREATE TABLE IF NOT EXISTS workers (
     mode TEXT);
 ";
 
+/// A sequence's row: id, seq, spec JSON, created, cancelled, paused since.
+type SequenceRow = (String, i64, String, i64, bool, Option<i64>);
+
 /// The rows of one transition, taken from the model under the service's lock and written
 /// later, possibly together with other batches (see `storage::commit`).
 #[derive(Clone, Debug, Default)]
@@ -157,7 +160,7 @@ pub struct Batch {
     tiles: Vec<TileRow>,
     extras: Vec<Extra>,
     /// Sequences (jobs of many frames) whose row changed.
-    sequences: Vec<(String, i64, String, i64, bool)>,
+    sequences: Vec<SequenceRow>,
     /// Jobs whose rows go, after the rest of the batch.
     deletes: Vec<String>,
 }
@@ -196,7 +199,15 @@ impl Batch {
         let mut batch = Batch { extras: extras.to_vec(), ..Batch::default() };
         for (id, tiles) in changes {
             if let Some(s) = model.sequences.get(id) {
-                batch.sequences.push((s.id.clone(), s.seq as i64, json(&s.spec), s.created_ms as i64, s.cancelled));
+                let paused_ms = s.paused_ms.map(|t| t as i64);
+                batch.sequences.push((
+                    s.id.clone(),
+                    s.seq as i64,
+                    json(&s.spec),
+                    s.created_ms as i64,
+                    s.cancelled,
+                    paused_ms,
+                ));
             }
             let Some(job) = model.jobs.get(id) else { continue };
             batch.jobs.push(JobRow {
@@ -375,11 +386,12 @@ impl Store {
             for extra in &batch.extras {
                 write_extra(&tx, extra)?;
             }
-            for (id, seq, spec, created_ms, cancelled) in &batch.sequences {
+            for (id, seq, spec, created_ms, cancelled, paused_ms) in &batch.sequences {
                 tx.prepare_cached(
-                    "INSERT OR REPLACE INTO sequences (id, seq, spec, created_ms, cancelled) VALUES (?1, ?2, ?3, ?4, ?5)",
+                    "INSERT OR REPLACE INTO sequences (id, seq, spec, created_ms, cancelled, paused_ms)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
                 )?
-                .execute(params![id, seq, spec, created_ms, cancelled])?;
+                .execute(params![id, seq, spec, created_ms, cancelled, paused_ms])?;
             }
             for job in &batch.deletes {
                 for sql in [

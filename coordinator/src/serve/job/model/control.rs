@@ -36,9 +36,6 @@ impl Job {
 
 impl JobsModel {
     fn active(&mut self, job: &str) -> Result<&mut Job, TransitionError> {
-        if self.sequences.contains_key(job) {
-            return Err(TransitionError::OfFrames(job.to_string()));
-        }
         let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if j.state.is_terminal() {
             return Err(TransitionError::Ended { job: job.to_string(), state: j.state.as_str() });
@@ -48,6 +45,9 @@ impl JobsModel {
 
     /// Pauses a job (again: nothing changes).
     pub(super) fn pause(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        if self.sequences.contains_key(job) {
+            return self.pause_sequence(job, Some(now_ms), now_ms);
+        }
         let j = self.active(job)?;
         let mut changes = Changes::new();
         if j.paused_ms.is_none() {
@@ -59,6 +59,9 @@ impl JobsModel {
 
     /// Resumes a paused job (one that is not paused: nothing changes).
     pub(super) fn resume_paused(&mut self, job: &str, now_ms: u64) -> Result<Changes, TransitionError> {
+        if self.sequences.contains_key(job) {
+            return self.pause_sequence(job, None, now_ms);
+        }
         let j = self.active(job)?;
         let mut changes = Changes::new();
         if let Some(since) = j.paused_ms.take() {

@@ -27,9 +27,6 @@ pub enum TransitionError {
     /// A frame whose scene did not load: the same bundle cannot load it again.
     #[error("frame job {0} failed because its scene did not load: submit the frames again with the scene fixed")]
     SceneRefused(String),
-    /// Not (yet) done to a job of frames as a whole.
-    #[error("job {0} is a job of frames: pause or resume its frames one by one")]
-    OfFrames(String),
     /// A frame planned out of turn, or of a cancelled sequence.
     #[error("sequence {sequence} is not planning frame {index}")]
     NotPlanning {

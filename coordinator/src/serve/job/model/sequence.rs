@@ -97,6 +97,8 @@ pub struct Sequence {
     pub planned: usize,
     /// Cancelled by a client: no more frames are planned.
     pub cancelled: bool,
+    /// Paused by a client since then: its frames are paused, those planned meanwhile too.
+    pub paused_ms: Option<u64>,
 }
 
 impl Sequence {
@@ -123,7 +125,15 @@ impl JobsModel {
             return Err(TransitionError::DuplicateJob(id.to_string()));
         }
         let seq = self.next_seq();
-        let sequence = Sequence { id: id.to_string(), seq, spec, created_ms: now_ms, planned: 0, cancelled: false };
+        let sequence = Sequence {
+            id: id.to_string(),
+            seq,
+            spec,
+            created_ms: now_ms,
+            planned: 0,
+            cancelled: false,
+            paused_ms: None,
+        };
         self.sequences.insert(id.to_string(), sequence);
         let mut changes = Changes::new();
         touch(&mut changes, id, None);
@@ -158,13 +168,14 @@ impl JobsModel {
             return Err(TransitionError::NotPlanning { sequence: sequence.to_string(), index });
         }
         let id = SequenceSpec::frame_id(sequence, index);
-        let seq = s.seq;
+        let (seq, s_paused) = (s.seq, s.paused_ms);
         let number = s.spec.frames[index];
         let frame = FrameRef { sequence: sequence.to_string(), index, number, refused: error.is_some() };
         let spec = JobSpec { frame: Some(frame), ..spec };
         let mut changes = self.submit(&id, spec, now_ms)?;
         let job = self.jobs.get_mut(&id).expect("invariant: just submitted");
         job.seq = seq;
+        job.paused_ms = s_paused;
         if let Some(error) = error {
             changes.extend(self.fail(&id, error, now_ms));
         }
@@ -232,6 +243,32 @@ impl JobsModel {
         if s.cancelled {
             s.cancelled = false;
             touch(&mut changes, id, None);
+        }
+        Ok(changes)
+    }
+
+    /// Pauses (`Some(now)`) or resumes (`None`) a sequence: its frames that have not ended,
+    /// and those it plans meanwhile.
+    pub(super) fn pause_sequence(
+        &mut self,
+        id: &str,
+        paused: Option<u64>,
+        now_ms: u64,
+    ) -> Result<Changes, TransitionError> {
+        let s = self.sequences.get_mut(id).ok_or_else(|| TransitionError::UnknownJob(id.to_string()))?;
+        let mut changes = Changes::new();
+        if s.paused_ms.is_some() != paused.is_some() {
+            s.paused_ms = paused;
+            touch(&mut changes, id, None);
+        }
+        let frames: Vec<String> = s.frame_ids().collect();
+        for f in &frames {
+            if self.jobs.get(f).is_some_and(|j| !j.state.is_terminal()) {
+                changes.extend(match paused {
+                    Some(_) => self.pause(f, now_ms)?,
+                    None => self.resume_paused(f, now_ms)?,
+                });
+            }
         }
         Ok(changes)
     }

@@ -123,7 +123,10 @@ impl JobService {
         let progress = views.iter().map(|v| v.progress).sum::<f64>() / total.max(1) as f64;
         let count = |state: JobState| views.iter().filter(|v| v.state == state).count();
         let (done, failed) = (count(JobState::Done), count(JobState::Failed));
-        let state = inner.model.sequence_state(id).unwrap_or(JobState::Queued);
+        let state = match inner.model.sequence_state(id).unwrap_or(JobState::Queued) {
+            s_state if s.paused_ms.is_some() && !s_state.is_terminal() => JobState::Paused,
+            s_state => s_state,
+        };
         let elapsed_s = now_ms.saturating_sub(s.created_ms) as f64 / 1000.0;
         let first = views.first();
         JobView {

@@ -157,14 +157,16 @@ impl Store {
     /// counts the frames loaded as jobs. A row that does not decode is skipped and logged (its
     /// frames still load as jobs).
     pub fn load_sequences(&self) -> Result<Vec<Sequence>, StoreError> {
-        let mut stmt = self.conn.prepare("SELECT id, seq, spec, created_ms, cancelled FROM sequences ORDER BY seq")?;
+        let mut stmt =
+            self.conn.prepare("SELECT id, seq, spec, created_ms, cancelled, paused_ms FROM sequences ORDER BY seq")?;
         let rows = stmt.query_map([], |r| {
-            let row: (String, i64, String, i64, bool) = (r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?);
+            let row: (String, i64, String, i64, bool, Option<i64>) =
+                (r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?);
             Ok(row)
         })?;
         let mut out = Vec::new();
         for row in rows {
-            let (id, seq, spec, created_ms, cancelled) = row?;
+            let (id, seq, spec, created_ms, cancelled, paused_ms) = row?;
             match serde_json::from_str(&spec) {
                 Ok(spec) => out.push(Sequence {
                     id,
@@ -173,6 +175,7 @@ impl Store {
                     created_ms: created_ms as u64,
                     planned: 0,
                     cancelled,
+                    paused_ms: paused_ms.map(|t| t as u64),
                 }),
                 Err(e) => tracing::error!(sequence = %id, error = %e, "cannot load a sequence's row"),
             }
