@@ -67,6 +67,22 @@ fn a_camera_move_on_three_workers_equals_twelve_local_renders() {
     let job = &jobs.as_array().unwrap()[0];
     assert_eq!((job["state"].as_str(), job["frames_total"].as_u64()), (Some("done"), Some(12)), "{job}");
     assert_eq!(jobs.as_array().unwrap().len(), 1, "one job, its frames inside it");
+    // all of them as one archive: the same files
+    let (status, tar) = rest::get(&format!("{}/frames.tar", job_url(&c, job["id"].as_str().unwrap())), None);
+    assert_eq!(status, 200);
+    let mut archive = tar::Archive::new(tar.as_slice());
+    let mut names = Vec::new();
+    for entry in archive.entries().unwrap() {
+        let mut entry = entry.unwrap();
+        let name = entry.path().unwrap().display().to_string();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+        let farm = std::fs::read(dir.path().join("out").join(&name)).unwrap();
+        assert!(bytes == farm, "{name} differs from the one downloaded alone");
+        names.push(name);
+    }
+    assert_eq!(names.len(), 24);
+    assert_eq!((names[0].as_str(), names[23].as_str()), ("move.0001.exr", "move.0012.png"));
 }
 
 /// One file per frame and a seed per frame: frame N equals the local render of its own file

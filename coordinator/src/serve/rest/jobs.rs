@@ -230,6 +230,45 @@ async fn output(st: Arc<AppState>, id: String, kind: OutputKind) -> Result<impl 
     Ok(([(header::CONTENT_TYPE, kind.mime())], bytes))
 }
 
+/// `GET /api/v1/jobs/{id}/frames.tar`: a job of frames' done frames, each `NAME.NNNN.exr` and
+/// `.png`, as one tar streamed as it is written.
+pub async fn frames_tar(State(st): St, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let svc = st.svc.clone();
+    let files = blocking(move || svc.frame_files(&id)).await?;
+    let (tx, rx) = tokio::sync::mpsc::channel::<std::io::Result<axum::body::Bytes>>(8);
+    tokio::task::spawn_blocking(move || {
+        let mut tar = tar::Builder::new(ChannelWriter(tx.clone()));
+        let written = files.into_iter().try_for_each(|(name, mut file)| {
+            let mut header = tar::Header::new_gnu();
+            header.set_size(file.metadata()?.len());
+            header.set_mode(0o644);
+            header.set_cksum();
+            tar.append_data(&mut header, name, &mut file)
+        });
+        // a failure midway ends the body with an error, so the client sees a broken download
+        if let Err(e) = written.and_then(|()| tar.finish()) {
+            let _ = tx.blocking_send(Err(e));
+        }
+    });
+    let body = axum::body::Body::from_stream(tokio_stream::wrappers::ReceiverStream::new(rx));
+    Ok(([(header::CONTENT_TYPE, "application/x-tar")], body).into_response())
+}
+
+/// Sends what a blocking writer writes to an async body, a chunk at a time.
+struct ChannelWriter(tokio::sync::mpsc::Sender<std::io::Result<axum::body::Bytes>>);
+
+impl std::io::Write for ChannelWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let chunk = axum::body::Bytes::copy_from_slice(buf);
+        self.0.blocking_send(Ok(chunk)).map_err(|_| std::io::Error::other("the client went away"))?;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
 /// `GET /api/v1/jobs/{id}/result.exr`.
 pub async fn result_exr(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
     output(st, id, OutputKind::Exr).await

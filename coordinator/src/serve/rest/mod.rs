@@ -10,6 +10,7 @@
 //! | `PATCH /api/v1/jobs/{id}` | `{"priority": N}`: a new priority (higher runs first) |
 //! | `DELETE /api/v1/jobs/{id}` | delete an ended job and all its data (204; 409 while it is active) |
 //! | `GET /api/v1/jobs/{id}/result.exr`, `/preview.png` | outputs of a done job (409 before) |
+//! | `GET /api/v1/jobs/{id}/frames.tar` | a job of frames' done frames, `NAME.NNNN.exr` and `.png` each, as one tar |
 //! | `GET /api/v1/jobs/{id}/strategy.png`, `/emis.json` | a done EMIS job's strategy picture and report (404 for other integrators) |
 //! | `GET /api/v1/workers` | registered workers: state (idle, busy, disabled, draining, offline), tags, leases |
 //! | `POST /api/v1/workers/{id}/disable`, `/enable`, `/drain` | no new tiles; tiles again; no new tiles and stop when idle |
@@ -37,6 +38,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/v1/jobs/{id}/resume", post(jobs::resume))
         .route("/api/v1/jobs/{id}/requeue", post(jobs::requeue))
         .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
+        .route("/api/v1/jobs/{id}/frames.tar", get(jobs::frames_tar))
         .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
         .route("/api/v1/jobs/{id}/strategy.png", get(jobs::strategy_png))
         .route("/api/v1/jobs/{id}/emis.json", get(jobs::emis_json))

@@ -114,6 +114,31 @@ impl JobService {
         Ok(())
     }
 
+    /// The outputs of a job of frames' done frames, for one archive: each frame's EXR and PNG
+    /// under `NAME.NNNN.exr` and `.png`, open.
+    pub fn frame_files(&self, id: &str) -> Result<Vec<(String, std::fs::File)>, ServiceError> {
+        let inner = self.lock();
+        let id = &Self::resolve(&inner, id)?;
+        let s = inner.model.sequences.get(id).ok_or_else(|| {
+            ServiceError::FailedPrecondition(format!(
+                "job {id} is not a job of frames: its outputs are result.exr and preview.png"
+            ))
+        })?;
+        let plain = !s.spec.name.is_empty() && !s.spec.name.contains(['/', '\\']) && !s.spec.name.starts_with('.');
+        let name = if plain { s.spec.name.clone() } else { id.clone() };
+        let mut files = Vec::new();
+        for job in inner.model.frames_of(id).into_iter().filter(|j| j.state == JobState::Done) {
+            let number = job.spec.frame.as_ref().map_or(0, |f| f.number);
+            let stored = inner.jobs.get(&job.id).map(|r| r.files.clone()).unwrap_or_default();
+            for (digest, ext) in [(stored.result_exr, "exr"), (stored.preview_png, "png")] {
+                let missing = || ServiceError::NotFound(format!("frame {number} of job {id} has no stored {ext}"));
+                let file = self.blobs.open_blob(&digest.ok_or_else(missing)?)?.ok_or_else(missing)?;
+                files.push((format!("{name}.{number:04}.{ext}"), file));
+            }
+        }
+        Ok(files)
+    }
+
     /// The view of a sequence: its frames' work summed, a line per frame.
     pub(super) fn sequence_view(&self, inner: &Inner, id: &str, now_ms: u64) -> JobView {
         let s = &inner.model.sequences[id];
