@@ -10,6 +10,7 @@
 //! Frames of one sequence share its submission order and rank among themselves by frame, so
 //! workers take the earliest frames' tiles first and move on to the next frame while the last
 //! tiles of one are out: frames and tiles interleave.
+//! Why it is built so, with its measurements: docs/decisions/0071-frames-are-jobs-planned-lazily.md.
 
 use super::{Changes, Job, JobSpec, JobState, JobsModel, TransitionError, touch};
 use serde::{Deserialize, Serialize};
