@@ -7,11 +7,13 @@
 pub const MAX_FRAMES: usize = 100_000;
 
 /// The frames `spec` names, in the order given, each once: comma-separated items, each a
-/// number `N`, a range `A-B` or a stepped range `A-B:S` (B ≥ A, S ≥ 1).
+/// number `N`, a range `A-B` or a stepped range `A-B:S` (B ≥ A, S ≥ 1). At most
+/// [`MAX_FRAMES`] may be named in all, repeats counted.
 pub fn parse(spec: &str) -> Result<Vec<u32>, String> {
     let bad = |item: &str, why: &str| format!("frames \"{spec}\": \"{item}\" {why}");
     let mut frames = Vec::new();
     let mut seen = std::collections::HashSet::new();
+    let mut named = 0usize;
     for item in spec.split(',').map(str::trim) {
         let (range, step) = match item.split_once(':') {
             Some((r, s)) => (r, s.parse::<u32>().ok().filter(|&s| s > 0).ok_or_else(|| bad(item, "has a bad step"))?),
@@ -26,15 +28,15 @@ pub fn parse(spec: &str) -> Result<Vec<u32>, String> {
         if b < a {
             return Err(bad(item, "ends before it starts"));
         }
-        if ((b - a) / step) as usize >= MAX_FRAMES {
+        // counted with repeats, so that a hostile list of one long range over and over costs no
+        // more than MAX_FRAMES steps
+        named += ((b - a) / step) as usize + 1;
+        if named > MAX_FRAMES {
             return Err(format!("frames \"{spec}\": more than {MAX_FRAMES} frames"));
         }
         for n in (a..=b).step_by(step as usize) {
             if seen.insert(n) {
                 frames.push(n);
-            }
-            if frames.len() > MAX_FRAMES {
-                return Err(format!("frames \"{spec}\": more than {MAX_FRAMES} frames"));
             }
         }
     }
@@ -77,6 +79,9 @@ mod tests {
         for bad in ["", "a", "5-1", "1-3:0", "1-", "-2", "0-4294967295"] {
             assert!(parse(bad).is_err(), "{bad}");
         }
+        // one long range named over and over is refused, not expanded again each time
+        let repeated = vec!["1-60000"; 2].join(",");
+        assert!(parse(&repeated).unwrap_err().contains("more than"));
     }
 
     #[test]

@@ -87,8 +87,8 @@ impl JobService {
             return Ok(());
         }
         for (sequence, indices) in due {
+            let Some(s) = self.lock().model.sequences.get(&sequence).map(|s| s.spec.clone()) else { continue };
             for index in indices {
-                let Some(s) = self.lock().model.sequences.get(&sequence).map(|s| s.spec.clone()) else { break };
                 let (spec, error) = match self.frame_spec(&s, index) {
                     Ok(spec) => (spec, None),
                     Err(e) => {

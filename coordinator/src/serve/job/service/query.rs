@@ -120,7 +120,9 @@ impl JobService {
         let mut jobs: Vec<_> = stills.chain(inner.model.sequences.values().map(|s| (s.seq, &s.id))).collect();
         jobs.sort_unstable_by_key(|&(seq, _)| std::cmp::Reverse(seq));
         let total = jobs.len();
-        let views = jobs.into_iter().skip(offset).take(limit).map(|(_, id)| self.view(&inner, id, now_ms)).collect();
+        // a list shows a job of frames by its summary: its frames' lines are in its own view
+        let summary = |id: &str| JobView { frames: Vec::new(), ..self.view(&inner, id, now_ms) };
+        let views = jobs.into_iter().skip(offset).take(limit).map(|(_, id)| summary(id)).collect();
         let ticket = inner.ticket;
         drop(inner);
         self.commits.wait(ticket)?;
