@@ -16,8 +16,10 @@
 //!   least useful connection closed: of the newcomer's peer at the per-peer limit, of the
 //!   peers holding the most at the global cap. Least useful is: no request in flight before one
 //!   with a request in flight (a long poll, a watch stream, an upload), then one that never
-//!   sent a byte before one that has (a TLS handshake under way, a client between requests),
-//!   then the least recently active (accepted, a request started or ended, bytes received).
+//!   sent a byte before one that has (a TLS handshake under way, a client between requests;
+//!   bytes waiting in the socket count, since the task that reads a real client's first bytes
+//!   may run late on a loaded machine), then the least recently active (accepted, a request
+//!   started or ended, bytes received).
 //!   A flood of idle sockets, even from the address real clients use (all of loopback is one
 //!   peer), thus only evicts itself: `/healthz` and real clients are served on fresh
 //!   connections and kept while they work. A TLS client is not yet in a request during its
@@ -45,8 +47,9 @@ use axum::serve::{IncomingStream, Listener};
 use std::collections::HashMap;
 use std::io;
 use std::net::{IpAddr, SocketAddr};
+use std::os::fd::AsRawFd;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
@@ -158,6 +161,8 @@ struct Conn {
     in_flight: AtomicU32,
     /// One more than the time of the last read that brought bytes; 0 if none has.
     heard_ms: AtomicU64,
+    /// The socket's descriptor (-1 until known), to see bytes that arrived before any read.
+    fd: AtomicI32,
     served: AtomicBool,
     /// Set (under the registry's lock) when the connection is to be closed.
     closing: AtomicBool,
@@ -176,11 +181,22 @@ impl Conn {
     }
 
     /// Lower goes first: idle before busy, silent before heard, then least recently active.
+    /// Bytes waiting in the socket count as heard: a real client's first bytes arrive as it
+    /// connects, but on a loaded machine the task that reads them may run late.
     fn rank(&self) -> (bool, bool, u64) {
         let heard = self.heard_ms.load(Ordering::Relaxed);
         let active = self.last_event_ms.load(Ordering::Relaxed).max(heard.saturating_sub(1));
-        (self.in_flight.load(Ordering::Relaxed) > 0, heard > 0, active)
+        let spoke = heard > 0 || bytes_waiting(self.fd.load(Ordering::Relaxed));
+        (self.in_flight.load(Ordering::Relaxed) > 0, spoke, active)
     }
+}
+
+/// Whether bytes wait to be read on socket `fd` (`FIONREAD`); false for -1 or on error. The
+/// caller holds the table's lock, under which a listed connection's socket stays open.
+fn bytes_waiting(fd: i32) -> bool {
+    let mut n: libc::c_int = 0;
+    // SAFETY: FIONREAD writes one int; `fd` is an open socket while its connection is listed
+    fd >= 0 && unsafe { libc::ioctl(fd, libc::FIONREAD, &mut n) } == 0 && n > 0
 }
 
 /// Why a connection was closed, for the log.
@@ -219,6 +235,7 @@ impl Table {
             last_event_ms: AtomicU64::new(now_ms),
             in_flight: AtomicU32::new(0),
             heard_ms: AtomicU64::new(0),
+            fd: AtomicI32::new(-1),
             served: AtomicBool::new(false),
             closing: AtomicBool::new(false),
             waker: AtomicWaker::new(),
@@ -390,7 +407,7 @@ async fn sweep(registry: Weak<Registry>) {
 impl<L> Listener for LimitedListener<L>
 where
     L: Listener<Addr = SocketAddr>,
-    L::Io: Unpin,
+    L::Io: Unpin + AsRawFd,
 {
     type Io = Tracked<L::Io>;
     type Addr = Peer;
@@ -401,6 +418,7 @@ where
         let (io, addr) = self.inner.accept().await;
         let now = self.registry.now_ms();
         let conn = self.registry.table().admit(&self.registry.limits, PeerKey::of(addr.ip()), self.registry.epoch, now);
+        conn.fd.store(io.as_raw_fd(), Ordering::Relaxed);
         let tracked = Tracked { inner: io, conn: conn.clone(), registry: self.registry.clone() };
         (tracked, Peer { addr, conn: Some(conn) })
     }

@@ -283,3 +283,26 @@ async fn wait_until(mut done: impl FnMut() -> bool) {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
 }
+
+/// A client whose first bytes wait unread in its socket (its task has not run yet) counts as
+/// heard: newer silent sockets of its peer go first.
+#[test]
+fn bytes_waiting_unread_count_as_heard() {
+    use std::io::Write;
+    use std::os::fd::AsRawFd;
+    let server = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let mut client = std::net::TcpStream::connect(server.local_addr().unwrap()).unwrap();
+    let (accepted, _) = server.accept().unwrap();
+    client.write_all(b"\x16\x03\x01").unwrap();
+    let (l, epoch) = (limits(100, 2), Instant::now());
+    let mut table = Table::default();
+    let real = table.admit(&l, peer(1), epoch, 0);
+    real.fd.store(accepted.as_raw_fd(), Ordering::Relaxed);
+    let start = Instant::now();
+    while !bytes_waiting(accepted.as_raw_fd()) && start.elapsed() < std::time::Duration::from_secs(5) {
+        std::thread::yield_now();
+    }
+    let silent = table.admit(&l, peer(1), epoch, 1);
+    let _newcomer = table.admit(&l, peer(1), epoch, 2);
+    assert!(closing(&silent) && !closing(&real), "the client with bytes waiting was closed first");
+}
