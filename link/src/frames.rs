@@ -80,7 +80,7 @@ mod tests {
             assert!(parse(bad).is_err(), "{bad}");
         }
         // one long range named over and over is refused, not expanded again each time
-        let repeated = vec!["1-60000"; 2].join(",");
+        let repeated = ["1-60000"; 2].join(",");
         assert!(parse(&repeated).unwrap_err().contains("more than"));
     }
 
