@@ -39,6 +39,11 @@
 //! its next read or write and wakes the task, hyper drops the connection, and the descriptor is
 //! freed when the wrapper is dropped.
 
+mod sys;
+
+use sys::bytes_waiting;
+pub use sys::{FdLimit, raise_fd_limit};
+
 use atomic_waker::AtomicWaker;
 use axum::extract::{ConnectInfo, Request};
 use axum::middleware::Next;
@@ -104,36 +109,6 @@ impl Limits {
     }
 }
 
-/// The soft descriptor limit before and after [`raise_fd_limit`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FdLimit {
-    /// The soft limit the process started with.
-    pub was: u64,
-    /// The soft limit now.
-    pub now: u64,
-}
-
-/// Raises the soft `RLIMIT_NOFILE` to the hard limit (2²⁰ when the hard limit is infinite,
-/// which Linux does not accept as a soft one).
-pub fn raise_fd_limit() -> io::Result<FdLimit> {
-    let mut limit = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
-    // SAFETY: getrlimit writes the struct it is given and nothing else
-    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) } != 0 {
-        return Err(io::Error::last_os_error());
-    }
-    let was = limit.rlim_cur;
-    let target = if limit.rlim_max == libc::RLIM_INFINITY { 1 << 20 } else { limit.rlim_max };
-    if target <= limit.rlim_cur {
-        return Ok(FdLimit { was, now: was });
-    }
-    let raised = libc::rlimit { rlim_cur: target, rlim_max: limit.rlim_max };
-    // SAFETY: setrlimit reads the struct it is given
-    if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &raised) } != 0 {
-        return Err(io::Error::last_os_error());
-    }
-    Ok(FdLimit { was, now: target })
-}
-
 /// Whom a limit is counted for: an IPv4 address, or the /64 of an IPv6 one (a host usually
 /// has a whole /64).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -181,22 +156,18 @@ impl Conn {
     }
 
     /// Lower goes first: idle before busy, silent before heard, then least recently active.
-    /// Bytes waiting in the socket count as heard: a real client's first bytes arrive as it
-    /// connects, but on a loaded machine the task that reads them may run late.
     fn rank(&self) -> (bool, bool, u64) {
         let heard = self.heard_ms.load(Ordering::Relaxed);
         let active = self.last_event_ms.load(Ordering::Relaxed).max(heard.saturating_sub(1));
-        let spoke = heard > 0 || bytes_waiting(self.fd.load(Ordering::Relaxed));
-        (self.in_flight.load(Ordering::Relaxed) > 0, spoke, active)
+        (self.in_flight.load(Ordering::Relaxed) > 0, heard > 0, active)
     }
-}
 
-/// Whether bytes wait to be read on socket `fd` (`FIONREAD`); false for -1 or on error. The
-/// caller holds the table's lock, under which a listed connection's socket stays open.
-fn bytes_waiting(fd: i32) -> bool {
-    let mut n: libc::c_int = 0;
-    // SAFETY: FIONREAD writes one int; `fd` is an open socket while its connection is listed
-    fd >= 0 && unsafe { libc::ioctl(fd, libc::FIONREAD, &mut n) } == 0 && n > 0
+    /// Whether a silent connection's bytes wait unread (its reading task runs late on a
+    /// loaded machine), noting it as heard if so.
+    fn spoke_unread(&self) -> bool {
+        let spoke = self.heard_ms.load(Ordering::Relaxed) == 0 && bytes_waiting(self.fd.load(Ordering::Relaxed));
+        spoke.then(|| self.heard()).is_some()
+    }
 }
 
 /// Why a connection was closed, for the log.
@@ -262,9 +233,16 @@ impl Table {
     }
 
     /// Of the connections `among` picks, the one to close first, never `except`.
+    /// Only the chosen one's socket is asked whether bytes wait (a system call per choice,
+    /// not per connection); one that has spoken is noted as heard and the choice made again.
     fn victim(&self, among: impl Fn(&Conn) -> bool, except: u64) -> Option<Arc<Conn>> {
-        let candidates = self.conns.values().filter(|c| c.id != except && among(c));
-        candidates.filter(|c| !c.closing.load(Ordering::Relaxed)).min_by_key(|c| c.rank()).cloned()
+        loop {
+            let candidates = self.conns.values().filter(|c| c.id != except && among(c));
+            let victim = candidates.filter(|c| !c.closing.load(Ordering::Relaxed)).min_by_key(|c| c.rank())?;
+            if !victim.spoke_unread() {
+                return Some(victim.clone());
+            }
+        }
     }
 
     fn close(&mut self, conn: &Conn, reason: Reason) {

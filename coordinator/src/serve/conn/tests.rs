@@ -305,4 +305,5 @@ fn bytes_waiting_unread_count_as_heard() {
     let silent = table.admit(&l, peer(1), epoch, 1);
     let _newcomer = table.admit(&l, peer(1), epoch, 2);
     assert!(closing(&silent) && !closing(&real), "the client with bytes waiting was closed first");
+    assert!(real.heard_ms.load(Ordering::Relaxed) > 0, "noted as heard once asked");
 }

@@ -97,14 +97,22 @@ impl JobsModel {
 
     /// Requeues a failed or cancelled job from its last checkpoint, which holds
     /// `tiles[..merged]`. It is not paused afterwards, whatever it was.
-    pub(super) fn requeue(&mut self, job: &str, merged: usize) -> Result<Changes, TransitionError> {
-        let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
+    /// Whether job `job` may be requeued: failed or cancelled, and not a frame whose scene
+    /// did not load (the same bundle cannot load it again).
+    pub fn requeueable(&self, job: &str) -> Result<(), TransitionError> {
+        let j = self.jobs.get(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
         if !matches!(j.state, JobState::Failed | JobState::Cancelled) {
             return Err(TransitionError::NotRequeueable { job: job.to_string(), state: j.shown_state().as_str() });
         }
         if j.spec.frame.as_ref().is_some_and(|f| f.refused) {
             return Err(TransitionError::SceneRefused(job.to_string()));
         }
+        Ok(())
+    }
+
+    pub(super) fn requeue(&mut self, job: &str, merged: usize) -> Result<Changes, TransitionError> {
+        self.requeueable(job)?;
+        let j = self.jobs.get_mut(job).expect("invariant: requeueable found it");
         let mut changes = Changes::new();
         let merged = merged.min(j.merged);
         for i in merged..j.tiles.len() {

@@ -2,8 +2,8 @@
 //! priority, and requeueing a failed or cancelled job (the model's `control.rs` says what
 //! each does to the job). Each answers with the job's view once the change is committed.
 
-use super::{Inner, JobService, ServiceError, restore_running};
-use crate::serve::job::model::{Event, JobState, TransitionError};
+use super::{JobService, ServiceError, restore_running};
+use crate::serve::job::model::Event;
 use crate::serve::job::view::JobView;
 
 impl JobService {
@@ -51,7 +51,8 @@ impl JobService {
             drop(inner);
             return self.requeue_frames(job, now_ms);
         }
-        check_requeueable(&inner, job)?;
+        // refused before the job's checkpoint is read
+        inner.model.requeueable(job).map_err(super::retention::refused)?;
         // the checkpoint the database names, with everything queued before it committed
         self.sync(&inner)?;
         let merged = self.commits.store().checkpointed(job)?.unwrap_or(0);
@@ -83,11 +84,8 @@ impl JobService {
             let mut inner = self.lock();
             let effects = inner.model.apply(Event::Requeue { job: id, merged: 0 }, now_ms)?;
             self.persist(&mut inner, &effects.changes, &[])?;
-            let ended = |j: &&crate::serve::job::model::Job| {
-                matches!(j.state, JobState::Failed | JobState::Cancelled)
-                    && !j.spec.frame.as_ref().is_some_and(|f| f.refused)
-            };
-            inner.model.frames_of(id).into_iter().filter(ended).map(|j| j.id.clone()).collect::<Vec<_>>()
+            let frames = inner.model.frames_of(id).into_iter().map(|j| j.id.clone());
+            frames.filter(|f| inner.model.requeueable(f).is_ok()).collect::<Vec<_>>()
         };
         for frame in &frames {
             self.requeue(frame, now_ms)?;
@@ -97,17 +95,5 @@ impl JobService {
         let inner = self.lock();
         self.sync(&inner)?;
         Ok(self.view(&inner, id, now_ms))
-    }
-}
-
-/// Refuses a requeue before the job's checkpoint is read.
-fn check_requeueable(inner: &Inner, job: &str) -> Result<(), ServiceError> {
-    let j = inner.model.jobs.get(job).ok_or_else(|| ServiceError::NotFound(format!("job {job} not found")))?;
-    if j.spec.frame.as_ref().is_some_and(|f| f.refused) {
-        return Err(TransitionError::SceneRefused(job.to_string()).into());
-    }
-    match j.state {
-        JobState::Failed | JobState::Cancelled => Ok(()),
-        _ => Err(TransitionError::NotRequeueable { job: job.to_string(), state: j.shown_state().as_str() }.into()),
     }
 }

@@ -128,7 +128,8 @@ impl JobService {
         let effects = inner.model.apply(Event::Lease { worker, max_tiles, ttl_ms }, now_ms)?;
         if let Some(l) = effects.leases().next() {
             // an EMIS job's state is made at its first lease (all leases are of one job)
-            inner.emis(&l.job.clone());
+            let job = l.job.clone();
+            inner.emis(&job);
         }
         self.persist(&mut inner, &effects.changes, &[])?;
         let state = &mut *inner;
