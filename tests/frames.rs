@@ -1,7 +1,8 @@
 //! Jobs of many frames on a real farm: a camera move (the frame number rotates the camera) on
 //! three workers equals the local render of each frame bit for bit, with the seed fixed or
 //! varying per frame; one scene file per frame; a frame whose scene does not load fails alone,
-//! and a cancelled frame is retried alone.
+//! and a cancelled frame is retried alone; EMIS frames that start from the frame before's
+//! decision equal the local warm chain.
 
 use super::*;
 use std::path::PathBuf;
@@ -147,4 +148,64 @@ fn control_cancel_and_requeue(c: &Coordinator, frame: &str) {
     assert_eq!(status, 200);
     let (status, body) = rest::post(&format!("{}/requeue", job_url(c, frame)), None);
     assert_eq!(status, 200, "{body}");
+}
+
+/// `--warm-start` on emis-vcm: caustic-glass with its camera turning. Frame 1 starts with path
+/// tracing and restarts into a bidirectional strategy; frames 2 and 3 start from the decision
+/// of the frame before, so nothing restarts. On three workers each frame equals the local
+/// chain `tessera render --frames 1-3 --warm-start` bit for bit (image, counts, decisions), and
+/// differs from its cold render.
+#[test]
+fn warm_started_emis_frames_equal_the_local_warm_chain() {
+    use tessera_common::film::exr::read_attribute;
+    let dir = tempfile::tempdir().unwrap();
+    let (c, _workers) = farm(dir.path(), 3);
+    let original = scene("caustic-glass");
+    std::fs::copy(original.with_file_name("gem.obj"), dir.path().join("gem.obj")).unwrap();
+    let xml = std::fs::read_to_string(&original).unwrap();
+    let lookat = r#"<lookat origin="0, 3.5, 8.5" target="0.4, 0.8, 0" up="0, 1, 0"/>"#;
+    assert!(xml.contains(lookat));
+    let xml = xml.replacen(lookat, &format!(r#"{lookat}<rotate y="1" angle="$frame"/>"#), 1).replacen(
+        r#"<scene version="3.0.0">"#,
+        r#"<scene version="3.0.0"><default name="frame" value="0"/>"#,
+        1,
+    );
+    let moving = dir.path().join("glass.xml");
+    std::fs::write(&moving, xml).unwrap();
+    let moving = moving.to_str().unwrap();
+    let emis = ["--integrator", "emis-vcm", "--spp", "6", "--seed", "4", "--emis-updates", "1,2,4,8"];
+    let farm_out = dir.path().join("farm/glass.####.exr");
+    let mut args = vec!["submit", moving, "--server", &c.url, "--frames", "1-3", "--warm-start", "--wait", "-o"];
+    args.push(farm_out.to_str().unwrap());
+    args.extend(emis);
+    let (ok, _, err) = tessera(&args);
+    assert!(ok, "{err}");
+    let render = |out: &str, more: &[&str]| {
+        let mut args = vec!["render", moving, "--threads", "2", "--frames", "1-3", "-o", out];
+        args.extend(emis.iter().chain(more));
+        let (ok, _, err) = tessera(&args);
+        assert!(ok, "{err}");
+    };
+    let (warm, cold) = (dir.path().join("warm/glass.####.exr"), dir.path().join("cold/glass.####.exr"));
+    render(warm.to_str().unwrap(), &["--warm-start"]);
+    render(cold.to_str().unwrap(), &[]);
+    let frame = |pattern: &Path, n: u32| pattern.with_file_name(format!("glass.{n:04}.exr"));
+    let kept_from = |path: &Path| read_attribute(path, "tessera/emis_kept_from").unwrap();
+    for n in 1..=3 {
+        let (farm, local) = (frame(&farm_out, n), frame(&warm, n));
+        assert_same_image(&farm, &local);
+        for key in ["tessera/emis_nu", "tessera/emis_connections", "tessera/emis_updates", "tessera/emis_kept_from"] {
+            assert_eq!(read_attribute(&farm, key).unwrap(), read_attribute(&local, key).unwrap(), "frame {n}: {key}");
+        }
+        let read = |p: &Path| tessera_common::film::exr::read_rgb(p).unwrap().pixels;
+        if n == 1 {
+            assert!(kept_from(&local).unwrap() > 0.0, "the first frame starts with path tracing and restarts");
+            assert_same_image(&local, &frame(&cold, n));
+        } else {
+            assert_eq!(kept_from(&local), Some(0.0), "frame {n} starts warm: nothing restarts");
+            let nu = read_attribute(&local, "tessera/emis_nu").unwrap().unwrap();
+            assert!(nu > 0.0, "frame {n} keeps a bidirectional strategy");
+            assert!(read(&local) != read(&frame(&cold, n)), "frame {n} warm differs from cold");
+        }
+    }
 }

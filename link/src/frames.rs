@@ -3,6 +3,8 @@
 //! the zero-padded frame number (the Blender and Flamenco convention: `shot.####.exr` is
 //! `shot.0007.exr` for frame 7).
 
+use tessera_common::settings::RenderSettings;
+
 /// The most frames one job may have.
 pub const MAX_FRAMES: usize = 100_000;
 
@@ -65,6 +67,34 @@ pub fn expand(pattern: &str, frame: u32) -> String {
         out.push_str(&format!("{frame:0width$}"));
     }
     out
+}
+
+/// How a job of frames makes frame N from its scene and settings.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameRule<'a> {
+    /// The scene's path; runs of `#` are the frame number (one file per frame).
+    pub scene: &'a str,
+    /// The scene parameter that carries the frame number (a scene of one file).
+    pub param: &'a str,
+    /// Frame N renders with the seed plus N.
+    pub seed_per_frame: bool,
+}
+
+impl FrameRule<'_> {
+    /// Frame `number`'s scene path and settings: its own file where the path has runs of `#`,
+    /// else the frame parameter set (a scene must use a parameter it is given); the seed moved
+    /// on by the frame number if asked. `tessera render --frames` and the farm both make their
+    /// frames so, which is why they render the same bits.
+    pub fn frame(&self, settings: &RenderSettings, number: u32) -> (String, RenderSettings) {
+        let mut settings = settings.clone();
+        if !is_pattern(self.scene) {
+            settings.defines.insert(self.param.to_string(), number.to_string());
+        }
+        if self.seed_per_frame {
+            settings.seed = Some(settings.seed.unwrap_or(0).wrapping_add(u64::from(number)));
+        }
+        (expand(self.scene, number), settings)
+    }
 }
 
 #[cfg(test)]

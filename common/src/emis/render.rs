@@ -105,6 +105,15 @@ pub enum PilotStart {
     PathTracing,
 }
 
+impl PilotStart {
+    /// Whether a render with this pilot warm-started from a strategy of `nu` light paths
+    /// starts from it: always but from path tracing under the path-tracing start, which
+    /// starts as that start does (its reduced set, which a path-tracing decision came from).
+    pub fn takes_warm(self, nu: f32) -> bool {
+        nu > 0.0 || self == PilotStart::Bidirectional
+    }
+}
+
 /// Which candidates moments are recorded for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CandidateSet {
@@ -151,6 +160,10 @@ pub struct EmisConfig {
     /// candidate's or lower by more than this / √(recorded iterations) of it (0: always the
     /// lowest score).
     pub incumbent_margin: f64,
+    /// Start from this strategy instead of the pilot's, deciding from the full set at once:
+    /// frame N+1 of a camera move starting from frame N's decision (`--warm-start`). A
+    /// path-tracing decision under [`PilotStart::PathTracing`] starts as that pilot does.
+    pub warm_start: Option<Strategy>,
 }
 
 impl EmisConfig {
@@ -186,6 +199,19 @@ impl EmisConfig {
             connection_scope: ConnectionScope::default(),
             settle_margin: Self::SETTLE_MARGIN,
             incumbent_margin: Self::INCUMBENT_MARGIN,
+            warm_start: None,
+        }
+    }
+
+    /// The strategy a render starts with and the candidates its first updates choose from:
+    /// [`EmisConfig::warm_start`] with the full set, else the pilot's.
+    pub fn initial(&self) -> (Strategy, CandidateSet) {
+        match &self.warm_start {
+            Some(s) if self.pilot.takes_warm(s.nu) => (s.clone(), CandidateSet::Full),
+            _ => match self.pilot {
+                PilotStart::Bidirectional => (Strategy::pilot(self.method), CandidateSet::Full),
+                PilotStart::PathTracing => (Strategy::path_tracing_start(self.method), CandidateSet::Reduced),
+            },
         }
     }
 
@@ -410,7 +436,7 @@ pub struct EmisOutput {
 
 /// The driver's shape of a local `emis-*` render of `scene` with `opts`.
 pub fn shape(scene: &Scene, config: &EmisConfig, opts: &RenderOptions) -> Shape {
-    let initial_nu = Strategy::initial(config.method, config.pilot).nu;
+    let initial_nu = config.initial().0.nu;
     let emis = Some(EmisSchedule { updates: config.updates.clone(), initial_nu });
     Shape { width: scene.camera.width, height: scene.camera.height, budget: opts.budget, tile: None, emis }
 }

@@ -2,7 +2,7 @@
 //! and at each update barrier denoises the image, runs the optimiser and switches the strategy.
 //! Pure and synchronous (the farm calls it between passes); reports every update.
 //!
-//! A path-tracing start ([`PilotStart::PathTracing`]) decides from the reduced candidate set
+//! A path-tracing start ([`super::PilotStart::PathTracing`]) decides from the reduced candidate set
 //! with global merging until a bidirectional candidate wins (when no later update could
 //! weigh the start, by more than the share of the render a restart discards). That update
 //! restarts: the caller starts a new image (the report says `restarted`), the moments and
@@ -20,7 +20,7 @@ use super::moments::MomentBuffer;
 use super::optimize::{Decision, ImageLevelScore, Incumbent, MergeScope, OptimizerInput, optimize};
 use super::schedule::RestartTotal;
 use super::start::{KeptStart, relative_mean_square, start_weight};
-use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, PilotStart, Strategy};
+use super::{CandidateSet, EmisConfig, EmisMethod, PilotData, Strategy};
 use crate::film::Film;
 use crate::integrator::path::connections::Connections;
 use crate::integrator::path::merge::MergeMask;
@@ -158,11 +158,7 @@ pub struct EmisState {
 impl EmisState {
     /// The state before the pilot.
     pub fn new(config: EmisConfig, width: u32, height: u32) -> Self {
-        let strategy = Strategy::initial(config.method, config.pilot);
-        let candidate_set = match config.pilot {
-            PilotStart::Bidirectional => CandidateSet::Full,
-            PilotStart::PathTracing => CandidateSet::Reduced,
-        };
+        let (strategy, candidate_set) = config.initial();
         let candidates = config.candidates_of(candidate_set);
         let collecting = !config.updates.is_empty();
         EmisState {

@@ -2,6 +2,7 @@
 //! restart.
 
 use super::*;
+use crate::emis::PilotStart;
 use crate::emis::cost::CostTerms;
 use crate::integrator::observer::WorkTimes;
 
@@ -246,4 +247,31 @@ fn the_bidirectional_pilot_never_restarts() {
     let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1, RestartTotal::Samples(64)).clone();
     assert!(!report.reduced && !report.restarted);
     assert_eq!((state.strategy.nu, state.kept_from, state.moments.iterations), (2.0, 0, 1));
+}
+
+/// A warm start begins with the strategy it was handed and decides from the full set (an
+/// update restarts nothing); a path-tracing decision under the path-tracing start starts as
+/// that start does, and under the method's own pilot is kept.
+#[test]
+fn a_warm_start_begins_with_the_strategy_it_was_handed() {
+    let decided = Strategy { nu: 0.5, connections: Connections::Fixed(2), merge: Some(MergeMask::Constant(0.25)) };
+    let config = EmisConfig {
+        pilot: PilotStart::PathTracing,
+        warm_start: Some(decided.clone()),
+        ..EmisConfig::new(EmisMethod::Vcm)
+    };
+    let mut state = EmisState::new(config.clone(), SIDE, SIDE);
+    assert_eq!((&state.strategy, state.candidate_set, state.candidates.len()), (&decided, CandidateSet::Full, 51));
+    state.absorb(&pilot(&state, |c| if c.nu == 0.5 { 1e-3 } else { 1.0 })).unwrap();
+    let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
+    let report = state.update(&image, 1, RestartTotal::Samples(64)).clone();
+    assert!(!report.reduced && !report.restarted, "{report:?}");
+    assert_eq!((state.kept_from, state.start.is_none(), state.strategy.nu), (0, true, 0.5));
+    let pt = Strategy::path_tracing();
+    let cold = EmisState::new(EmisConfig { warm_start: Some(pt.clone()), ..config.clone() }, SIDE, SIDE);
+    assert_eq!(cold.strategy, Strategy::path_tracing_start(EmisMethod::Vcm));
+    assert_eq!(cold.candidate_set, CandidateSet::Reduced);
+    let own = EmisConfig { warm_start: Some(pt.clone()), pilot: PilotStart::Bidirectional, ..config };
+    let kept = EmisState::new(own, SIDE, SIDE);
+    assert_eq!((kept.strategy, kept.candidate_set), (pt, CandidateSet::Full));
 }

@@ -13,6 +13,7 @@ pub mod overheads;
 pub mod photon_map;
 pub mod pt_recording;
 pub mod speed;
+pub mod warm_start;
 
 use anyhow::Context;
 use clap::Subcommand;
@@ -46,6 +47,9 @@ pub enum BenchCommand {
     Envmap(envmap::EnvmapArgs),
     /// The farm coordinator: result ingest, scaling with real workers, bytes on the wire.
     Farm(farm::FarmArgs),
+    /// EMIS frames started from the frame before's decision against started cold, at equal
+    /// time on a camera move.
+    WarmStart(warm_start::WarmStartArgs),
 }
 
 /// Runs a `tessera bench` subcommand.
@@ -60,6 +64,7 @@ pub fn run(command: &BenchCommand) -> anyhow::Result<()> {
         BenchCommand::PhotonMap(args) => photon_map::run(args),
         BenchCommand::Envmap(args) => envmap::run(args),
         BenchCommand::Farm(args) => farm::run(args),
+        BenchCommand::WarmStart(args) => warm_start::run(args),
     }
 }
 

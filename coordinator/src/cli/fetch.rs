@@ -74,18 +74,6 @@ fn output_of(args: &FetchArgs, job: &pb::Job) -> PathBuf {
     args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{name}.exr")))
 }
 
-/// Where frame `number` goes: `output` with its runs of `#` the frame number (`.####` before
-/// the extension when it has none).
-fn frame_path(output: &Path, number: u32) -> PathBuf {
-    let text = output.to_string_lossy();
-    if tessera_link::frames::is_pattern(&text) {
-        return PathBuf::from(tessera_link::frames::expand(&text, number));
-    }
-    let stem = output.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-    let ext = output.extension().map_or_else(|| "exr".into(), |e| e.to_string_lossy().into_owned());
-    output.with_file_name(format!("{stem}.{number:04}.{ext}"))
-}
-
 /// Writes what a job made: a still's outputs, or each done frame's (then fails with
 /// [`JobEnded`] naming the frames that did not end done).
 async fn download_done(c: &mut Client, job: &pb::Job, output: &Path) -> anyhow::Result<()> {
@@ -99,7 +87,7 @@ async fn download_done(c: &mut Client, job: &pb::Job, output: &Path) -> anyhow::
             continue;
         }
         let frame_job = get(c, &frame.job_id).await?;
-        download_all(c, &frame_job, &OutputPaths::new(&frame_path(output, frame.number))).await?;
+        download_all(c, &frame_job, &OutputPaths::new(&super::frames::frame_path(output, frame.number))).await?;
     }
     let unplanned = job.frames_total as usize - job.frames.len();
     if missing.is_empty() && unplanned == 0 {

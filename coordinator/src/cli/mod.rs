@@ -8,6 +8,7 @@ pub mod client;
 pub mod control;
 pub mod exit;
 pub mod fetch;
+pub mod frames;
 pub mod healthcheck;
 pub mod render;
 pub mod submit;

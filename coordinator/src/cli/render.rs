@@ -1,14 +1,16 @@
-//! `tessera render`: renders a scene on this machine with no setup, writing an EXR (beauty RGB
-//! plus per-pixel sample counts) and an sRGB PNG preview beside it (see [`crate::output`]).
+//! `tessera render`: renders a scene (or its `--frames`, one after another) on this machine
+//! with no setup, writing an EXR (beauty RGB plus per-pixel sample counts) and an sRGB PNG
+//! preview beside it (see [`crate::output`]).
 
-use crate::options::{JobArgs, make_renderer, scene_name};
+use crate::options::{JobArgs, make_renderer};
 use crate::output::{OutputPaths, Outputs, Provenance};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
+use tessera_common::emis::Strategy;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::{LoadOptions, Scene, SceneLimits};
-use tessera_common::settings::WorkLimits;
+use tessera_common::settings::{Renderer, WorkLimits};
 use tessera_common::texture::TextureLimits;
 
 /// Arguments of `tessera render`.
@@ -31,26 +33,60 @@ pub struct RenderArgs {
     /// 4096 in all].
     #[arg(long, value_name = "MIB")]
     pub texture_budget: Option<u64>,
+    /// Frames, rendered one after another.
+    #[command(flatten)]
+    pub frames: super::frames::FrameArgs,
 }
 
-/// Runs `tessera render`.
+/// Runs `tessera render`: one image, or each of `--frames` in order (with `--warm-start`,
+/// an EMIS frame starting from the one before's final strategy).
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
     if args.threads == Some(0) {
         return Err(crate::options::InvalidInput("--threads must be at least 1".into()).into());
     }
+    let frames = args.frames.numbers()?;
+    if args.frames.warm_start && settings.integrator.emis_method().is_none() {
+        let message = format!("--warm-start needs an emis-* integrator, not {}", settings.integrator);
+        return Err(crate::options::InvalidInput(message).into());
+    }
+    let output = args.output.clone().unwrap_or_else(|| super::frames::default_output(&args.scene, frames.is_some()));
+    let Some(frames) = frames else {
+        render_one(args, &args.scene, &settings, &OutputPaths::new(&output), None)?;
+        return Ok(());
+    };
+    let pattern = args.scene.to_string_lossy();
+    let rule = args.frames.rule(&pattern);
+    let mut warm = None;
+    for number in frames {
+        let (scene, settings) = rule.frame(&settings, number);
+        let out = OutputPaths::new(&super::frames::frame_path(&output, number));
+        let decision = render_one(args, std::path::Path::new(&scene), &settings, &out, warm.take())?;
+        warm = decision.filter(|_| args.frames.warm_start);
+    }
+    Ok(())
+}
+
+/// Renders `scene` with `settings` to `output`, an EMIS render starting from `warm` if given;
+/// returns an EMIS render's final strategy.
+fn render_one(
+    args: &RenderArgs,
+    scene: &std::path::Path,
+    settings: &tessera_common::settings::RenderSettings,
+    output: &OutputPaths,
+    warm: Option<Strategy>,
+) -> anyhow::Result<Option<Strategy>> {
     let textures = args.texture_budget.map_or_else(TextureLimits::default, |mib| TextureLimits::total(mib << 20));
     // the user's own scene on the user's own machine: as many triangles and as much memory
     // per tile as it takes, but no setting that overflows or asks for absurd work
     let limits = SceneLimits { textures, max_triangles: u64::MAX };
-    let scene =
-        Scene::load_options(&args.scene, &LoadOptions { defines: settings.define_map(), limits, confine_to: None })?;
+    let scene = Scene::load_options(scene, &LoadOptions { defines: settings.define_map(), limits, confine_to: None })?;
     let work = WorkLimits { max_tile_bytes: u64::MAX, ..WorkLimits::default() };
     settings.resolved(&scene).check_work(scene.camera.width, scene.camera.height, &work)?;
-    let renderer = make_renderer(&settings, &scene)?;
-    let output = OutputPaths::new(
-        &args.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.exr", scene_name(&args.scene)))),
-    );
+    let mut renderer = make_renderer(settings, &scene)?;
+    if let Renderer::Emis(config, _) = &mut renderer {
+        config.warm_start = warm;
+    }
     let budget = match settings.time_s {
         Some(t) => Budget::Time(Duration::from_secs_f64(t)),
         None => Budget::Samples(settings.spp.unwrap_or(scene.spp)),
@@ -78,7 +114,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         scene: scene.path.display().to_string(),
         extra: vec![("render_seconds".into(), format!("{:.3}", out.elapsed.as_secs_f64()))],
     };
-    Outputs::new(&out.film, &provenance, emis.as_ref()).write_all(&output, renderer.name(), out.spp)?;
+    Outputs::new(&out.film, &provenance, emis.as_ref()).write_all(output, renderer.name(), out.spp)?;
     let samples = out.film.total_samples();
     let secs = out.elapsed.as_secs_f64();
     if out.film.non_finite > 0 {
@@ -95,7 +131,7 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         scene.texture_bytes as f64 / 1e6,
         output.exr.display()
     );
-    Ok(())
+    Ok(emis.map(|e| e.strategy))
 }
 
 /// Peak resident set size of this process so far: `VmHWM` of `/proc/self/status`, which starts

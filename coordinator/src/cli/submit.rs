@@ -3,7 +3,7 @@
 //! for EMIS the strategy PNG and JSON report), named as `tessera render` names them.
 
 use super::client::{Client, ServerArgs, runtime, status_error};
-use crate::options::{InvalidInput, JobArgs, scene_name};
+use crate::options::{JobArgs, scene_name};
 use std::path::PathBuf;
 use tessera_proto::v1 as pb;
 
@@ -40,36 +40,21 @@ pub struct SubmitArgs {
     /// scene's name].
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Render these frames as one job (`1-240`, `1-240:2`, `1,5,10-20`): frame N sets the
-    /// scene parameter `--frame-param` to N, as `-D frame=N` would. A scene name with runs of
-    /// `#` (`shot.####.xml`) is one file per frame. `-o` names the frames' files with `#`
-    /// runs too [default: SCENE.####.exr].
-    #[arg(long, value_name = "FRAMES")]
-    pub frames: Option<String>,
-    /// The scene parameter that carries the frame number.
-    #[arg(long, default_value = "frame", value_name = "NAME")]
-    pub frame_param: String,
-    /// Frame N renders with the seed plus N (as `tessera render --seed S+N`), not all with S.
-    #[arg(long)]
-    pub seed_per_frame: bool,
+    /// Frames: one job of them.
+    #[command(flatten)]
+    pub frames: super::frames::FrameArgs,
 }
 
 /// Runs `tessera submit`.
 pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
-    let frames = match &args.frames {
-        Some(spec) => Some(tessera_link::frames::parse(spec).map_err(InvalidInput)?),
-        None => None,
-    };
+    let frames = args.frames.numbers()?;
     let bundle = match &frames {
         None => tessera_common::bundle::pack(&args.scene, &settings.define_map())?,
-        Some(frames) => pack_frames(&args.scene, &settings, &args.frame_param, frames)?,
+        Some(frames) => pack_frames(&args.scene, &settings, &args.frames.frame_param, frames)?,
     };
     let name = scene_name(&args.scene).replace('#', "").trim_matches('.').to_string();
-    let output = args.output.clone().unwrap_or_else(|| match frames {
-        Some(_) => PathBuf::from(format!("{name}.####.exr")),
-        None => PathBuf::from(format!("{name}.exr")),
-    });
+    let output = args.output.clone().unwrap_or_else(|| super::frames::default_output(&args.scene, frames.is_some()));
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
         let header = pb::SubmitJobRequest {
@@ -79,9 +64,10 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
             after: args.after.clone(),
             require_tags: args.require_tags.clone(),
             name: args.name.clone().unwrap_or(name),
-            frames: args.frames.clone().unwrap_or_default(),
-            frame_param: args.frame_param.clone(),
-            seed_per_frame: args.seed_per_frame,
+            frames: args.frames.frames.clone().unwrap_or_default(),
+            frame_param: args.frames.frame_param.clone(),
+            seed_per_frame: args.frames.seed_per_frame,
+            warm_start: args.frames.warm_start,
         };
         let parts = tokio_stream::iter(submission_parts(header, bundle));
         let job = c.jobs.submit_job_stream(c.request(parts)).await.map_err(status_error)?.into_inner();

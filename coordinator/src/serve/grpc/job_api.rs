@@ -30,7 +30,7 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.write(&file.data).await?;
         }
         let placement = Placement { priority: req.priority, after: req.after, require_tags: req.require_tags };
-        let frames = frames_from_pb(&req.frames, &req.frame_param, req.seed_per_frame)?;
+        let frames = frames_from_pb(&req.frames, &req.frame_param, (req.seed_per_frame, req.warm_start))?;
         let view = bundle.submit(b.scene_path, settings, placement, Some(req.name), frames).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
@@ -54,7 +54,7 @@ impl pb::job_service_server::JobService for JobApi {
             bundle.write(&part.data).await?;
         }
         let placement = Placement { priority: header.priority, after: header.after, require_tags: header.require_tags };
-        let frames = frames_from_pb(&header.frames, &header.frame_param, header.seed_per_frame)?;
+        let frames = frames_from_pb(&header.frames, &header.frame_param, (header.seed_per_frame, header.warm_start))?;
         let view = bundle.submit(scene_path, settings, placement, Some(header.name), frames).await?;
         Ok(Response::new(job_to_pb(&view)))
     }
@@ -183,13 +183,21 @@ impl JobApi {
     }
 }
 
-/// A submission's frames, if it asks for any (`frame_param` defaults to `frame`).
-fn frames_from_pb(frames: &str, param: &str, seed_per_frame: bool) -> Result<Option<FramesRequest>, Status> {
+/// A submission's frames, if it asks for any (`frame_param` defaults to `frame`), with its
+/// flags `seed_per_frame` and `warm_start`.
+fn frames_from_pb(
+    frames: &str,
+    param: &str,
+    (seed_per_frame, warm_start): (bool, bool),
+) -> Result<Option<FramesRequest>, Status> {
     if frames.is_empty() {
+        if warm_start {
+            return Err(Status::invalid_argument("field \"warm_start\" needs \"frames\""));
+        }
         return Ok(None);
     }
     let frames =
         tessera_link::frames::parse(frames).map_err(|e| Status::invalid_argument(format!("field \"frames\": {e}")))?;
     let param = if param.is_empty() { "frame".to_string() } else { param.to_string() };
-    Ok(Some(FramesRequest { frames, param, seed_per_frame }))
+    Ok(Some(FramesRequest { frames, param, seed_per_frame, warm_start }))
 }

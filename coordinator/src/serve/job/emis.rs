@@ -5,23 +5,15 @@
 //! barriers); this decides *what* the next pass renders with.
 
 use super::model::{JobSpec, TileSpec};
+pub use super::spec::MergeSpec;
+use super::spec::WarmStart;
 use super::view::StrategyView;
 use crate::serve::storage::BlobStore;
-use tessera_common::emis::{CandidateSet, EmisState, PilotData, RestartTotal, collects_moments};
+use std::sync::Arc;
+use tessera_common::emis::{CandidateSet, EmisState, PilotData, RestartTotal, Strategy, collects_moments};
 use tessera_common::film::Film;
 use tessera_common::integrator::path::connections::Connections;
 use tessera_common::integrator::path::merge::MergeMask;
-
-/// Where a tile's merge probability comes from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum MergeSpec {
-    /// No merging (emis-bdpt).
-    None,
-    /// The same χ everywhere (the pilot's).
-    Constant(f32),
-    /// A per-pixel mask stored as a blob (width·height little-endian f32).
-    Mask(String),
-}
 
 /// The counts an EMIS tile renders with, as a lease carries them.
 #[derive(Clone, Debug, PartialEq)]
@@ -106,6 +98,28 @@ fn stored(blobs: &BlobStore, digest: &mut Option<String>, mask: &[f32]) -> std::
     Ok(d)
 }
 
+/// The strategy of `warm`, its masks of `pixels` values read from `blobs`.
+fn warm_strategy(warm: &WarmStart, blobs: &BlobStore, pixels: u32) -> Result<Strategy, String> {
+    let mask = |digest: &str| -> Result<Arc<Vec<f32>>, String> {
+        let bytes = blobs.get(digest).map_err(|e| e.to_string())?;
+        let bytes = bytes.ok_or_else(|| format!("the warm start's mask {digest} is missing"))?;
+        if bytes.len() != pixels as usize * 4 {
+            return Err(format!("the warm start's mask {digest} has {} bytes, not {}", bytes.len(), pixels * 4));
+        }
+        Ok(Arc::new(bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()))
+    };
+    let connections = match &warm.connection_mask {
+        Some(d) => Connections::PerPixel(mask(d)?),
+        None => Connections::Fixed(warm.connections),
+    };
+    let merge = match &warm.merge {
+        MergeSpec::None => None,
+        MergeSpec::Constant(c) => Some(MergeMask::Constant(*c)),
+        MergeSpec::Mask(d) => Some(MergeMask::PerPixel(mask(d)?)),
+    };
+    Ok(Strategy { nu: warm.nu, connections, merge })
+}
+
 /// An EMIS job's state on the coordinator.
 pub struct EmisJob {
     /// Merged pilot data, current strategy, reports.
@@ -117,11 +131,17 @@ pub struct EmisJob {
 }
 
 impl EmisJob {
-    /// The state before the pilot of an `emis-*` job; `None` for other integrators.
-    pub fn new(spec: &JobSpec) -> Option<EmisJob> {
-        spec.settings.integrator.emis_method()?;
-        let state = EmisState::new(spec.settings.emis_config(), spec.width, spec.height);
-        Some(EmisJob { state, mask_digest: None, connection_digest: None })
+    /// The state before the pilot of an `emis-*` job (starting from its warm start's strategy,
+    /// whose masks are read from `blobs`); `None` for other integrators.
+    pub fn new(spec: &JobSpec, blobs: &BlobStore) -> Result<Option<EmisJob>, String> {
+        if spec.settings.integrator.emis_method().is_none() {
+            return Ok(None);
+        }
+        let mut config = spec.settings.emis_config();
+        config.warm_start =
+            spec.warm.as_ref().map(|w| warm_strategy(w, blobs, spec.width * spec.height)).transpose()?;
+        let state = EmisState::new(config, spec.width, spec.height);
+        Ok(Some(EmisJob { state, mask_digest: None, connection_digest: None }))
     }
 
     /// Restores a checkpointed state ([`EmisJob::checkpoint`]).
@@ -155,6 +175,13 @@ impl EmisJob {
             collect,
             candidates: self.state.candidate_set,
         })
+    }
+
+    /// The decision a job of frames hands to its next frame: the current strategy, its masks
+    /// stored as blobs.
+    pub fn decision(&mut self, blobs: &BlobStore) -> std::io::Result<WarmStart> {
+        let s = self.strategy(blobs, false)?;
+        Ok(WarmStart { nu: s.nu, connections: s.connections, connection_mask: s.connection_mask, merge: s.merge })
     }
 
     /// What this job's pilot data must look like.
@@ -234,6 +261,41 @@ mod tests {
         spec
     }
 
+    fn blobs() -> (tempfile::TempDir, BlobStore) {
+        let dir = tempfile::tempdir().unwrap();
+        let blobs = BlobStore::open(dir.path()).unwrap();
+        (dir, blobs)
+    }
+
+    /// A decision handed to the next frame through blobs comes back as the same strategy, which
+    /// the next frame starts from, deciding from the full set; a path-tracing decision under
+    /// the path-tracing start starts that frame as the start does; a lost mask is an error.
+    #[test]
+    fn a_warm_start_begins_with_the_decision_it_was_handed() {
+        let (_dir, blobs) = blobs();
+        let mut before = EmisJob::new(&spec(), &blobs).unwrap().unwrap();
+        let mask: Vec<f32> = (0..8).map(|i| i as f32 / 8.0).collect();
+        before.state.strategy = Strategy {
+            nu: 0.5,
+            connections: Connections::PerPixel(Arc::new(mask.iter().map(|m| m * 4.0).collect())),
+            merge: Some(MergeMask::PerPixel(Arc::new(mask))),
+        };
+        let warm = before.decision(&blobs).unwrap();
+        assert_eq!(warm.blobs().count(), 2, "{warm:?}");
+        let mut path_tracing = JobSpec { warm: Some(warm.clone()), ..spec() };
+        path_tracing.settings.emis_pilot = tessera_common::emis::PilotStart::PathTracing;
+        let after = EmisJob::new(&path_tracing, &blobs).unwrap().unwrap();
+        assert_eq!(after.state.strategy, before.state.strategy);
+        assert_eq!(after.state.candidate_set, CandidateSet::Full);
+        assert_eq!(path_tracing.shape().emis.unwrap().initial_nu, 0.5);
+        let pt = WarmStart { nu: 0.0, connections: 0, connection_mask: None, merge: MergeSpec::Constant(0.0) };
+        let cold = EmisJob::new(&JobSpec { warm: Some(pt), ..path_tracing.clone() }, &blobs).unwrap().unwrap();
+        assert_eq!(cold.state.candidate_set, CandidateSet::Reduced, "a path-tracing decision starts cold");
+        let lost = WarmStart { merge: MergeSpec::Mask("0".repeat(64)), ..warm };
+        let error = EmisJob::new(&JobSpec { warm: Some(lost), ..path_tracing }, &blobs).err().unwrap();
+        assert!(error.contains("missing"), "{error}");
+    }
+
     fn pilot(job: &EmisJob, iterations: u32) -> PilotData {
         let mut moments = MomentBuffer::new(4, 2, job.state.candidates.len());
         moments.iterations = iterations;
@@ -245,7 +307,8 @@ mod tests {
     /// of its transition) leaves the state as the first run made it.
     #[test]
     fn an_update_runs_once_per_barrier() {
-        let mut job = EmisJob::new(&spec()).unwrap();
+        let (_dir, blobs) = blobs();
+        let mut job = EmisJob::new(&spec(), &blobs).unwrap().unwrap();
         job.absorb(&pilot(&job, 1)).unwrap();
         let film = Film::for_filter(4, 2, &tessera_common::film::filter::Filter::BOX);
         let restarted = job.update(&film, 1, RestartTotal::Samples(64));
@@ -261,8 +324,9 @@ mod tests {
 
     #[test]
     fn pilot_data_must_match_the_tile_and_whether_it_collects() {
-        let job = EmisJob::new(&spec()).unwrap();
-        assert!(EmisJob::new(&JobSpec { settings: RenderSettings::default(), ..spec() }).is_none());
+        let (_dir, blobs) = blobs();
+        let job = EmisJob::new(&spec(), &blobs).unwrap().unwrap();
+        assert!(EmisJob::new(&JobSpec { settings: RenderSettings::default(), ..spec() }, &blobs).unwrap().is_none());
         let tile = TileSpec { rect: Rect::full(4, 2), samples: 1..2 };
         let good = pilot(&job, 1).encode();
         assert!(job.decode_pilot(&tile, true, &good).unwrap().is_some());
@@ -280,7 +344,7 @@ mod tests {
         assert!(job.decode_pilot(&tile, true, &absurd.encode()).is_ok(), "the bound itself is allowed");
         // with path tracing as the strategy only iteration 0, those ≡ 2 mod 4 before 16 and
         // those ≡ 6 mod 8 after it record moments
-        let mut pt = EmisJob::new(&spec()).unwrap();
+        let mut pt = EmisJob::new(&spec(), &blobs).unwrap().unwrap();
         pt.state.strategy.nu = 0.0;
         assert!(pt.decode_pilot(&tile, true, &[]).unwrap().is_none());
         assert!(pt.decode_pilot(&tile, true, &good).unwrap_err().contains("does not collect"));

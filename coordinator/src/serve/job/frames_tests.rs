@@ -15,6 +15,7 @@ fn sequence(frames: Vec<u32>, seed_per_frame: bool) -> SequenceSpec {
         frames,
         frame_param: "frame".into(),
         seed_per_frame,
+        warm_start: false,
         scene_path: "move.xml".into(),
         bundle_digest: "d".into(),
         after: vec![],
@@ -77,6 +78,40 @@ fn pausing_a_job_of_frames_pauses_its_frames_planned_and_to_come() {
     assert_eq!(m.lease("w", 1, 5, TTL).0.len(), 1);
 }
 
+/// With a warm start, frame N+1 is planned once frame N decided (and starts from that
+/// decision) or ended without one (and starts cold); the rest of the window waits.
+#[test]
+fn a_warm_started_frame_waits_for_the_decision_of_the_frame_before() {
+    use super::spec::{MergeSpec, WarmStart};
+    let mut m = JobsModel::default();
+    let spec = SequenceSpec { warm_start: true, ..sequence((1..=5).collect(), false) };
+    m.apply(Event::SubmitSequence { id: "s", spec: Box::new(spec) }, 0).unwrap();
+    plan(&mut m);
+    plan(&mut m);
+    assert_eq!(m.sequences["s"].planned, 1, "frame 2 waits for frame 1's decision");
+    assert_eq!(m.warm_start_of("s", 1), None);
+    let decision = WarmStart { nu: 0.5, connections: 2, connection_mask: None, merge: MergeSpec::Mask("m".into()) };
+    let first = SequenceSpec::frame_id("s", 0);
+    let effects = m.apply(Event::Decided { job: &first, decision: Box::new(decision.clone()) }, 2).unwrap();
+    assert!(effects.changes.contains_key(&first), "the decision is written with the frame");
+    assert_eq!(m.warm_start_of("s", 1), Some(decision));
+    plan(&mut m);
+    assert_eq!(m.sequences["s"].planned, 2);
+    // a frame that ends without a decision lets the next one start cold
+    m.cancel(&SequenceSpec::frame_id("s", 1), 3).unwrap();
+    assert_eq!(m.warm_start_of("s", 2), None);
+    plan(&mut m);
+    assert_eq!(m.sequences["s"].planned, 3);
+    // without a warm start, frames do not start from one another
+    m.apply(Event::SubmitSequence { id: "t", spec: Box::new(sequence((1..=5).collect(), false)) }, 4).unwrap();
+    plan(&mut m);
+    assert_eq!(m.sequences["t"].planned, 5);
+    let t0 = SequenceSpec::frame_id("t", 0);
+    let decision = WarmStart { nu: 1.0, connections: 1, connection_mask: None, merge: MergeSpec::None };
+    m.apply(Event::Decided { job: &t0, decision: Box::new(decision) }, 5).unwrap();
+    assert_eq!(m.warm_start_of("t", 1), None);
+}
+
 /// A frame whose scene did not load fails alone and cannot be requeued; cancelling the
 /// sequence plans no more and ends it; a done sequence is done.
 #[test]
@@ -88,6 +123,7 @@ fn a_refused_frame_fails_alone_and_cancel_ends_the_sequence() {
     let effects = m.apply(refused, 1).unwrap();
     let frame0 = SequenceSpec::frame_id("s", 0);
     assert_eq!(effects.ended().collect::<Vec<_>>(), [(frame0.as_str(), JobState::Failed)]);
+    assert_eq!(effects.changes[&frame0].len(), 1, "its tile's row is written with its failure");
     assert!(matches!(m.requeue(&frame0, 0, 2), Err(TransitionError::SceneRefused(_))));
     let late = Event::PlanFrame { sequence: "s", index: 0, spec: Box::new(spec.clone()), error: None };
     assert!(matches!(m.apply(late, 2), Err(TransitionError::NotPlanning { .. })), "planned twice");
@@ -118,7 +154,8 @@ fn a_job_of_frames_survives_a_restart_and_goes_whole() {
         xml.replacen(r#"<scene version="3.0.0">"#, r#"<scene version="3.0.0"><default name="frame" value="0"/>"#, 1);
     let lookat = r#"<lookat origin="0, 0, 3.9" target="0, 0, 0" up="0, 1, 0"/>"#;
     let xml = xml.replacen(lookat, &format!(r#"{lookat}<rotate y="1" angle="$frame"/>"#), 1);
-    let frames = FramesRequest { frames: (1..=40).collect(), param: "frame".into(), seed_per_frame: false };
+    let frames =
+        FramesRequest { frames: (1..=40).collect(), param: "frame".into(), seed_per_frame: false, warm_start: false };
     let settings = RenderSettings { spp: Some(1), ..Default::default() };
     let id = {
         let svc = JobService::open(dir.path(), CFG, 1_000).unwrap();

@@ -175,6 +175,9 @@ pub struct Job {
     pub index: TileIndex,
     /// Paused by a client since then: no tile is leased (see `control.rs`).
     pub paused_ms: Option<u64>,
+    /// EMIS, a frame of a job of frames that starts each from the one before: the decision
+    /// its updates ended on, which the next frame starts from (see `sequence.rs`).
+    pub decided: Option<super::spec::WarmStart>,
 }
 
 /// Results that arrive ahead of the merge frontier wait in memory: a job leases no further
@@ -256,6 +259,14 @@ impl Job {
 /// What a call changed, for the service to persist: per job, the tile indices whose rows
 /// changed (the job's own row is always saved for a job listed here).
 pub type Changes = BTreeMap<String, BTreeSet<usize>>;
+
+/// Adds `other` to `changes`, joining the tiles of a job both name (a map's own `extend`
+/// would keep only `other`'s, and their rows would not be written).
+pub fn join(changes: &mut Changes, other: Changes) {
+    for (job, tiles) in other {
+        changes.entry(job).or_default().extend(tiles);
+    }
+}
 
 fn touch(changes: &mut Changes, job: &str, tile: Option<usize>) {
     let set = changes.entry(job.to_string()).or_default();
@@ -345,6 +356,7 @@ impl JobsModel {
             slowest_ms_per_sample: None,
             index: TileIndex::default(),
             paused_ms: None,
+            decided: None,
         };
         let range = job.add_tiles(first);
         self.jobs.insert(id.to_string(), job);

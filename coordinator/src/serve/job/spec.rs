@@ -45,6 +45,48 @@ pub struct JobSpec {
     /// The frame of a sequence this job renders (see `model/sequence.rs`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame: Option<super::model::FrameRef>,
+    /// EMIS: the decision of the frame before, which this frame starts from (`--warm-start`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm: Option<WarmStart>,
+}
+
+/// Where a tile's merge probability comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MergeSpec {
+    /// No merging (emis-bdpt).
+    None,
+    /// The same χ everywhere (the pilot's).
+    Constant(f32),
+    /// A per-pixel mask stored as a blob (width·height little-endian f32).
+    Mask(String),
+}
+
+/// An EMIS job's decision (its strategy once its updates ended) as the next frame of a job of
+/// frames starts from it (`--warm-start`): the counts, and the per-pixel masks as blobs
+/// (width·height little-endian f32), which the job and the next frame keep alive.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WarmStart {
+    /// Light paths per pixel per iteration (0: path tracing).
+    pub nu: f32,
+    /// Connections per camera vertex (0 with a connection mask).
+    pub connections: u32,
+    /// Per-pixel expected connections.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connection_mask: Option<String>,
+    /// Merge probability.
+    pub merge: MergeSpec,
+}
+
+impl WarmStart {
+    /// The blobs it names.
+    pub fn blobs(&self) -> impl Iterator<Item = &String> {
+        let merge = match &self.merge {
+            MergeSpec::Mask(d) => Some(d),
+            _ => None,
+        };
+        self.connection_mask.iter().chain(merge)
+    }
 }
 
 /// The most tags a worker may have or a job may require, and their longest length.
@@ -121,6 +163,7 @@ impl JobSpec {
             after: Vec::new(),
             require_tags: Vec::new(),
             frame: None,
+            warm: None,
         }
     }
 
@@ -136,7 +179,10 @@ impl JobSpec {
         };
         let emis = s.integrator.emis_method().map(|m| EmisSchedule {
             updates: s.emis_updates.clone(),
-            initial_nu: Strategy::initial(m, s.emis_pilot).nu,
+            initial_nu: match &self.warm {
+                Some(w) if s.emis_pilot.takes_warm(w.nu) => w.nu,
+                _ => Strategy::initial(m, s.emis_pilot).nu,
+            },
         });
         Shape { width: self.width, height: self.height, budget, tile: (!self.full_frame).then_some(TILE_SIZE), emis }
     }

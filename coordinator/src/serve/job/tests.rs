@@ -26,6 +26,7 @@ fn spec(integrator: IntegratorName, spp: u32, priority: i32) -> JobSpec {
         after: Vec::new(),
         require_tags: Vec::new(),
         frame: None,
+        warm: None,
     }
 }
 

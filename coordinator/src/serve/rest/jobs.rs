@@ -33,7 +33,7 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
 type Submission = (RenderSettings, Placement, Option<String>, Option<FramesRequest>);
 
 /// Splits the `settings` JSON into render settings, placement (`priority`, `after`,
-/// `require_tags`), name and frames (`frames`, `frame_param`, `seed_per_frame`).
+/// `require_tags`), name and frames (`frames`, `frame_param`, `seed_per_frame`, `warm_start`).
 fn parse_settings(text: &str) -> Result<Submission, ApiError> {
     let mut value: serde_json::Value =
         serde_json::from_str(text).map_err(|e| invalid(format!("field \"settings\" is not JSON: {e}")))?;
@@ -59,7 +59,8 @@ fn parse_settings(text: &str) -> Result<Submission, ApiError> {
     Ok((settings, Placement { priority, after, require_tags }, name, frames))
 }
 
-/// The settings' `frames` (`"1-240"`), `frame_param` and `seed_per_frame`, if it asks for any.
+/// The settings' `frames` (`"1-240"`), `frame_param`, `seed_per_frame` and `warm_start`, if it
+/// asks for any.
 fn frames_of(obj: &mut serde_json::Map<String, serde_json::Value>) -> Result<Option<FramesRequest>, ApiError> {
     let mut text = |field: &str| match obj.remove(field) {
         None => Ok(None),
@@ -67,14 +68,21 @@ fn frames_of(obj: &mut serde_json::Map<String, serde_json::Value>) -> Result<Opt
         Some(_) => Err(invalid(format!("settings field \"{field}\" must be a string"))),
     };
     let (frames, param) = (text("frames")?, text("frame_param")?);
-    let seed_per_frame = match obj.remove("seed_per_frame") {
-        None => false,
-        Some(v) => v.as_bool().ok_or_else(|| invalid("settings field \"seed_per_frame\" must be true or false"))?,
+    let mut flag = |field: &str| match obj.remove(field) {
+        None => Ok(false),
+        Some(v) => v.as_bool().ok_or_else(|| invalid(format!("settings field \"{field}\" must be true or false"))),
     };
-    let Some(frames) = frames else { return Ok(None) };
+    let (seed_per_frame, warm_start) = (flag("seed_per_frame")?, flag("warm_start")?);
+    let Some(frames) = frames else {
+        if warm_start {
+            return Err(invalid("settings field \"warm_start\" needs \"frames\""));
+        }
+        return Ok(None);
+    };
     let frames =
         tessera_link::frames::parse(&frames).map_err(|e| invalid(format!("settings field \"frames\": {e}")))?;
-    Ok(Some(FramesRequest { frames, param: param.unwrap_or_else(|| "frame".into()), seed_per_frame }))
+    let param = param.unwrap_or_else(|| "frame".into());
+    Ok(Some(FramesRequest { frames, param, seed_per_frame, warm_start }))
 }
 
 /// Most bytes the `settings` part may have.

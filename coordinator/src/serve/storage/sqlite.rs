@@ -131,7 +131,7 @@ CREATE TABLE IF NOT EXISTS jobs (
     passes TEXT NOT NULL, worker_failures TEXT NOT NULL, error TEXT,
     created_ms INTEGER NOT NULL, started_ms INTEGER, finished_ms INTEGER,
     merged INTEGER NOT NULL DEFAULT 0, checkpoint TEXT, result_exr TEXT, preview_png TEXT,
-    strategy_png TEXT, emis_json TEXT, paused_ms INTEGER, priority INTEGER);
+    strategy_png TEXT, emis_json TEXT, paused_ms INTEGER, priority INTEGER, decided TEXT);
 CREATE TABLE IF NOT EXISTS tiles (
     job_id TEXT NOT NULL, idx INTEGER NOT NULL, x0 INTEGER NOT NULL, y0 INTEGER NOT NULL,
     x1 INTEGER NOT NULL, y1 INTEGER NOT NULL, s0 INTEGER NOT NULL, s1 INTEGER NOT NULL,
@@ -179,6 +179,7 @@ struct JobRow {
     finished_ms: Option<i64>,
     paused_ms: Option<i64>,
     priority: i32,
+    decided: Option<String>,
 }
 
 #[derive(Clone, Debug)]
@@ -223,6 +224,7 @@ impl Batch {
                 finished_ms: job.finished_ms.map(|t| t as i64),
                 paused_ms: job.paused_ms.map(|t| t as i64),
                 priority: job.spec.priority,
+                decided: job.decided.as_ref().map(json),
             });
             for &i in tiles {
                 let t = &job.tiles[i];
@@ -309,7 +311,7 @@ impl Store {
         conn.execute_batch(SCHEMA)?;
         // databases from before workers kept their identity and address, before EMIS jobs
         // stored their strategy PNG and report, before jobs could be paused or reprioritised, and
-        // before workers had tags and could be disabled
+        // before workers had tags and could be disabled, and before frames started warm
         let added = [
             ("workers", "secret_sha256", "TEXT"),
             ("workers", "host", "TEXT"),
@@ -319,6 +321,7 @@ impl Store {
             ("jobs", "priority", "INTEGER"),
             ("workers", "tags", "TEXT"),
             ("workers", "mode", "TEXT"),
+            ("jobs", "decided", "TEXT"),
         ];
         for (table, column, kind) in added {
             let exists =
@@ -342,10 +345,10 @@ impl Store {
             for j in &batch.jobs {
                 tx.prepare_cached(
                     "INSERT INTO jobs (id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms,
-                        finished_ms, paused_ms, priority)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)
+                        finished_ms, paused_ms, priority, decided)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)
                      ON CONFLICT(id) DO UPDATE SET state = ?4, passes = ?5, worker_failures = ?6, error = ?7,
-                        started_ms = ?9, finished_ms = ?10, paused_ms = ?11, priority = ?12",
+                        started_ms = ?9, finished_ms = ?10, paused_ms = ?11, priority = ?12, decided = ?13",
                 )?
                 .execute(params![
                     j.id,
@@ -359,7 +362,8 @@ impl Store {
                     j.started_ms,
                     j.finished_ms,
                     j.paused_ms,
-                    j.priority
+                    j.priority,
+                    j.decided
                 ])?;
             }
             let mut stmt = tx.prepare_cached(

@@ -24,6 +24,7 @@ fn store_round_trips_the_model_and_pairs_merged_with_its_checkpoint() {
         after: Vec::new(),
         require_tags: Vec::new(),
         frame: None,
+        warm: None,
     };
     let c = m.submit("a", spec, 5).unwrap();
     store.persist(&m, &c, &[]).unwrap();

@@ -11,7 +11,7 @@
 //!   tiles that were leased go back to the queue with a new epoch, and failure counts and
 //!   blocklists start afresh.
 
-use super::{Changes, Job, JobState, JobsModel, PassKind, TileState, TransitionError, touch};
+use super::{Changes, Job, JobState, JobsModel, PassKind, TileState, TransitionError, join, touch};
 
 impl Job {
     /// The state clients see: `paused` for a paused job that has not ended, a finishing job
@@ -81,7 +81,7 @@ impl JobsModel {
             touch(&mut changes, job, None);
             for f in &frames {
                 if self.jobs.contains_key(f) {
-                    changes.extend(self.set_priority(f, priority)?);
+                    join(&mut changes, self.set_priority(f, priority)?);
                 }
             }
             return Ok(changes);

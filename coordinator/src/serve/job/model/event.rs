@@ -162,6 +162,14 @@ pub enum Event<'a> {
         /// Whether the next pass collects moments.
         collect: bool,
     },
+    /// A frame's EMIS updates ended on `decision`, which the next frame of its job of frames
+    /// starts from (`--warm-start`).
+    Decided {
+        /// The job.
+        job: &'a str,
+        /// Its strategy, masks stored.
+        decision: Box<super::super::spec::WarmStart>,
+    },
     /// A finishing job's outputs are stored (after [`Effect::WriteOutputs`]).
     OutputsWritten {
         /// The job.
@@ -267,9 +275,7 @@ impl Effects {
 
     /// Adds `other`'s changes and effects after this one's.
     pub fn extend(&mut self, other: Effects) {
-        for (job, tiles) in other.changes {
-            self.changes.entry(job).or_default().extend(tiles);
-        }
+        super::join(&mut self.changes, other.changes);
         self.then.extend(other.then);
     }
 }
@@ -324,6 +330,7 @@ impl JobsModel {
                 let changes = self.optimized(job, restart, nu, collect, now_ms)?;
                 Effects { changes, then: vec![Effect::PassPlanned { job: job.to_string() }] }
             }
+            Event::Decided { job, decision } => Effects::of(self.decided(job, *decision)?),
             Event::OutputsWritten { job } => Effects::of(self.outputs_written(job, now_ms)?),
             Event::Cancel { job } if self.sequences.contains_key(job) => {
                 Effects::of(self.cancel_sequence(job, now_ms)?)

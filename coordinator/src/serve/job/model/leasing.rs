@@ -5,7 +5,7 @@
 
 use super::{
     BLOCKLIST_AFTER_FAILURES, Changes, Job, JobState, JobsModel, LeaseRef, PassKind, TileState, fail_tile, host_of,
-    touch,
+    join, touch,
 };
 
 /// How long a lease may be held, heartbeats or not: `factor` times what the tile should take at
@@ -152,7 +152,7 @@ impl JobsModel {
             if let Some(last) = &self.jobs[id].last_failure {
                 error += &format!("; the last failure: {last}");
             }
-            changes.extend(self.fail(id, error, now_ms));
+            join(&mut changes, self.fail(id, error, now_ms));
         }
         (stranded, changes)
     }

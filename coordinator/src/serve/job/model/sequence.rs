@@ -12,7 +12,8 @@
 //! tiles of one are out: frames and tiles interleave.
 //! Why it is built so, with its measurements: docs/decisions/0071-frames-are-jobs-planned-lazily.md.
 
-use super::{Changes, Job, JobSpec, JobState, JobsModel, TransitionError, touch};
+use super::super::spec::WarmStart;
+use super::{Changes, Job, JobSpec, JobState, JobsModel, TransitionError, join, touch};
 use serde::{Deserialize, Serialize};
 use tessera_common::settings::RenderSettings;
 
@@ -49,6 +50,9 @@ pub struct SequenceSpec {
     pub frame_param: String,
     /// Frame N renders with seed S + N.
     pub seed_per_frame: bool,
+    /// EMIS: frame N+1 starts from frame N's decision, and is planned once it is made.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub warm_start: bool,
     /// The scene's path in the bundle; runs of `#` are the frame number.
     pub scene_path: String,
     /// Digest of the bundle that holds every frame's files.
@@ -67,19 +71,14 @@ impl SequenceSpec {
         format!("{id}-{index:06}")
     }
 
-    /// Frame `index`'s scene path and settings: its own file where the path has runs of `#`,
-    /// else the frame parameter set (a scene must use a parameter it is given); the seed moved
-    /// on by the frame number if asked.
+    /// Frame `index`'s scene path and settings ([`tessera_link::frames::FrameRule`]).
     pub fn frame(&self, index: usize) -> (String, RenderSettings) {
-        let number = self.frames[index];
-        let mut settings = self.settings.clone();
-        if !tessera_link::frames::is_pattern(&self.scene_path) {
-            settings.defines.insert(self.frame_param.clone(), number.to_string());
-        }
-        if self.seed_per_frame {
-            settings.seed = Some(settings.seed.unwrap_or(0).wrapping_add(u64::from(number)));
-        }
-        (tessera_link::frames::expand(&self.scene_path, number), settings)
+        let rule = tessera_link::frames::FrameRule {
+            scene: &self.scene_path,
+            param: &self.frame_param,
+            seed_per_frame: self.seed_per_frame,
+        };
+        rule.frame(&self.settings, self.frames[index])
     }
 }
 
@@ -141,12 +140,19 @@ impl JobsModel {
         Ok(changes)
     }
 
-    /// The frames each sequence may plan now: up to [`FRAMES_IN_FLIGHT`] not ended, in order.
+    /// The frames each sequence may plan now: up to [`FRAMES_IN_FLIGHT`] not ended, in order;
+    /// with a warm start, the next once the frame before it decided or ended.
     pub fn frames_due(&self) -> Vec<(String, Vec<usize>)> {
         let mut due = Vec::new();
         for s in self.sequences.values().filter(|s| !s.cancelled && s.planned < s.spec.frames.len()) {
             let active = s.frame_ids().filter(|id| self.jobs.get(id).is_some_and(|j| !j.state.is_terminal())).count();
-            let room = FRAMES_IN_FLIGHT.saturating_sub(active).min(s.spec.frames.len() - s.planned);
+            let mut room = FRAMES_IN_FLIGHT.saturating_sub(active).min(s.spec.frames.len() - s.planned);
+            if s.spec.warm_start {
+                // one at a time: each waits for the one before it
+                let before = s.planned.checked_sub(1).and_then(|i| self.jobs.get(&SequenceSpec::frame_id(&s.id, i)));
+                let ready = before.is_none_or(|j| j.decided.is_some() || j.state.is_terminal());
+                room = room.min(usize::from(ready));
+            }
             if room > 0 {
                 due.push((s.id.clone(), (s.planned..s.planned + room).collect()));
             }
@@ -178,10 +184,28 @@ impl JobsModel {
         job.seq = seq;
         job.paused_ms = s_paused;
         if let Some(error) = error {
-            changes.extend(self.fail(&id, error, now_ms));
+            join(&mut changes, self.fail(&id, error, now_ms));
         }
         self.sequences.get_mut(sequence).expect("invariant: found above").planned += 1;
         touch(&mut changes, sequence, None);
+        Ok(changes)
+    }
+
+    /// The decision a warm-started frame `index` of `sequence` starts from: the frame before's,
+    /// if it made one.
+    pub fn warm_start_of(&self, sequence: &str, index: usize) -> Option<WarmStart> {
+        let s = self.sequences.get(sequence).filter(|s| s.spec.warm_start && index > 0)?;
+        self.jobs.get(&SequenceSpec::frame_id(&s.id, index - 1))?.decided.clone()
+    }
+
+    /// A job's EMIS updates ended on `decision` ([`super::Event::Decided`]).
+    pub(super) fn decided(&mut self, job: &str, decision: WarmStart) -> Result<Changes, TransitionError> {
+        let j = self.jobs.get_mut(job).ok_or_else(|| TransitionError::UnknownJob(job.to_string()))?;
+        let mut changes = Changes::new();
+        if j.decided.as_ref() != Some(&decision) {
+            j.decided = Some(decision);
+            touch(&mut changes, job, None);
+        }
         Ok(changes)
     }
 
@@ -196,7 +220,7 @@ impl JobsModel {
         }
         let frames: Vec<String> = self.sequences[id].frame_ids().filter(|f| self.jobs.contains_key(f)).collect();
         for frame in &frames {
-            changes.extend(self.cancel(frame, now_ms)?);
+            join(&mut changes, self.cancel(frame, now_ms)?);
         }
         Ok(changes)
     }
@@ -265,10 +289,13 @@ impl JobsModel {
         let frames: Vec<String> = s.frame_ids().collect();
         for f in &frames {
             if self.jobs.get(f).is_some_and(|j| !j.state.is_terminal()) {
-                changes.extend(match paused {
-                    Some(_) => self.pause(f, now_ms)?,
-                    None => self.resume_paused(f, now_ms)?,
-                });
+                join(
+                    &mut changes,
+                    match paused {
+                        Some(_) => self.pause(f, now_ms)?,
+                        None => self.resume_paused(f, now_ms)?,
+                    },
+                );
             }
         }
         Ok(changes)

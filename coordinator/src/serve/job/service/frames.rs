@@ -1,11 +1,12 @@
 //! Jobs of many frames on the service's side (the model's `sequence.rs` says what they are):
 //! submitting one, planning its frames as room frees up (each frame's scene is loaded first,
 //! without the lock, and a frame whose scene does not load fails alone), and what clients see
-//! of it: one job whose state, progress and ETA cover its frames, with a line per frame.
+//! of it: one job whose state, progress and ETA cover its frames, with a line per frame; and
+//! with `--warm-start`, each frame's decision handed to the next.
 
 use super::upload::BundleUpload;
 use super::{Inner, JobService, ServiceError};
-use crate::serve::job::model::{Event, JobSpec, JobState, SequenceSpec};
+use crate::serve::job::model::{Changes, Event, JobSpec, JobState, SequenceSpec};
 use crate::serve::job::spec::Placement;
 use crate::serve::job::view::{FrameView, JobView};
 use tessera_common::settings::RenderSettings;
@@ -19,6 +20,8 @@ pub struct FramesRequest {
     pub param: String,
     /// Frame N renders with the seed plus N.
     pub seed_per_frame: bool,
+    /// EMIS: frame N+1 starts from frame N's decision.
+    pub warm_start: bool,
 }
 
 impl JobService {
@@ -37,6 +40,10 @@ impl JobService {
         now_ms: u64,
     ) -> Result<JobView, ServiceError> {
         check_frames(&frames)?;
+        if frames.warm_start && settings.integrator.emis_method().is_none() {
+            let message = format!("field \"warm_start\" needs an emis-* integrator, not {}", settings.integrator);
+            return Err(ServiceError::InvalidArgument(message));
+        }
         let placement = self.check_placement(&settings, placement)?;
         // the bundle's own scene is the first frame's (its file, when each frame has one)
         let first = tessera_link::frames::expand(scene_path, frames.frames[0]);
@@ -48,6 +55,7 @@ impl JobService {
             frames: frames.frames,
             frame_param: frames.param,
             seed_per_frame: frames.seed_per_frame,
+            warm_start: frames.warm_start,
             scene_path: scene_path.to_string(),
             bundle_digest: digest.clone(),
             after: placement.after,
@@ -90,7 +98,7 @@ impl JobService {
             let Some(s) = self.lock().model.sequences.get(&sequence).map(|s| s.spec.clone()) else { continue };
             for index in indices {
                 let (spec, error) = match self.frame_spec(&s, index) {
-                    Ok(spec) => (spec, None),
+                    Ok(spec) => (JobSpec { warm: self.lock().model.warm_start_of(&sequence, index), ..spec }, None),
                     Err(e) => {
                         let (scene_path, settings) = s.frame(index);
                         let spec = JobSpec {
@@ -112,6 +120,31 @@ impl JobService {
         self.sync(&self.lock())?;
         self.work.notify_waiters();
         Ok(())
+    }
+
+    /// Records the decision of a warm-started job of frames' frame once its EMIS strategy is
+    /// final: its last planned pass collects no moments, or it is `finishing`. Returns the
+    /// changes to commit with what the caller commits. The decision's masks live as long as
+    /// the frame (and the next frame's spec) names them.
+    pub(super) fn decide(
+        &self,
+        inner: &mut Inner,
+        job: &str,
+        finishing: bool,
+        now_ms: u64,
+    ) -> Result<Changes, ServiceError> {
+        let Some(j) = inner.model.jobs.get(job).filter(|j| j.decided.is_none()) else { return Ok(Changes::new()) };
+        let sequence = j.spec.frame.as_ref().and_then(|f| inner.model.sequences.get(&f.sequence));
+        let collects = j.driver.passes().last().is_some_and(|p| p.collect);
+        if !sequence.is_some_and(|s| s.spec.warm_start) || (collects && !finishing) {
+            return Ok(Changes::new());
+        }
+        let runtime = inner.job(job);
+        let Some(emis) = runtime.emis.as_mut() else { return Ok(Changes::new()) };
+        let decision = emis.decision(&self.blobs)?;
+        runtime.masks.extend(decision.blobs().cloned());
+        tracing::debug!(job_id = %job, nu = decision.nu, "frame decided: the next frame starts from it");
+        Ok(inner.model.apply(Event::Decided { job, decision: Box::new(decision) }, now_ms)?.changes)
     }
 
     /// The outputs of a job of frames' done frames, for one archive: each frame's EXR and PNG

@@ -129,7 +129,7 @@ impl JobService {
         if let Some(l) = effects.leases().next() {
             // an EMIS job's state is made at its first lease (all leases are of one job)
             let job = l.job.clone();
-            inner.emis(&job);
+            inner.emis(&job, &self.blobs);
         }
         self.persist(&mut inner, &effects.changes, &[])?;
         let state = &mut *inner;

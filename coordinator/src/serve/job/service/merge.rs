@@ -7,7 +7,7 @@ use super::runtime::{CheckpointState, HeldResult};
 use super::{Inner, JobService, ServiceError};
 use crate::output::{Outputs, PngEffort, Provenance};
 use crate::serve::job::emis::EmisJob;
-use crate::serve::job::model::{Changes, Effect, Effects, Event, JobSpec, TileSpec};
+use crate::serve::job::model::{Changes, Effect, Effects, Event, JobSpec, TileSpec, join};
 use crate::serve::job::validate::{ResultClaim, validate_result};
 use crate::serve::storage::{Extra, OutputDigests};
 use std::ops::Range;
@@ -52,7 +52,7 @@ impl JobService {
         let layout = self.lock().model.jobs.get(job).map(|j| j.spec.layout(tile.rect)).ok_or("the job is gone")?;
         let accum = validate_result(tile, layout, claim, image)?;
         // megabytes of pilot data are decoded without holding the service's lock
-        let shape = self.lock().emis(job).map(|e| e.shape());
+        let shape = self.lock().emis(job, &self.blobs).map(|e| e.shape());
         let pilot = match shape {
             Some(shape) => shape.decode(tile, collect, pilot)?,
             None if pilot.is_empty() => None,
@@ -74,7 +74,7 @@ impl JobService {
         now_ms: u64,
     ) -> Result<(), ServiceError> {
         let filter = inner.model.jobs.get(job).map(|j| Filter::new(j.spec.filter));
-        inner.emis(job);
+        inner.emis(job, &self.blobs);
         let runtime = inner.job(job);
         let (Some(film), Some(emis), Some(filter)) = (runtime.film.as_mut(), runtime.emis.as_mut(), filter) else {
             return self.fail_locked(inner, job, "the EMIS state of this job is missing", now_ms);
@@ -90,7 +90,8 @@ impl JobService {
             *film = Film::for_filter(film.width, film.height, &filter);
         }
         let (nu, collect) = (emis.state.strategy.nu, emis.state.collecting());
-        let effects = inner.model.apply(Event::Optimized { job, restart: restarted, nu, collect }, now_ms)?;
+        let mut effects = inner.model.apply(Event::Optimized { job, restart: restarted, nu, collect }, now_ms)?;
+        join(&mut effects.changes, self.decide(inner, job, false, now_ms)?);
         let upto = inner.model.jobs.get(job).map_or(0, |j| j.merged);
         self.checkpoint(inner, job, upto, &effects.changes, Vec::new(), now_ms)?;
         self.pass_planned(inner, job);
@@ -172,6 +173,7 @@ impl JobService {
             // encoding a frame's outputs takes seconds for big films: `finish` does it without
             // the lock; the accepted result is committed now
             let upto = *upto;
+            join(&mut merged.changes, self.decide(inner, &job, true, now_ms)?);
             self.persist(inner, &merged.changes, &extras)?;
             return Ok(self.finishing(inner, &job, upto, now_ms));
         }
@@ -236,6 +238,8 @@ impl JobService {
         let last = *inner.job(job).checkpoint.get_or_insert(CheckpointState { at_ms: now_ms, cost_ms: 0 });
         let interval = self.cfg.checkpoint_interval_ms.max(last.cost_ms.saturating_mul(CHECKPOINT_SPACING));
         let due = now_ms.saturating_sub(last.at_ms) >= interval;
+        let mut merged = merged;
+        join(&mut merged.changes, self.decide(inner, job, false, now_ms)?);
         let changes = &merged.changes;
         match merged.then.first() {
             Some(Effect::PassPlanned { .. }) => {
@@ -349,7 +353,7 @@ impl JobService {
         film: &mut Film,
     ) -> Result<(), ServiceError> {
         // after a restart the EMIS state may not be made yet: stored pilot data needs it
-        inner.emis(job);
+        inner.emis(job, &self.blobs);
         let emis_error = |message| ServiceError::Emis { job: job.to_string(), message };
         for i in range.clone() {
             let runtime = inner.job(job);

@@ -211,12 +211,16 @@ impl Inner {
 
     /// The EMIS state of an unfinished EMIS job, made when first needed (its first lease, or
     /// its first merge after a restart): its moment buffers take hundreds of bytes a pixel,
-    /// which queued jobs must not hold.
-    fn emis(&mut self, job: &str) -> Option<&mut EmisJob> {
+    /// which queued jobs must not hold. A warm start whose masks cannot be read leaves it
+    /// unmade, which fails the job at its first update.
+    fn emis(&mut self, job: &str, blobs: &BlobStore) -> Option<&mut EmisJob> {
         let j = self.model.jobs.get(job)?;
         let runtime = self.jobs.entry(job.to_string()).or_default();
         if runtime.emis.is_none() && !j.state.is_terminal() {
-            runtime.emis = EmisJob::new(&j.spec);
+            match EmisJob::new(&j.spec, blobs) {
+                Ok(emis) => runtime.emis = emis,
+                Err(error) => tracing::error!(job_id = %job, %error, "cannot make the EMIS state"),
+            }
         }
         runtime.emis.as_mut()
     }
@@ -493,6 +497,7 @@ fn unreadable_job(id: &str, error: String, now_ms: u64) -> super::model::Job {
         slowest_ms_per_sample: None,
         index: Default::default(),
         paused_ms: None,
+        decided: None,
     }
 }
 

@@ -133,6 +133,7 @@ impl JobService {
                 tracing::warn!(job_id = %job.id, error = %e, "cannot delete old result files");
             }
             blobs.extend(runtime.files.outputs().cloned().chain(runtime.masks));
+            blobs.extend(warm_blobs(&job).cloned());
             blobs.insert(job.spec.bundle_digest);
         }
         blobs.extend(bundles);
@@ -221,11 +222,17 @@ fn restore(inner: &mut Inner, removed: Vec<(Job, JobRuntime)>, sequences: Vec<Se
 }
 
 /// Every blob a job in `inner` names: bundles, outputs (EMIS strategy PNGs and reports
-/// included), merge masks.
+/// included), merge masks, and the masks of frames' warm starts.
 fn live_blobs(inner: &Inner) -> HashSet<String> {
     // a job of frames plans its next frames from its bundle
     let sequences = inner.model.sequences.values().map(|s| s.spec.bundle_digest.clone());
     let bundles = inner.model.jobs.values().map(|j| j.spec.bundle_digest.clone()).chain(sequences);
     let files = inner.jobs.values().flat_map(|r| r.files.outputs().chain(&r.masks).cloned().collect::<Vec<_>>());
-    bundles.chain(files).collect()
+    let warm = inner.model.jobs.values().flat_map(|j| warm_blobs(j).cloned().collect::<Vec<_>>());
+    bundles.chain(files).chain(warm).collect()
+}
+
+/// The masks of the decision a job of frames' frame started from and of the one it made.
+fn warm_blobs(job: &Job) -> impl Iterator<Item = &String> {
+    job.spec.warm.iter().chain(&job.decided).flat_map(|w| w.blobs())
 }

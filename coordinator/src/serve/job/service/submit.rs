@@ -190,6 +190,7 @@ impl JobService {
             after: placement.after,
             require_tags: placement.require_tags,
             frame: None,
+            warm: None,
             full_frame,
             settings: integrator_settings,
             width: scene.camera.width,

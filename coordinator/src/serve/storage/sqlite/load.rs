@@ -23,6 +23,7 @@ struct JobRow {
     merged: i64,
     paused_ms: Option<i64>,
     priority: Option<i32>,
+    decided: Option<String>,
     files: JobFiles,
 }
 
@@ -36,7 +37,8 @@ impl Store {
     ) -> Result<Vec<Result<(Job, JobFiles), (String, StoreError)>>, StoreError> {
         let mut stmt = self.conn.prepare(
             "SELECT id, seq, spec, state, passes, worker_failures, error, created_ms, started_ms, finished_ms,
-                    merged, checkpoint, result_exr, preview_png, strategy_png, emis_json, paused_ms, priority
+                    merged, checkpoint, result_exr, preview_png, strategy_png, emis_json, paused_ms, priority,
+                    decided
              FROM jobs ORDER BY seq",
         )?;
         let rows = stmt.query_map([], |r| {
@@ -61,6 +63,7 @@ impl Store {
                 },
                 paused_ms: r.get(16)?,
                 priority: r.get(17)?,
+                decided: r.get(18)?,
             })
         })?;
         let mut out = Vec::new();
@@ -85,6 +88,8 @@ impl Store {
         let passes: Vec<Pass> = serde_json::from_str(&row.passes).map_err(|e| corrupt(format!("passes: {e}")))?;
         let worker_failures =
             serde_json::from_str(&row.worker_failures).map_err(|e| corrupt(format!("worker_failures: {e}")))?;
+        let decided = row.decided.map(|d| serde_json::from_str(&d)).transpose();
+        let decided = decided.map_err(|e| corrupt(format!("decided: {e}")))?;
         let merged = row.merged as usize;
         let tiles = self.load_tiles(&id, merged, deadline_ms)?;
         if merged > tiles.len() {
@@ -109,6 +114,7 @@ impl Store {
             slowest_ms_per_sample: None,
             index: Default::default(),
             paused_ms: row.paused_ms.map(|t| t as u64),
+            decided,
         };
         job.reindex();
         Ok((job, row.files))
