@@ -77,8 +77,9 @@ pub fn render_emis_state(
 ) -> (Film, tessera_common::emis::EmisState) {
     use tessera_common::emis::{EmisConfig, render_emis};
     let opts = RenderOptions { budget: Budget::Samples(iterations), seed, threads, tile_size: 32 };
-    let out = render_emis(scene, PathSettings::from_scene(scene, None), &EmisConfig::new(method), &opts, &|_, _| {})
-        .expect("render");
+    let out =
+        render_emis(scene, PathSettings::from_scene(scene, None), &EmisConfig::own_pilot(method), &opts, &|_, _| {})
+            .expect("render");
     (out.render.film, out.state)
 }
 

@@ -13,9 +13,15 @@
 //! 0046-incumbent-margin.md have the figures.
 //! `EMIS_DIAG=1` prints every candidate's prediction beside its truth at each judged update;
 //! `EMIS_OUTLIERS=each` decides with that outlier rule instead of the default;
-//! `EMIS_INCUMBENT_MARGIN=0` (or another scale) with that incumbent margin;
-//! `EMIS_PILOT=path-tracing` with the path-tracing start (the tests judge the bidirectional
-//! pilot's decisions; under that start only one judged update may run).
+//! `EMIS_INCUMBENT_MARGIN=0` (or another scale) with that incumbent margin.
+//!
+//! Those tests judge the method's own pilot (`EmisConfig::own_pilot`), whose updates all
+//! decide from the full set. The default pilot (path tracing first, what `tessera render` and
+//! farm jobs run) is judged by the decision its render ends on, the last update's, within the
+//! same 1.25 (`default_pilot_*`). On caustic-glass at seed 1 that fails: path tracing sees no
+//! caustic path in 16 iterations at 128², wins every update and ends there (regret 7.07), so
+//! that test is ignored and says so; requiring 4 recorded iterations before path tracing
+//! settles does not change it (measured: it keeps path tracing at 16).
 //!
 //! Regenerate the truth after a change that alters what candidates render or cost (from the
 //! repository root, release build, an otherwise idle machine; about 45 minutes on 2 cores):
@@ -28,7 +34,7 @@
 mod common;
 
 use common::scene_path;
-use tessera_common::emis::{EmisConfig, EmisMethod, UpdateReport, render_emis};
+use tessera_common::emis::{EmisConfig, EmisMethod, PilotStart, UpdateReport, render_emis};
 use tessera_common::integrator::PathSettings;
 use tessera_common::render::{Budget, RenderOptions};
 use tessera_common::scene::Scene;
@@ -53,23 +59,26 @@ fn truth(name: &str) -> SceneTruth {
     scene
 }
 
-/// The reports of the judged updates of one `emis-vcm` render at `SIZE`².
-fn judged_updates(name: &str, seed: u64) -> Vec<UpdateReport> {
+/// Every update's report of one `emis-vcm` render at `SIZE`² with `pilot`.
+fn updates(name: &str, seed: u64, pilot: PilotStart) -> Vec<UpdateReport> {
     let scene = Scene::load(&scene_path(name)).expect("scene loads").with_resolution(SIZE, SIZE).expect("square");
     // the update after 16 runs only if an iteration follows it
-    let mut config = EmisConfig { updates: vec![1, 4, 16], ..EmisConfig::new(EmisMethod::Vcm) };
+    let mut config = EmisConfig { updates: vec![1, 4, 16], pilot, ..EmisConfig::own_pilot(EmisMethod::Vcm) };
     if let Ok(rule) = std::env::var("EMIS_OUTLIERS") {
         config.filters.outliers = serde_json::from_value(rule.into()).expect("EMIS_OUTLIERS: shared or each");
-    }
-    if let Ok(pilot) = std::env::var("EMIS_PILOT") {
-        config.pilot = serde_json::from_value(pilot.into()).expect("EMIS_PILOT: bidirectional or path-tracing");
     }
     if let Ok(margin) = std::env::var("EMIS_INCUMBENT_MARGIN") {
         config.incumbent_margin = margin.parse().expect("EMIS_INCUMBENT_MARGIN: a number");
     }
     let opts = RenderOptions { budget: Budget::Samples(17), seed, threads: 0, tile_size: 32 };
     let out = render_emis(&scene, PathSettings::from_scene(&scene, None), &config, &opts, &|_, _| {}).expect("render");
-    out.state.reports.into_iter().filter(|r| JUDGED.contains(&r.iteration)).collect()
+    out.state.reports
+}
+
+/// The reports of the judged updates of one render with the method's own pilot.
+fn judged_updates(name: &str, seed: u64) -> Vec<UpdateReport> {
+    let reports = updates(name, seed, PilotStart::Bidirectional);
+    reports.into_iter().filter(|r| JUDGED.contains(&r.iteration)).collect()
 }
 
 /// One judged update with its regret.
@@ -178,4 +187,53 @@ fn veach_mis_merges_almost_nowhere() {
 #[test]
 fn veach_mis_decisions_are_near_the_best() {
     assert_regrets("veach-mis", &judge("veach-mis"));
+}
+
+/// The decision a render with the default pilot (path tracing first) ends on, the last
+/// update's, for every seed, with its regret, printed as a table.
+fn judge_default(name: &str) -> Vec<Judged> {
+    let truth = truth(name);
+    eprintln!("| scene | seed | updates (iteration: ν c, R restarted, S settled) | regret |");
+    SEEDS
+        .iter()
+        .map(|&seed| {
+            let reports = updates(name, seed, PilotStart::PathTracing);
+            let report = reports.last().expect("the update after 1 runs").clone();
+            let regret = truth.regret(report.nu, report.connections).expect("the decision is a candidate");
+            let steps: Vec<String> = reports
+                .iter()
+                .map(|r| {
+                    let marks = format!("{}{}", if r.restarted { " R" } else { "" }, if r.settled { " S" } else { "" });
+                    format!("{}: {} {}{marks}", r.iteration, r.nu, r.connections)
+                })
+                .collect();
+            let line = format!("| {name} | {seed} | {} | {regret:.3} |", steps.join(", "));
+            eprintln!("{line}");
+            Judged { report, line, regret }
+        })
+        .collect()
+}
+
+/// The default pilot on caustic-glass: the render ends on light paths, near the best. Fails
+/// at seed 1 (module documentation): a known defect of the path-tracing start, not fixed.
+#[test]
+#[ignore = "known defect: the path-tracing start never sees caustic-glass's caustic at seed 1 (regret 7.07)"]
+fn default_pilot_on_caustic_glass_ends_on_light_paths_near_the_best() {
+    let judged = judge_default("caustic-glass");
+    for j in &judged {
+        assert!(j.report.nu > 0.0, "caustic-glass: ends in path tracing: {}", j.line);
+    }
+    assert_regrets("caustic-glass", &judged);
+}
+
+/// The default pilot on cornell-box ends near the best.
+#[test]
+fn default_pilot_on_cornell_box_ends_near_the_best() {
+    assert_regrets("cornell-box", &judge_default("cornell-box"));
+}
+
+/// The default pilot on veach-mis ends near the best.
+#[test]
+fn default_pilot_on_veach_mis_ends_near_the_best() {
+    assert_regrets("veach-mis", &judge_default("veach-mis"));
 }

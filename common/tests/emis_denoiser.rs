@@ -20,7 +20,7 @@ fn check(name: &str, estimate: ImageEstimate) {
     let scene = Scene::load(&scene_path(name)).expect("scene loads");
     let reference = read_rgb(&scene_path(name).with_file_name("reference.exr")).expect("reference");
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let mut config = EmisConfig::new(EmisMethod::Vcm);
+    let mut config = EmisConfig::own_pilot(EmisMethod::Vcm);
     config.denoise = estimate.settings();
     let candidates = config.candidates.candidates();
     let settings = PathSettings::from_scene(&scene, None);

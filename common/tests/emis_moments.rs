@@ -131,7 +131,7 @@ fn pt_strategy_records_moments_in_a_quarter_then_an_eighth_of_the_iterations() {
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     // the guided Ī, whose updates read guides
-    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::own_pilot(EmisMethod::Vcm) };
     let pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: None };
     let sparse = [SPARSE_FROM + 2, SPARSE_FROM + 10];
     for skipped in [1, 3, 4, 5, 8].into_iter().chain(sparse) {
@@ -181,7 +181,7 @@ fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
     use tessera_common::emis::denoise::DenoiseSettings;
-    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Bdpt) };
+    let config = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::own_pilot(EmisMethod::Bdpt) };
     let pilot = Strategy::pilot(EmisMethod::Bdpt);
     let guides = |iterations| {
         let (_, data) = render_iterations(&scene, settings, &config, &pilot, 7, iterations, Some(CandidateSet::Full));
@@ -214,12 +214,12 @@ fn guides_are_the_pilots_primary_vertices_and_merge_like_one_run() {
 #[test]
 fn guides_are_recorded_only_where_an_update_reads_them() {
     use tessera_common::emis::denoise::DenoiseSettings;
-    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotStart, Strategy, render_iterations};
+    use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let default = EmisConfig::new(EmisMethod::Vcm);
-    let guided = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::new(EmisMethod::Vcm) };
-    let start = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let default = EmisConfig::own_pilot(EmisMethod::Vcm);
+    let guided = EmisConfig { denoise: DenoiseSettings::GUIDED, ..EmisConfig::own_pilot(EmisMethod::Vcm) };
+    let start = EmisConfig::new(EmisMethod::Vcm);
     let record = |config: &EmisConfig, strategy: &Strategy, set| {
         let (_, data) = render_iterations(&scene, settings, config, strategy, 5, 0..1, Some(set));
         data.expect("iteration 0 records").guides
@@ -247,7 +247,7 @@ fn path_tracing_with_a_merge_mask_counts_only_the_probes_queries() {
     use tessera_common::integrator::path::merge::MergeMask;
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let merging_pt = Strategy { nu: 0.0, connections: Connections::Fixed(0), merge: Some(MergeMask::Constant(1.0)) };
     let (image, data) = render_iterations(&scene, settings, &config, &merging_pt, 3, 2..3, Some(CandidateSet::Full));
     let statistics = data.expect("iteration 2 records").statistics;
@@ -273,7 +273,7 @@ fn collecting_iterations_time_their_work() {
     use tessera_common::integrator::observer::TIMED_PIXEL_STRIDE;
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let measured = EmisConfig { measured_costs: true, ..config.clone() };
     let pilot = Strategy::pilot(EmisMethod::Vcm);
     // not the job's first call, which would also probe path tracing
@@ -319,7 +319,7 @@ fn the_first_call_probes_path_tracing_when_costs_are_measured() {
     use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
     let scene = Scene::load(&scene_path("cornell-box")).expect("scene loads");
     let settings = PathSettings::from_scene(&scene, None);
-    let mut config = EmisConfig::new(EmisMethod::Vcm);
+    let mut config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let start = Strategy::path_tracing_start(EmisMethod::Vcm);
     let (plain, _) = render_iterations(&scene, settings, &config, &start, 2, 0..1, Some(CandidateSet::Reduced));
     config.measured_costs = true;

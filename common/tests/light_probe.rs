@@ -7,7 +7,7 @@ mod common;
 
 use common::scene_path;
 use tessera_common::emis::cost::PathStatistics;
-use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, PilotStart, Strategy, render_iterations};
+use tessera_common::emis::{CandidateSet, EmisConfig, EmisMethod, Strategy, render_iterations};
 use tessera_common::film::{Rect, TileAccum};
 use tessera_common::integrator::path::merge::MergeMask;
 use tessera_common::integrator::{Integrator, PathSettings, TileRequest};
@@ -21,7 +21,7 @@ fn scene() -> Scene {
 
 /// The statistics and the image of one recorded iteration with `strategy`.
 fn record(scene: &Scene, strategy: &Strategy, set: CandidateSet) -> (PathStatistics, TileAccum) {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let settings = PathSettings::from_scene(scene, None);
     let (accum, data) = render_iterations(scene, settings, &config, strategy, 3, 0..1, Some(set));
     let data = data.expect("a recording iteration returns pilot data");

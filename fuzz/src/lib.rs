@@ -177,7 +177,7 @@ pub mod job {
     pub fn emis(head: [u8; 2]) -> (Decoder, EmisConfig, CandidateSet, u32, u32) {
         let decoder = [Decoder::Pilot, Decoder::State, Decoder::Decisions][head[0] as usize % 3];
         let method = if head[0] & 4 == 0 { EmisMethod::Bdpt } else { EmisMethod::Vcm };
-        let mut config = EmisConfig::new(method);
+        let mut config = EmisConfig::own_pilot(method);
         config.pilot = if head[0] & 8 == 0 { PilotStart::Bidirectional } else { PilotStart::PathTracing };
         let set = if head[0] & 16 == 0 { CandidateSet::Full } else { CandidateSet::Reduced };
         (decoder, config, set, head[1] as u32 % 4 + 1, (head[1] as u32 >> 2) % 4 + 1)

@@ -178,9 +178,9 @@ impl EmisConfig {
     /// The default [`EmisConfig::incumbent_margin`] (docs/decisions/0046-incumbent-margin.md).
     pub const INCUMBENT_MARGIN: f64 = 0.25;
 
-    /// The paper's configuration of `method`, with the method's own pilot
-    /// ([`PilotStart::Bidirectional`], what the decision tests and benches study); a render's
-    /// settings choose the pilot (`RenderSettings::emis_pilot`, [`PilotStart::default`]).
+    /// The paper's configuration of `method` with the default pilot ([`PilotStart::default`],
+    /// path tracing first), as `tessera render` and farm jobs run it unless their settings
+    /// choose another (`RenderSettings::emis_pilot`).
     pub fn new(method: EmisMethod) -> Self {
         EmisConfig {
             method,
@@ -195,7 +195,7 @@ impl EmisConfig {
             filters: FilterSettings::default(),
             denoise: DenoiseSettings::default(),
             start_denoise: DenoiseSettings::GUIDED_HALF,
-            pilot: PilotStart::Bidirectional,
+            pilot: PilotStart::default(),
             connection_scope: ConnectionScope::default(),
             settle_margin: Self::SETTLE_MARGIN,
             incumbent_margin: Self::INCUMBENT_MARGIN,
@@ -213,6 +213,13 @@ impl EmisConfig {
                 PilotStart::PathTracing => (Strategy::path_tracing_start(self.method), CandidateSet::Reduced),
             },
         }
+    }
+
+    /// [`EmisConfig::new`] with the method's own pilot ([`PilotStart::Bidirectional`]), which
+    /// the benches and most decision tests study: its updates judge the full candidate set from
+    /// the first iteration on.
+    pub fn own_pilot(method: EmisMethod) -> Self {
+        EmisConfig { pilot: PilotStart::Bidirectional, ..Self::new(method) }
     }
 
     /// Whether the updates of `set` read the denoiser's guides: only the guided filter does,

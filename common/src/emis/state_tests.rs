@@ -25,7 +25,7 @@ fn pilot(state: &EmisState, moment: impl Fn(&Candidate) -> f32) -> PilotData {
 /// image kept from that iteration on) with that candidate's global merge decision.
 #[test]
 fn a_path_tracing_start_restarts_when_a_bidirectional_candidate_wins() {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let mut state = EmisState::new(config, SIDE, SIDE);
     assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
     assert_eq!(state.strategy, Strategy::path_tracing_start(EmisMethod::Vcm));
@@ -75,7 +75,7 @@ fn a_restart_pilots_the_next_update_with_merging_everywhere() {
     let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
     let target = Candidate { nu: 1.0, connections: 1, merge: false };
     let restart = |method: EmisMethod, updates: Vec<u32>| {
-        let config = EmisConfig { pilot: PilotStart::PathTracing, updates, ..EmisConfig::new(method) };
+        let config = EmisConfig { updates, ..EmisConfig::new(method) };
         let mut state = EmisState::new(config, SIDE, SIDE);
         state.absorb(&pilot(&state, |c| if *c == target { 1e-3 } else { 1e4 })).unwrap();
         let report = state.update(&image, 4, RestartTotal::Samples(1000)).clone();
@@ -96,7 +96,7 @@ fn a_restart_pilots_the_next_update_with_merging_everywhere() {
 fn a_restart_whose_next_update_would_not_pay_renders_its_winner() {
     let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
     let target = Candidate { nu: 1.0, connections: 1, merge: false };
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     // the winner as `reaches` prices it, merging everywhere, against path tracing
     let sums = StatisticsSums { iterations: 1, camera_vertices: 3 * (SIDE * SIDE) as u64, ..Default::default() };
     let merged = Candidate { merge: true, ..target };
@@ -130,7 +130,7 @@ fn a_restart_whose_next_update_would_not_pay_renders_its_winner() {
 /// time budget of 17 iterations at pt's pace the dearer winner would not reach 16.
 #[test]
 fn a_restart_must_win_back_the_iterations_it_discards() {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
     let target = Candidate { nu: 1.0, connections: 0, merge: false };
     use RestartTotal::{Samples, Time};
@@ -179,7 +179,7 @@ fn a_restart_must_win_back_the_iterations_it_discards() {
 /// one recorded iteration, and never with an infinite margin.
 #[test]
 fn path_tracing_settles_after_two_clear_wins_in_a_row() {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let image = vec![[0.5f32; 3]; (SIDE * SIDE) as usize];
     // one iteration in which path tracing's moment is `pt` and every other candidate's
     // moment × cost is `other` times path tracing's cost
@@ -237,11 +237,11 @@ fn path_tracing_settles_after_two_clear_wins_in_a_row() {
     assert!(state.update(&image, 4, RestartTotal::Samples(1000)).settled);
 }
 
-/// The bidirectional pilot (`EmisConfig::new`'s) never restarts, even when its first
+/// The bidirectional pilot (`EmisConfig::own_pilot`) never restarts, even when its first
 /// update chooses a bidirectional strategy.
 #[test]
 fn the_bidirectional_pilot_never_restarts() {
-    let mut state = EmisState::new(EmisConfig::new(EmisMethod::Bdpt), SIDE, SIDE);
+    let mut state = EmisState::new(EmisConfig::own_pilot(EmisMethod::Bdpt), SIDE, SIDE);
     assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Full, 26));
     state.absorb(&pilot(&state, |c| if c.nu == 2.0 && c.connections == 1 { 1e-3 } else { 1.0 })).unwrap();
     let report = state.update(&vec![[0.5f32; 3]; (SIDE * SIDE) as usize], 1, RestartTotal::Samples(64)).clone();
@@ -258,7 +258,7 @@ fn a_warm_start_begins_with_the_strategy_it_was_handed() {
     let config = EmisConfig {
         pilot: PilotStart::PathTracing,
         warm_start: Some(decided.clone()),
-        ..EmisConfig::new(EmisMethod::Vcm)
+        ..EmisConfig::own_pilot(EmisMethod::Vcm)
     };
     let mut state = EmisState::new(config.clone(), SIDE, SIDE);
     assert_eq!((&state.strategy, state.candidate_set, state.candidates.len()), (&decided, CandidateSet::Full, 51));

@@ -108,7 +108,7 @@ fn pilot_data_round_trips_and_refuses_bad_sizes_and_values() {
 
 #[test]
 fn decisions_read_from_a_checkpoint_head_alone() {
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let mut state = EmisState::new(config, 4, 3);
     state.update(&[[0.5; 3]; 12], 1, crate::emis::RestartTotal::Time(u32::MAX));
     let bytes = state.encode();
@@ -126,13 +126,13 @@ fn decisions_read_from_a_checkpoint_head_alone() {
     let mut other = bytes.clone();
     other[4..8].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
     assert!(EmisState::read_decisions(&mut &other[..]).unwrap_err().contains("another Tessera version"));
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     assert!(EmisState::decode(config, 4, 3, &other).err().is_some_and(|e| e.contains("another Tessera version")));
 }
 
 #[test]
 fn emis_state_checkpoint_round_trips() {
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let mut state = EmisState::new(config.clone(), 3, 2);
     state.absorb(&pilot(3, 2, state.candidates.len())).unwrap();
     state.strategy = Strategy {
@@ -167,7 +167,7 @@ fn emis_state_checkpoint_round_trips() {
 /// restart the full set and the first kept iteration.
 #[test]
 fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let mut state = EmisState::new(config.clone(), 3, 2);
     assert_eq!((state.candidate_set, state.candidates.len()), (CandidateSet::Reduced, 9));
     state.absorb(&pilot(3, 2, 9)).unwrap();
@@ -185,7 +185,7 @@ fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() 
     state.candidate_set = CandidateSet::Reduced;
     assert!(EmisState::decode(config, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
     state.kept_from = 0;
-    let bidirectional = EmisConfig::new(EmisMethod::Vcm);
+    let bidirectional = EmisConfig::own_pilot(EmisMethod::Vcm);
     assert!(EmisState::decode(bidirectional, 3, 2, &state.encode()).err().unwrap().contains("reduced"));
 }
 
@@ -193,7 +193,7 @@ fn emis_state_checkpoint_keeps_the_candidate_set_and_the_first_kept_iteration() 
 /// one that does not end where the image begins is refused.
 #[test]
 fn emis_state_checkpoint_keeps_the_path_tracing_start() {
-    let config = EmisConfig { pilot: PilotStart::PathTracing, ..EmisConfig::new(EmisMethod::Vcm) };
+    let config = EmisConfig::new(EmisMethod::Vcm);
     let mut state = EmisState::new(config.clone(), 3, 2);
     state.candidate_set = CandidateSet::Full;
     state.candidates = config.candidates_of(CandidateSet::Full);

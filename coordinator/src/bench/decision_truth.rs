@@ -135,7 +135,13 @@ impl Subject {
         let scene = scene.with_resolution(size, size).context("same proportions")?;
         let reference = downsample(&reference.pixels, w as usize, (w / size) as usize);
         let settings = PathSettings::from_scene(&scene, None);
-        Ok(Subject { name: scene_name(path), scene, settings, reference, config: EmisConfig::new(EmisMethod::Vcm) })
+        Ok(Subject {
+            name: scene_name(path),
+            scene,
+            settings,
+            reference,
+            config: EmisConfig::own_pilot(EmisMethod::Vcm),
+        })
     }
 
     fn pixels(&self) -> u32 {

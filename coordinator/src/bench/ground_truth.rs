@@ -136,7 +136,7 @@ impl Subject {
         let reference = tessera_common::film::exr::read_rgb(&path.with_file_name("reference.exr"))?.pixels;
         let ref_mean = reference.iter().map(|p| (p[0] + p[1] + p[2]) / 3.0).collect();
         let settings = PathSettings::from_scene(&scene, None);
-        Ok(Subject { scene, reference, ref_mean, settings, config: EmisConfig::new(EmisMethod::Vcm) })
+        Ok(Subject { scene, reference, ref_mean, settings, config: EmisConfig::own_pilot(EmisMethod::Vcm) })
     }
 
     fn size(&self) -> (usize, usize) {

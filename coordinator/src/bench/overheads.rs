@@ -59,7 +59,7 @@ struct Overhead {
 /// host's load changing between rounds, which separate fastest times are not).
 fn accumulation_overhead(scene: &Scene, method: EmisMethod, iterations: u32, repeats: u32) -> Overhead {
     // the guided Ī, so that the first iterations record the guides (the default Ī does not)
-    let config = EmisConfig { denoise: ImageEstimate::Guided.settings(), ..EmisConfig::new(method) };
+    let config = EmisConfig { denoise: ImageEstimate::Guided.settings(), ..EmisConfig::own_pilot(method) };
     let settings = PathSettings::from_scene(scene, None);
     let strategy = Strategy::pilot(method);
     let mut best = [f64::INFINITY; 3];
@@ -124,7 +124,7 @@ impl UpdateKind {
 /// One denoiser and one optimiser run of the VCM update `kind` on synthetic inputs of
 /// `w × h`: (optimiser seconds, denoiser seconds, candidates, moment bytes).
 fn update_time(w: u32, h: u32, kind: UpdateKind) -> (f64, f64, usize, usize) {
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     let set = match kind {
         UpdateKind::PathTracingStart => CandidateSet::Reduced,
         UpdateKind::Bidirectional | UpdateKind::BidirectionalGuided => CandidateSet::Full,

@@ -99,7 +99,7 @@ pub fn table(args: &SceneArgs, repeats: u32, pool: &rayon::ThreadPool) -> anyhow
     );
     println!("| scene | pt ms/it | {} | {} | {} |", RUNS[1], RUNS[2], RUNS[3]);
     println!("|---|---|---|---|---|");
-    let config = EmisConfig::new(EmisMethod::Vcm);
+    let config = EmisConfig::own_pilot(EmisMethod::Vcm);
     for path in &args.scenes()? {
         let scene = Scene::load(path)?;
         let rounds: Vec<[(f64, f64); 4]> =

@@ -65,7 +65,7 @@ fn measure_scene(
     let (w, h) = (scene.camera.width, scene.camera.height);
     let pixels = w * h;
     let settings = PathSettings::from_scene(scene, None);
-    let mut config = EmisConfig::new(EmisMethod::Vcm);
+    let mut config = EmisConfig::own_pilot(EmisMethod::Vcm);
     // the pilot times path tracing's probe too, for the constants it measures
     config.measured_costs = true;
     // the statistics of the pilot (two iterations), as the optimiser would see them
