@@ -30,7 +30,7 @@ import zlib
 ROOT = os.path.dirname(os.path.abspath(__file__))
 NEW_SCENES = ["textured-room", "spectral-cornell", "spectral-emitters", "included-scene", "legacy-v06",
               "spot-directional", "serialized-uv", "checker-conductor", "masked-leaves", "mesh-colors",
-              "lanczos-crop", "envmap-glossy", "textured-emitters"]
+              "lanczos-crop", "envmap-glossy", "textured-emitters", "direct-samples"]
 OBJECT_TAGS = {"scene", "bsdf", "shape", "emitter", "texture", "sensor", "film", "rfilter", "sampler",
                "integrator", "medium", "phase", "volume"}
 PROP_TAGS = {"boolean", "integer", "float", "string", "point", "vector", "rgb", "spectrum", "transform"}

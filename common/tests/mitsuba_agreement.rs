@@ -143,6 +143,7 @@ macro_rules! all_scenes {
             spectral_cornell => "spectral-cornell",
             spectral_emitters => "spectral-emitters",
             spot_directional => "spot-directional",
+            direct_samples => "direct-samples",
             textured_room => "textured-room",
             textured_emitters => "textured-emitters",
             living_room => "living-room",
@@ -198,6 +199,7 @@ mod light_tracing {
         spectral_cornell => "spectral-cornell",
         spectral_emitters => "spectral-emitters",
         spot_directional => "spot-directional",
+        direct_samples => "direct-samples",
         textured_emitters => "textured-emitters",
     );
 

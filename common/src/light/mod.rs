@@ -155,6 +155,17 @@ fn sphere_cone(dist2: f32, radius: f32) -> (f32, f32) {
 }
 
 impl Light {
+    /// Multiplies a point, spot or directional light's emission by `factor`; other lights are
+    /// left as they are (see `IntegratorSettings::delta_light_factor`).
+    pub fn scale_delta(&mut self, factor: f32) {
+        match self {
+            Light::Point { intensity, .. } => *intensity = *intensity * factor,
+            Light::Spot(spot) => spot.intensity = spot.intensity * factor,
+            Light::Directional { irradiance, .. } => *irradiance = *irradiance * factor,
+            Light::Area { .. } | Light::Constant { .. } | Light::Envmap(_) => {}
+        }
+    }
+
     /// Whether the light is a delta light (a point or one direction: cannot be hit by rays).
     pub fn is_delta(&self) -> bool {
         matches!(self, Light::Point { .. } | Light::Spot(_) | Light::Directional { .. })

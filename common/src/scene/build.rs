@@ -123,7 +123,12 @@ pub(super) fn build(tree: &SceneTree, path: &Path, limits: SceneLimits) -> Resul
         max_depth: None,
         rr_depth: 5,
         hide_emitters: false,
+        delta_light_factor: 1,
     });
+    if integrator.delta_light_factor != 1 {
+        let factor = integrator.delta_light_factor as f32;
+        b.lights.iter_mut().for_each(|light| light.scale_delta(factor));
+    }
     Ok(Scene::assemble(
         path,
         Parts {

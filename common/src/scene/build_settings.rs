@@ -86,6 +86,7 @@ fn build_path_like(e: &Element) -> Result<IntegratorSettings, SceneError> {
         max_depth: max_depth(e)?,
         rr_depth: rr_depth(e)?,
         hide_emitters: e.boolean_or("hide_emitters", false)?,
+        delta_light_factor: 1,
     };
     let mut ignored = read_ignored(e, SAMPLING_INTEGRATOR_EXTRAS)?;
     if e.plugin == "volpathmis" {
@@ -103,7 +104,8 @@ fn build_path_like(e: &Element) -> Result<IntegratorSettings, SceneError> {
 }
 
 /// `direct` = emitter hits plus next-event and BSDF samples at the first surface: `path`'s
-/// expectation with `max_depth` 2.
+/// expectation with `max_depth` 2, but that each emitter sample of a point, spot or directional
+/// light counts whole ([`IntegratorSettings::delta_light_factor`]).
 fn build_direct(e: &Element) -> Result<IntegratorSettings, SceneError> {
     let shading = e.integer("shading_samples")?;
     let (emitter, bsdf) = (e.integer("emitter_samples")?, e.integer("bsdf_samples")?);
@@ -124,13 +126,27 @@ fn build_direct(e: &Element) -> Result<IntegratorSettings, SceneError> {
     let hide_emitters = e.boolean_or("hide_emitters", false)?;
     let ignored = read_ignored(e, SAMPLING_INTEGRATOR_EXTRAS)?;
     e.check_all_used()?;
+    if counts[1] == 0 {
+        // BSDF sampling is the only way `direct` lights a smooth mirror or glass (or a lobe
+        // of one): without it Mitsuba shows no light there, path tracing does
+        tracing::warn!(
+            file = %e.location,
+            "direct with bsdf_samples 0 renders what mirrors, glass and smooth coatings reflect of area and environment lights; Mitsuba leaves it black"
+        );
+    }
     tracing::warn!(
         file = %e.location,
         integrator = %e.plugin,
         ignored = ?ignored,
-        "direct converges to path's image with max_depth 2: rendered that way, sample counts ignored"
+        "direct converges to path's image with max_depth 2, point, spot and directional lights times emitter_samples: rendered that way"
     );
-    Ok(IntegratorSettings { kind: e.plugin.clone(), max_depth: Some(2), rr_depth: 5, hide_emitters })
+    Ok(IntegratorSettings {
+        kind: e.plugin.clone(),
+        max_depth: Some(2),
+        rr_depth: 5,
+        hide_emitters,
+        delta_light_factor: counts[0] as u32,
+    })
 }
 
 /// `aov` and `moment` render their first nested integrator; the extra outputs are not produced.

@@ -49,6 +49,11 @@ pub struct IntegratorSettings {
     pub rr_depth: u32,
     /// Hide directly visible emitters.
     pub hide_emitters: bool,
+    /// What point, spot and directional lights' light is multiplied by: Mitsuba's `direct`
+    /// weighs each of its `emitter_samples` samples of a delta light by 1, not by
+    /// 1 / `emitter_samples` as other lights (`src/integrators/direct.cpp`), so their direct
+    /// light is that many times their own (0: none). 1 for every other integrator.
+    pub delta_light_factor: u32,
 }
 
 /// How much memory a scene may make its loader take.

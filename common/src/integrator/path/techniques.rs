@@ -320,7 +320,9 @@ fn camera_contribution(
     let value = match v.kind {
         VertexKind::Light { light, at } => {
             let light = &scene.lights[light as usize];
-            if light.is_infinite() {
+            // a point or spot light has no area the camera could see, so Mitsuba's ptracer
+            // does not connect it to the sensor: splatted, it would be one pixel's spike
+            if light.is_infinite() || light.is_delta() {
                 return None;
             }
             light.emitted_towards(&scene.light_context(), at, v.p, v.n_geo, cs.wi) * v.beta.x
