@@ -30,7 +30,9 @@ import zlib
 ROOT = os.path.dirname(os.path.abspath(__file__))
 NEW_SCENES = ["textured-room", "spectral-cornell", "spectral-emitters", "included-scene", "legacy-v06",
               "spot-directional", "serialized-uv", "checker-conductor", "masked-leaves", "mesh-colors",
-              "lanczos-crop", "envmap-glossy", "textured-emitters", "direct-samples"]
+              "lanczos-crop", "envmap-glossy", "textured-emitters", "direct-samples",
+              "area-ref", "conductor-names",
+              "spot-texture"]
 OBJECT_TAGS = {"scene", "bsdf", "shape", "emitter", "texture", "sensor", "film", "rfilter", "sampler",
                "integrator", "medium", "phase", "volume"}
 PROP_TAGS = {"boolean", "integer", "float", "string", "point", "vector", "rgb", "spectrum", "transform"}
@@ -356,7 +358,7 @@ REQUIRED = [
 ]
 FORBIDDEN = ["spectrum/blackbody", "bsdf/principled", "bsdf/normalmap", "bsdf/bumpmap", "bsdf/blendbsdf",
              "shape/instance", "shape/shapegroup", "shape/cylinder", "sensor/thinlens", "sensor/orthographic",
-             "medium/", "phase/", "integrator/ptracer", "bsdf/polarizer", "bsdf/retarder", "emitter/spot:texture",
+             "medium/", "phase/", "integrator/ptracer", "bsdf/polarizer", "bsdf/retarder",
              "bsdf/dielectric:int_ior<-", "bsdf/dielectric:ext_ior<-"]
 
 

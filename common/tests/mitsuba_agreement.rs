@@ -144,6 +144,9 @@ macro_rules! all_scenes {
             spectral_emitters => "spectral-emitters",
             spot_directional => "spot-directional",
             direct_samples => "direct-samples",
+            area_ref => "area-ref",
+            conductor_names => "conductor-names",
+            spot_texture => "spot-texture",
             textured_room => "textured-room",
             textured_emitters => "textured-emitters",
             living_room => "living-room",
@@ -200,6 +203,8 @@ mod light_tracing {
         spectral_emitters => "spectral-emitters",
         spot_directional => "spot-directional",
         direct_samples => "direct-samples",
+        area_ref => "area-ref",
+        spot_texture => "spot-texture",
         textured_emitters => "textured-emitters",
     );
 
@@ -212,6 +217,7 @@ mod light_tracing {
             "caustic-glass",
             "env-lit",
             "checker-conductor",
+            "conductor-names",
             "envmap-glossy",
             "legacy-v06",
             "masked-leaves",

@@ -261,3 +261,20 @@ fn unused_caller_parameter_is_an_error() {
     let msg = Scene::load_with(&path, &defines).err().expect("error").to_string();
     assert!(msg.contains("\"spp\"") && msg.contains("not used"), "{msg}");
 }
+
+/// A top-level area emitter lights the shape that references it; a second shape referencing
+/// it is refused at its `<ref>`, as Mitsuba refuses it; one no shape references is left out.
+#[test]
+fn an_area_emitter_referenced_by_two_shapes_is_refused_at_the_second() {
+    let light = r#"<emitter type="area" id="lamp"><rgb name="radiance" value="1, 1, 1"/></emitter>"#;
+    let sphere =
+        |y: f32| format!(r#"<shape type="sphere"><point name="center" value="0, {y}, -3"/><ref id="lamp"/></shape>"#);
+    let one = format!("<scene version=\"3.0.0\">\n{SENSOR}\n{light}\n{}\n</scene>\n", sphere(0.0));
+    let (scene, _dir) = load(&[("scene.xml", &one)]);
+    assert_eq!(scene.expect("one shape references it").lights.len(), 1);
+    let two = format!("<scene version=\"3.0.0\">\n{SENSOR}\n{light}\n{}\n{}\n</scene>\n", sphere(0.0), sphere(1.0));
+    expect_error(&[("scene.xml", &two)], "scene.xml", 6, "already lights the shape at");
+    let none = format!("<scene version=\"3.0.0\">\n{SENSOR}\n{light}\n<shape type=\"sphere\"/>\n</scene>\n");
+    let (scene, _dir) = load(&[("scene.xml", &none)]);
+    assert!(scene.expect("an unreferenced emitter is left out").lights.is_empty());
+}

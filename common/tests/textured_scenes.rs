@@ -172,8 +172,11 @@ fn parameters_mitsuba_does_not_texture_are_refused() {
     let conductor =
         format!("<shape type=\"sphere\"><bsdf type=\"conductor\">\n{}</bsdf></shape>", tex.replace("NAME", "eta"));
     expect_error(&conductor, &[], 5, "textured \"eta\"");
-    let spot = "<emitter type=\"spot\">\n<texture type=\"checkerboard\" name=\"texture\"/></emitter>";
-    expect_error(spot, &[], 5, "only an area light's radiance can be textured");
+    let spot = "<emitter type=\"spot\">\n<texture type=\"checkerboard\" name=\"intensity\"/></emitter>";
+    expect_error(spot, &[], 5, "only an area light's radiance and a spot's texture can be textures");
+    // a spot's projected image must vary, as Mitsuba requires
+    let flat = "<emitter type=\"spot\">\n<rgb name=\"texture\" value=\"0.5\"/></emitter>";
+    expect_error(flat, &[], 5, "must vary over the image");
 }
 
 #[test]

@@ -69,6 +69,20 @@ pub struct Spot {
     pub cutoff: f32,
     /// Half-angle of the full-intensity beam (radians).
     pub beam: f32,
+    /// An image projected along the beam (Mitsuba's `texture`).
+    pub projection: Option<Projection>,
+}
+
+/// A spot light's projected image: looked up at (½ + ½ x / (z tan cutoff), ½ + ½ y / (z tan
+/// cutoff)) of the direction in the light's own frame, as Mitsuba's `direction_to_uv`.
+#[derive(Clone, Debug)]
+pub struct Projection {
+    /// The image.
+    pub texture: Arc<Texture>,
+    /// World to the light's frame (its `to_world` rotation, transposed).
+    pub to_local: glam::Mat3,
+    /// tan(cutoff).
+    pub uv_factor: f32,
 }
 
 impl Spot {
@@ -83,7 +97,15 @@ impl Spot {
         } else {
             0.0
         };
-        self.intensity * falloff
+        match &self.projection {
+            Some(p) if falloff > 0.0 => {
+                let l = p.to_local * d;
+                let scale = 0.5 / (l.z * p.uv_factor);
+                let uv = Vec2::new(0.5 + l.x * scale, 0.5 + l.y * scale);
+                self.intensity * falloff * p.texture.eval(&crate::texture::TexturePoint::uv(uv))
+            }
+            _ => self.intensity * falloff,
+        }
     }
 }
 

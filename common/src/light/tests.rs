@@ -186,6 +186,7 @@ fn test_spot() -> Light {
         intensity: Rgb::splat(5.0),
         cutoff: 30f32.to_radians(),
         beam: 20f32.to_radians(),
+        projection: None,
     })
 }
 
@@ -198,6 +199,7 @@ fn spot_falloff_is_linear_in_the_angle_as_in_mitsuba() {
         intensity: Rgb::ONE,
         cutoff: 20f32.to_radians(),
         beam: 15f32.to_radians(),
+        projection: None,
     };
     let at = |deg: f32| {
         let r = deg.to_radians();

@@ -36,6 +36,9 @@ struct Builder<'a> {
     material_textures: Vec<Option<MaterialTextures>>,
     /// Bsdf ids → material index, so a BSDF shared through `<ref>` is built once.
     material_ids: HashMap<String, u32>,
+    /// Top-level area emitters' ids → the shape that references one (`<ref>` inside a
+    /// `<shape>`, as Mitsuba allows): each may light one shape only.
+    attached: HashMap<String, Location>,
     lights: Vec<Light>,
     light_weights: Vec<f32>,
 }
@@ -77,11 +80,13 @@ pub(super) fn build(tree: &SceneTree, path: &Path, limits: SceneLimits) -> Resul
         materials: vec![],
         material_textures: vec![],
         material_ids: HashMap::new(),
+        attached: HashMap::new(),
         lights: vec![],
         light_weights: vec![],
     };
     let mut sensor: Option<(SensorSettings, &Location)> = None;
     let mut integrator: Option<IntegratorSettings> = None;
+    let mut area_ids = Vec::new();
     for e in &tree.elements {
         match e.tag.as_str() {
             "bsdf" => {
@@ -92,6 +97,8 @@ pub(super) fn build(tree: &SceneTree, path: &Path, limits: SceneLimits) -> Resul
                 // built (and its file read) even when unused, as Mitsuba does
                 b.textures.texture(e)?;
             }
+            // built by the shape that references it
+            "emitter" if e.plugin == "area" && e.id.is_some() => area_ids.push(e),
             "emitter" => {
                 let (light, w) = build_emitter(e, None, &mut b.textures)?;
                 b.lights.push(light);
@@ -116,6 +123,10 @@ pub(super) fn build(tree: &SceneTree, path: &Path, limits: SceneLimits) -> Resul
             _ if e.is_spectrum() => {}
             other => return Err(SceneError::at(&e.location, format!("<{other}> is not supported"))),
         }
+    }
+    for e in area_ids.iter().filter(|e| e.id.as_ref().is_some_and(|id| !b.attached.contains_key(id))) {
+        // Mitsuba loads it and leaves it out of the scene's emitters
+        tracing::warn!(file = %e.location, id = e.id.as_deref(), "an area emitter no shape references lights nothing");
     }
     let (sensor, _) = sensor.ok_or_else(|| SceneError::file(path, "the scene has no <sensor>"))?;
     let integrator = integrator.unwrap_or(IntegratorSettings {
@@ -397,6 +408,17 @@ impl Builder<'_> {
         Ok(m)
     }
 
+    /// Records that a shape references the top-level area emitter `c` (a copy placed by
+    /// `<ref>`); a second shape doing so is refused, as Mitsuba refuses it.
+    fn attach(&mut self, c: &Element) -> Result<(), SceneError> {
+        let (Some(id), Some(at)) = (&c.id, &c.reference) else { return Ok(()) };
+        if let Some(first) = self.attached.insert(id.clone(), at.clone()) {
+            let why = format!("area emitter \"{id}\" already lights the shape at {first}: an emitter lights one shape");
+            return Err(SceneError::at(at, why));
+        }
+        Ok(())
+    }
+
     fn shape(&mut self, e: &Element) -> Result<(), SceneError> {
         let mut material = None;
         let mut emitter = None;
@@ -405,7 +427,10 @@ impl Builder<'_> {
             match c.tag.as_str() {
                 "bsdf" if material.is_none() => material = Some(self.material_of(c)?),
                 "bsdf" => return Err(SceneError::at(at, "a shape can have only one bsdf")),
-                "emitter" if emitter.is_none() => emitter = Some(c),
+                "emitter" if emitter.is_none() => {
+                    self.attach(c)?;
+                    emitter = Some(c)
+                }
                 "emitter" => return Err(SceneError::at(at, "a shape can have only one nested emitter")),
                 other => return Err(SceneError::at(at, format!("a shape cannot contain <{other}>"))),
             }

@@ -36,17 +36,6 @@ const NAMED_IORS: &[(&str, f32)] = &[
     ("diamond", 2.419),
 ];
 
-/// Named conductors as Mitsuba's `*_rgb` variants resolve them (`src/bsdfs/conductor.cpp`,
-/// the spectra integrated to RGB).
-const NAMED_CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
-    ("Au", [0.143036, 0.375307, 1.44205], [3.983, 2.38556, 1.60336]),
-    ("Cu", [0.201005, 0.92375, 1.10222], [3.91326, 2.45305, 2.14209]),
-    ("Ag", [0.155276, 0.116728, 0.138388], [4.82835, 3.12222, 2.1469]),
-    ("Al", [1.6575, 0.880405, 0.521244], [9.22381, 6.2695, 4.837]),
-    ("Cr", [4.36967, 2.91651, 1.6549], [5.20655, 4.23131, 3.7547]),
-    ("none", [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
-];
-
 fn ior(e: &Element, name: &str, default: &str) -> Result<f32, SceneError> {
     if let Ok(Some(v)) = e.float(name) {
         if v <= 0.0 {
@@ -184,12 +173,12 @@ fn conductor_ior(e: &Element) -> Result<(Rgb, Rgb), SceneError> {
     let material = e.string("material")?;
     let (eta, k) = (e.color("eta", ColorUsage::Unbounded)?, e.color("k", ColorUsage::Unbounded)?);
     match (material, eta, k) {
-        (Some(m), None, None) => NAMED_CONDUCTORS
+        (Some(m), None, None) => super::conductors::NAMED_CONDUCTORS
             .iter()
             .find(|(n, _, _)| *n == m)
             .map(|(_, eta, k)| (Rgb::from(*eta), Rgb::from(*k)))
             .ok_or_else(|| {
-                let names: Vec<&str> = NAMED_CONDUCTORS.iter().map(|(n, _, _)| *n).collect();
+                let names: Vec<&str> = super::conductors::NAMED_CONDUCTORS.iter().map(|(n, _, _)| *n).collect();
                 SceneError::at(
                     e.location_of("material"),
                     format!("unknown conductor material \"{m}\" (supported: {})", names.join(", ")),

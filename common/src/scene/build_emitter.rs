@@ -4,7 +4,7 @@
 use super::build_texture::{Param, Textures};
 use super::error::SceneError;
 use super::xml::{ColorUsage, Element};
-use crate::light::{Envmap, Light, Spot};
+use crate::light::{Envmap, Light, Projection, Spot};
 use crate::math::{Frame, Rgb};
 use crate::texture::{Bitmap, BitmapOptions};
 use glam::{Mat3, Vec3};
@@ -20,12 +20,17 @@ pub(super) fn build_emitter(
     shape: Option<u32>,
     textures: &mut Textures,
 ) -> Result<(Light, f32), SceneError> {
-    // only an area light's radiance may be a texture, as in Mitsuba
-    let textured = |c: &Element| e.plugin == "area" && c.tag == "texture" && c.name.as_deref() == Some("radiance");
+    // only an area light's radiance and a spot's projected image may be textures, as in Mitsuba
+    let textured = |c: &Element| {
+        let name = c.name.as_deref();
+        c.tag == "texture"
+            && ((e.plugin == "area" && name == Some("radiance")) || (e.plugin == "spot" && name == Some("texture")))
+    };
     if let Some(child) = e.children.iter().find(|c| !c.is_spectrum() && !textured(c)) {
+        let why = "only an area light's radiance and a spot's texture can be textures";
         return Err(SceneError::at(
             &child.location,
-            format!("{} cannot contain <{}> (only an area light's radiance can be textured)", e.describe(), child.tag),
+            format!("{} cannot contain <{}> ({why})", e.describe(), child.tag),
         ));
     }
     let light = match (e.plugin.as_str(), shape) {
@@ -39,7 +44,7 @@ pub(super) fn build_emitter(
             };
             Light::Point { position, intensity }
         }
-        ("spot", None) => Light::Spot(spot(e)?),
+        ("spot", None) => Light::Spot(spot(e, textures)?),
         ("constant", None) => Light::Constant { radiance: emitted(e, "radiance")? },
         ("envmap", None) => Light::Envmap(Arc::new(envmap(e, textures)?)),
         ("directional", None) => {
@@ -115,7 +120,7 @@ fn rotation(e: &Element, what: &str) -> Result<(Mat3, Vec3), SceneError> {
 
 /// Mitsuba's `spot`: `cutoff_angle` (20°) and `beam_width` (¾ of it) in degrees, along +z of
 /// `to_world`.
-fn spot(e: &Element) -> Result<Spot, SceneError> {
+fn spot(e: &Element, textures: &mut Textures) -> Result<Spot, SceneError> {
     let intensity = emitted(e, "intensity")?;
     let cutoff = e.float_or("cutoff_angle", 20.0)?;
     let beam = e.float_or("beam_width", cutoff * 0.75)?;
@@ -132,12 +137,26 @@ fn spot(e: &Element) -> Result<Spot, SceneError> {
         ));
     }
     let (m, position) = rotation(e, "spot")?;
+    let projection = match textures.param(e, "texture", ColorUsage::Bounded)? {
+        None => None,
+        Some(Param::Texture(texture)) => {
+            Some(Projection { texture, to_local: m.transpose(), uv_factor: cutoff.to_radians().tan() })
+        }
+        // Mitsuba refuses it too
+        Some(Param::Constant(_)) => {
+            return Err(SceneError::at(
+                e.location_of("texture"),
+                "the spot's \"texture\" must vary over the image (a bitmap, say)",
+            ));
+        }
+    };
     Ok(Spot {
         position,
         frame: Frame::from_normal((m * Vec3::Z).normalize()),
         intensity,
         cutoff: cutoff.to_radians(),
         beam: beam.to_radians(),
+        projection,
     })
 }
 

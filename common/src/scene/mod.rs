@@ -12,6 +12,7 @@ mod build_emitter;
 mod build_mesh;
 mod build_settings;
 mod build_texture;
+mod conductors;
 pub mod error;
 pub mod load;
 mod primitive;
