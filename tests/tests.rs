@@ -9,7 +9,7 @@ use std::path::Path;
 use std::time::Duration;
 use tessera_tests::{
     Coordinator, Worker, assert_same_emis_outputs, assert_same_image, farm, local_render, local_render_with, rest,
-    scene, submit_and_wait, tessera, wait_for,
+    scene, submit_and_wait, tessera, wait_for, wait_for_or,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -188,10 +188,17 @@ fn killing_one_of_three_workers_mid_job_leaves_the_image_unchanged() {
     let at_kill = wait_for(TIMEOUT, "a lease of w0 to expire after the first tile", || {
         // SAFETY: signalling our own child process
         unsafe { libc::kill(pid, libc::SIGSTOP) };
-        let job = wait_for(TIMEOUT, "w0 to hold no lease", || {
-            let workers = rest::get_json(&format!("{}/api/v1/workers", c.url), None).1;
-            let w0_idle = workers.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"] == 0);
+        // the last answers, for the message should w0 never be seen idle (it once was not,
+        // under load, for 240 s)
+        let mut last = (0, serde_json::Value::Null);
+        let job = wait_for_or(TIMEOUT, || {
+            last = rest::get_json(&format!("{}/api/v1/workers", c.url), None);
+            let w0_idle = last.1.as_array()?.iter().any(|w| w["name"] == "w0" && w["leases"] == 0);
             w0_idle.then(|| rest::get_json(&job_url(&c, &id), None).1)
+        })
+        .unwrap_or_else(|| {
+            let (_, job) = rest::get_json(&job_url(&c, &id), None);
+            panic!("w0 held a lease for {TIMEOUT:?}: workers answered {} {}; the job: {job}", last.0, last.1)
         });
         let ready = job["tiles_done"].as_u64() >= Some(1) && expired(&c);
         if !ready {
