@@ -18,4 +18,5 @@ pub mod bundle;
 pub mod connect;
 pub mod convert;
 pub mod frames;
+pub mod mask;
 pub mod payload;

@@ -208,11 +208,8 @@ impl MaskCache {
             return Ok(mask.clone());
         }
         let bytes = fetch_verified(client, digest).await?;
-        if bytes.len() != pixels * 4 {
-            anyhow::bail!("{what} {digest} has {} bytes, expected {} for {pixels} pixels", bytes.len(), pixels * 4);
-        }
-        let mask: Vec<f32> =
-            bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("invariant: 4 bytes"))).collect();
+        let mask =
+            tessera_link::mask::decode(&bytes, pixels).map_err(|e| anyhow::anyhow!("{what} {digest} has {e}"))?;
         if mask.iter().any(|v| !range.contains(v)) {
             anyhow::bail!("{what} {digest} has values outside [{}, {}]", range.start(), range.end());
         }

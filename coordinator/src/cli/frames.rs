@@ -40,10 +40,16 @@ impl FrameArgs {
     }
 }
 
+/// The name of `scene` a job and its outputs take: its file or folder name, its own `#` runs
+/// left out.
+pub fn job_name(scene: &Path) -> String {
+    crate::options::scene_name(scene).replace('#', "").trim_matches('.').to_string()
+}
+
 /// The output a command writes by default for `scene`: `NAME.exr`, or `NAME.####.exr` for
-/// frames (a scene name's own `#` runs left out of NAME).
+/// frames.
 pub fn default_output(scene: &Path, frames: bool) -> PathBuf {
-    let name = crate::options::scene_name(scene).replace('#', "").trim_matches('.').to_string();
+    let name = job_name(scene);
     PathBuf::from(if frames { format!("{name}.####.exr") } else { format!("{name}.exr") })
 }
 

@@ -3,7 +3,7 @@
 //! for EMIS the strategy PNG and JSON report), named as `tessera render` names them.
 
 use super::client::{Client, ServerArgs, runtime, status_error};
-use crate::options::{JobArgs, scene_name};
+use crate::options::JobArgs;
 use std::path::PathBuf;
 use tessera_proto::v1 as pb;
 
@@ -51,9 +51,9 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     let frames = args.frames.numbers()?;
     let bundle = match &frames {
         None => tessera_common::bundle::pack(&args.scene, &settings.define_map())?,
-        Some(frames) => pack_frames(&args.scene, &settings, &args.frames.frame_param, frames)?,
+        Some(numbers) => pack_frames(&args.scene, &settings, &args.frames, numbers)?,
     };
-    let name = scene_name(&args.scene).replace('#', "").trim_matches('.').to_string();
+    let name = super::frames::job_name(&args.scene);
     let output = args.output.clone().unwrap_or_else(|| super::frames::default_output(&args.scene, frames.is_some()));
     runtime()?.block_on(async {
         let mut c = Client::connect(&args.server).await?;
@@ -79,25 +79,22 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
     })
 }
 
-/// One bundle of every frame's scene and what each references, each file once: a frame's
-/// scene is its own file where the name has runs of `#`, else the scene with the frame's
-/// parameter set (a file name may depend on it).
+/// One bundle of every frame's scene and what each references, each file once: each frame
+/// made as the coordinator will make it ([`tessera_link::frames::FrameRule`]), so a file name
+/// that depends on the frame parameter is packed for every frame.
 fn pack_frames(
     scene: &std::path::Path,
     settings: &tessera_common::settings::RenderSettings,
-    param: &str,
-    frames: &[u32],
+    frames: &super::frames::FrameArgs,
+    numbers: &[u32],
 ) -> anyhow::Result<tessera_common::bundle::Bundle> {
     let pattern = scene.to_string_lossy();
-    let per_file = tessera_link::frames::is_pattern(&pattern);
-    let scenes: Vec<_> = frames
+    let rule = frames.rule(&pattern);
+    let scenes: Vec<_> = numbers
         .iter()
         .map(|&n| {
-            let mut defines = settings.define_map();
-            if !per_file {
-                defines.insert(param.to_string(), n.to_string());
-            }
-            (PathBuf::from(tessera_link::frames::expand(&pattern, n)), defines)
+            let (path, settings) = rule.frame(settings, n);
+            (PathBuf::from(path), settings.define_map())
         })
         .collect();
     Ok(tessera_common::bundle::pack_many(&scenes, scene)?)

@@ -92,8 +92,7 @@ fn stored(blobs: &BlobStore, digest: &mut Option<String>, mask: &[f32]) -> std::
     if let Some(d) = digest {
         return Ok(d.clone());
     }
-    let bytes: Vec<u8> = mask.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let d = blobs.put(&bytes)?;
+    let d = blobs.put(&tessera_link::mask::encode(mask))?;
     *digest = Some(d.clone());
     Ok(d)
 }
@@ -103,10 +102,8 @@ fn warm_strategy(warm: &WarmStart, blobs: &BlobStore, pixels: u32) -> Result<Str
     let mask = |digest: &str| -> Result<Arc<Vec<f32>>, String> {
         let bytes = blobs.get(digest).map_err(|e| e.to_string())?;
         let bytes = bytes.ok_or_else(|| format!("the warm start's mask {digest} is missing"))?;
-        if bytes.len() != pixels as usize * 4 {
-            return Err(format!("the warm start's mask {digest} has {} bytes, not {}", bytes.len(), pixels * 4));
-        }
-        Ok(Arc::new(bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()))
+        let mask = tessera_link::mask::decode(&bytes, pixels as usize);
+        Ok(Arc::new(mask.map_err(|e| format!("the warm start's mask {digest} has {e}"))?))
     };
     let connections = match &warm.connection_mask {
         Some(d) => Connections::PerPixel(mask(d)?),
