@@ -619,6 +619,18 @@ def textured_emitters():
     write_float(out(d, "window.exr"), img.astype(np.float32))
 
 
+def spot_texture():
+    d = "spot-texture"
+    # projector slide: 8-bit sRGB PNG, 64x64, four quadrants (yellow, blue / green, red) with
+    # diagonal stripes at half brightness, so the projection's orientation and flips show
+    h = w = 64
+    y, x = np.mgrid[0:h, 0:w]
+    quad = np.array([[[0.95, 0.85, 0.1], [0.15, 0.3, 0.95]], [[0.1, 0.8, 0.2], [0.95, 0.15, 0.1]]])
+    img = quad[y // 32, x // 32]
+    stripe = ((x + y) // 6) % 2 == 1
+    img = np.where(stripe[..., None], img * 0.5, img)
+    write_ldr(out(d, "slide.png"), to_u8(img))
+
 
 if __name__ == "__main__":
     textured_room()
@@ -633,4 +645,5 @@ if __name__ == "__main__":
     lanczos_crop()
     envmap_glossy()
     textured_emitters()
+    spot_texture()
     print("assets written under", ROOT)
