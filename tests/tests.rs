@@ -479,6 +479,7 @@ fn image_comparison_notices_a_different_seed() {
     assert!(std::panic::catch_unwind(|| assert_same_image(&a, &b)).is_err());
 }
 
+mod api;
 mod bad_results;
 mod bounded_memory;
 mod client;

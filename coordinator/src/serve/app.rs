@@ -36,6 +36,7 @@ pub fn router(state: Arc<AppState>, tokens: Tokens, guard: Guard) -> axum::Route
         .merge(crate::serve::rest::router(state))
         // tonic's routes answer unknown paths with 200 + grpc-status 12 unless a fallback is set
         .fallback(|| async { ApiError::new(ErrorCode::NotFound, "no such route") })
+        .layer(axum::middleware::from_fn(crate::serve::error::problem_json))
         .layer(axum::middleware::from_fn_with_state(Arc::new(tokens), crate::serve::auth::require_token))
         .layer(axum::middleware::from_fn_with_state(Arc::new(guard), crate::serve::origin::refuse_foreign_browsers))
         .layer(tower_http::trace::TraceLayer::new_for_http())
@@ -137,12 +138,14 @@ pub fn serve_command(args: &ServeArgs) -> anyhow::Result<()> {
                 }
             })
         });
+        let publisher = crate::serve::events::spawn_publisher(svc.clone(), state.events.clone());
         let app = router(state, tokens, Guard { scheme, hosts });
         match tls {
             Some(config) => serve_until_stopped(TlsListener::new(listener, config), app).await?,
             None => serve_until_stopped(listener, app).await?,
         }
         ticker.abort();
+        publisher.abort();
         if let Some(r) = retention {
             r.abort();
         }

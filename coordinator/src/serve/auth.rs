@@ -49,8 +49,7 @@ pub async fn require_token(State(tokens): State<Arc<Tokens>>, req: Request, next
     if path.starts_with(GRPC_PREFIX) {
         tonic::Status::unauthenticated(message).into_http::<axum::body::Body>().into_response()
     } else {
-        let code = crate::serve::error::ErrorCode::Unauthenticated;
-        (code.http(), axum::Json(serde_json::json!({"error": message, "code": code.as_str()}))).into_response()
+        crate::serve::error::ApiError::new(crate::serve::error::ErrorCode::Unauthenticated, message).into_response()
     }
 }
 

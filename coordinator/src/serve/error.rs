@@ -1,6 +1,8 @@
 //! The one error-code table: every domain error maps to an [`ErrorCode`], and each code has
 //! exactly one HTTP status and one gRPC code. Client-facing messages name the field, file and
 //! line at fault; internal failures are logged in full once and reported without details.
+//! Over HTTP every error is an RFC 9457 problem document ([`problem`]), the framework's own
+//! rejections included ([`problem_json`] rewrites them).
 
 use crate::serve::job::model::TransitionError;
 use crate::serve::job::service::ServiceError;
@@ -142,6 +144,84 @@ impl From<ServiceError> for ApiError {
     }
 }
 
+/// The media type of error bodies.
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+/// An RFC 9457 problem document. `type` is `about:blank` (the status says what happened), the
+/// machine-readable class is the extension member `code`, and `error` repeats `detail` for
+/// clients written against the API's earlier `{code, error}` bodies.
+pub fn problem(status: http::StatusCode, code: &str, detail: &str) -> serde_json::Value {
+    serde_json::json!({
+        "type": "about:blank",
+        "title": status.canonical_reason().unwrap_or("Error"),
+        "status": status.as_u16(),
+        "detail": detail,
+        "code": code,
+        "error": detail,
+    })
+}
+
+/// A problem document as a response.
+pub fn problem_response(status: http::StatusCode, code: &str, detail: &str) -> axum::response::Response {
+    use axum::response::IntoResponse;
+    let body = problem(status, code, detail).to_string();
+    (status, [(http::header::CONTENT_TYPE, PROBLEM_JSON)], body).into_response()
+}
+
+impl axum::response::IntoResponse for ApiError {
+    fn into_response(self) -> axum::response::Response {
+        problem_response(self.code.http(), self.code.as_str(), &self.message)
+    }
+}
+
+/// The class of an error status the framework answered by itself (a rejected path, query or
+/// body, an unknown method).
+fn code_of_status(status: http::StatusCode) -> &'static str {
+    match status.as_u16() {
+        400 | 422 => ErrorCode::InvalidArgument.as_str(),
+        401 => ErrorCode::Unauthenticated.as_str(),
+        403 => ErrorCode::PermissionDenied.as_str(),
+        404 => ErrorCode::NotFound.as_str(),
+        405 => "method_not_allowed",
+        409 => ErrorCode::FailedPrecondition.as_str(),
+        413 => ErrorCode::PayloadTooLarge.as_str(),
+        415 => "unsupported_media_type",
+        429 => ErrorCode::ResourceExhausted.as_str(),
+        507 => ErrorCode::InsufficientStorage.as_str(),
+        _ if status.is_client_error() => "invalid_argument",
+        _ => ErrorCode::Internal.as_str(),
+    }
+}
+
+/// Framework rejections are short texts; anything longer is cut (it is only a message).
+const MAX_REJECTION_BYTES: usize = 4096;
+
+/// Middleware: an HTTP error response that is not yet a problem document (axum's rejections of
+/// a path, query or JSON body, 405 for a wrong method) becomes one, its text the `detail`.
+/// gRPC answers are left alone: their errors travel in trailers of HTTP 200 responses.
+pub async fn problem_json(req: axum::extract::Request, next: axum::middleware::Next) -> axum::response::Response {
+    let response = next.run(req).await;
+    let status = response.status();
+    let content_type = response.headers().get(http::header::CONTENT_TYPE).and_then(|v| v.to_str().ok());
+    let is_problem = content_type.is_some_and(|t| t.starts_with(PROBLEM_JSON) || t.starts_with("application/grpc"));
+    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        return response;
+    }
+    let (parts, body) = response.into_parts();
+    let text = match axum::body::to_bytes(body, MAX_REJECTION_BYTES).await {
+        Ok(bytes) if !bytes.is_empty() => String::from_utf8_lossy(&bytes).into_owned(),
+        _ => status.canonical_reason().unwrap_or("error").to_string(),
+    };
+    let mut rewritten = problem_response(status, code_of_status(status), text.trim());
+    // keep headers such as `Allow` on a 405
+    for (name, value) in parts.headers.iter() {
+        if name != http::header::CONTENT_TYPE && name != http::header::CONTENT_LENGTH {
+            rewritten.headers_mut().insert(name.clone(), value.clone());
+        }
+    }
+    rewritten
+}
+
 impl From<ApiError> for tonic::Status {
     fn from(e: ApiError) -> Self {
         e.to_status()
@@ -169,5 +249,16 @@ mod tests {
         assert_eq!(e.to_status().code(), tonic::Code::InvalidArgument);
         let e = ApiError::from(ServiceError::Io(std::io::Error::other("disk /secret/path full")));
         assert!(!e.message.contains("secret"));
+    }
+
+    #[test]
+    fn problems_carry_status_title_detail_and_code() {
+        let p = problem(http::StatusCode::CONFLICT, "failed_precondition", "job j1 is running");
+        assert_eq!(p["status"], 409);
+        assert_eq!(p["title"], "Conflict");
+        assert_eq!(p["detail"], "job j1 is running");
+        assert_eq!(p["code"], "failed_precondition");
+        assert_eq!(code_of_status(http::StatusCode::METHOD_NOT_ALLOWED), "method_not_allowed");
+        assert_eq!(code_of_status(http::StatusCode::UNPROCESSABLE_ENTITY), "invalid_argument");
     }
 }

@@ -3,6 +3,7 @@
 
 pub use super::clock::now_ms;
 use super::error::{ApiError, ErrorCode};
+use super::events::Hub;
 use super::job::model::LeaseRef;
 use super::job::service::{JobService, ServiceError};
 use super::metrics::Telemetry;
@@ -17,6 +18,8 @@ pub struct AppState {
     pub max_upload_bytes: usize,
     /// `/metrics` and the latencies the API layers observe.
     pub telemetry: Telemetry,
+    /// The event stream's subscriptions (fed by [`super::events::spawn_publisher`]).
+    pub events: Arc<Hub>,
     /// Leases with an upload stream open: one at a time, since each buffers up to its tile's
     /// result (twenty streams on one lease once held 576 MB).
     uploads: Mutex<HashSet<LeaseRef>>,
@@ -37,7 +40,8 @@ impl Drop for UploadSlot<'_> {
 impl AppState {
     /// The state of a coordinator serving `svc`.
     pub fn new(svc: Arc<JobService>, max_upload_bytes: usize) -> Self {
-        AppState { telemetry: Telemetry::new(svc.clone()), svc, max_upload_bytes, uploads: Mutex::default() }
+        let telemetry = Telemetry::new(svc.clone());
+        AppState { telemetry, svc, max_upload_bytes, events: Arc::default(), uploads: Mutex::default() }
     }
 
     /// The upload slot of `lease`, or an error while another stream holds it.

@@ -1,9 +1,7 @@
 //! JSON shapes of the REST API. DTOs never leave `rest/`.
 
-use crate::serve::error::ApiError;
 use crate::serve::job::service::{JobView, WorkerView};
 use crate::serve::job::view::StrategyView;
-use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use tessera_common::settings::RenderSettings;
 
@@ -109,12 +107,5 @@ impl From<WorkerView> for WorkerDto {
     fn from(w: WorkerView) -> Self {
         let (id, name, threads, last_seen_s_ago, leases) = (w.id, w.name, w.threads, w.last_seen_s_ago, w.leases);
         WorkerDto { id, name, threads, last_seen_s_ago, leases, state: w.state, tags: w.tags }
-    }
-}
-
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        (self.code.http(), axum::Json(serde_json::json!({ "error": self.message, "code": self.code.as_str() })))
-            .into_response()
     }
 }

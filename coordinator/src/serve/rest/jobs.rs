@@ -3,7 +3,7 @@
 use super::dto::{JobDto, WorkerDto};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::error::{ApiError, ErrorCode};
-use crate::serve::job::service::{FramesRequest, OutputKind};
+use crate::serve::job::service::{FramesRequest, JobFilter, OutputKind};
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
 use crate::serve::storage::WorkerMode;
@@ -143,6 +143,25 @@ pub struct Page {
     limit: Option<usize>,
     /// Jobs to skip, newest first.
     offset: Option<usize>,
+    /// Only jobs in these states (comma-separated names, as in `state`).
+    state: Option<String>,
+    /// Only jobs whose name contains this (case-insensitive).
+    name: Option<String>,
+}
+
+/// The states a client may filter by.
+const STATES: [&str; 9] = ["queued", "pilot", "optimizing", "final", "done", "failed", "cancelled", "paused", "blocked"];
+
+/// The filter of a list request: unknown state names are refused by name.
+fn filter_of(page: &Page) -> Result<JobFilter, ApiError> {
+    let mut states = Vec::new();
+    for s in page.state.iter().flat_map(|s| s.split(',')).map(str::trim).filter(|s| !s.is_empty()) {
+        if !STATES.contains(&s) {
+            return Err(invalid(format!("state \"{s}\" is not one of {}", STATES.join(", "))));
+        }
+        states.push(s.to_string());
+    }
+    Ok(JobFilter { states, name: page.name.clone().filter(|n| !n.is_empty()) })
 }
 
 /// Jobs per page of `GET /api/v1/jobs` unless `limit` says otherwise ...
@@ -150,21 +169,30 @@ pub const DEFAULT_PAGE: usize = 100;
 /// ... and at most.
 pub const MAX_PAGE: usize = 1000;
 
-/// `GET /api/v1/jobs?limit=N&offset=M`: newest first, one page; `X-Total-Count` says how many
-/// jobs there are and a `Link: <...>; rel="next"` header where the next page is.
+/// `GET /api/v1/jobs?limit=N&offset=M&state=S,T&name=PART`: newest first, one page of the jobs
+/// the filters let through; `X-Total-Count` says how many they let through and a
+/// `Link: <...>; rel="next"` header where the next page is.
 pub async fn list(State(st): St, Query(page): Query<Page>) -> Result<Response, ApiError> {
     let limit = page.limit.unwrap_or(DEFAULT_PAGE);
     if !(1..=MAX_PAGE).contains(&limit) {
         return Err(ApiError::new(ErrorCode::InvalidArgument, format!("limit must be 1 to {MAX_PAGE}, got {limit}")));
     }
     let offset = page.offset.unwrap_or(0);
+    let filter = filter_of(&page)?;
     let svc = st.svc.clone();
-    let (jobs, total) = blocking(move || svc.list_page(now_ms(), offset, limit)).await?;
+    let (jobs, total) = blocking(move || svc.list_page(now_ms(), offset, limit, &filter)).await?;
     let mut response = Json(jobs.into_iter().map(JobDto::from).collect::<Vec<_>>()).into_response();
     let headers = response.headers_mut();
     headers.insert("x-total-count", total.into());
     if offset + limit < total {
-        let next = format!("</api/v1/jobs?limit={limit}&offset={}>; rel=\"next\"", offset + limit);
+        let mut query = form_urlencoded::Serializer::new(String::new());
+        query.append_pair("limit", &limit.to_string()).append_pair("offset", &(offset + limit).to_string());
+        for (key, value) in [("state", &page.state), ("name", &page.name)] {
+            if let Some(value) = value {
+                query.append_pair(key, value);
+            }
+        }
+        let next = format!("</api/v1/jobs?{}>; rel=\"next\"", query.finish());
         headers.insert(header::LINK, next.parse().expect("invariant: ASCII header"));
     }
     Ok(response)
@@ -346,5 +374,14 @@ mod tests {
         assert_eq!(s.integrator, tessera_common::settings::IntegratorName::EmisVcm);
         let e = parse_settings(r#"{"integrator":"emis-vcm","cost_model":"reference"}"#).unwrap_err();
         assert!(e.message.contains("cost_model") && e.message.contains("retired"), "{}", e.message);
+    }
+
+    #[test]
+    fn list_filters_name_unknown_states() {
+        let page = |state: &str| Page { limit: None, offset: None, state: Some(state.into()), name: Some("Shot 1".into()) };
+        let f = filter_of(&page("done, failed")).unwrap();
+        assert_eq!((f.states, f.name.as_deref()), (vec!["done".to_string(), "failed".into()], Some("Shot 1")));
+        let e = filter_of(&page("done,finished")).unwrap_err();
+        assert!(e.message.contains("\"finished\"") && e.message.contains("cancelled"), "{}", e.message);
     }
 }

@@ -3,7 +3,8 @@
 //! | route | what |
 //! |---|---|
 //! | `POST /api/v1/jobs` | multipart: `scene` file, asset files (`asset`, file name = path relative to the scene), `settings` JSON |
-//! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON |
+//! | `GET /api/v1/jobs`, `GET /api/v1/jobs/{id}` | job status JSON; the list is paged (`limit`, `offset`) and filtered (`state=done,failed`, `name=` part of the name) |
+//! | `GET /api/v1/events`, `GET /api/v1/jobs/{id}/events` | server-sent events: job state and progress, frames, workers ([`events`]) |
 //! | `POST /api/v1/jobs/{id}/cancel` | cancel: the job stops and stays, `cancelled` |
 //! | `POST /api/v1/jobs/{id}/pause`, `/resume` | no more tiles handed out (`paused`; leased ones finish), and on again |
 //! | `POST /api/v1/jobs/{id}/requeue` | a failed or cancelled job runs on from its last checkpoint |
@@ -17,8 +18,12 @@
 //! | `GET /api/v1/server` | the coordinator's disk: free bytes, reserve, whether it is below it (`disk.low`) |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
 //! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
+//!
+//! Every error is an RFC 9457 problem document (`application/problem+json`: `type`, `title`,
+//! `status`, `detail`, and `code`, the class in the error table of [`crate::serve::error`]).
 
 pub mod dto;
+pub mod events;
 pub mod jobs;
 
 use crate::serve::state::AppState;
@@ -33,6 +38,8 @@ pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
         .route("/api/v1/jobs", get(jobs::list).post(jobs::submit))
         .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::delete).patch(jobs::patch))
+        .route("/api/v1/events", get(events::all))
+        .route("/api/v1/jobs/{id}/events", get(events::of_job))
         .route("/api/v1/jobs/{id}/cancel", post(jobs::cancel))
         .route("/api/v1/jobs/{id}/pause", post(jobs::pause))
         .route("/api/v1/jobs/{id}/resume", post(jobs::resume))

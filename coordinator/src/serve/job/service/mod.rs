@@ -41,7 +41,7 @@ use tessera_common::film::Film;
 pub use super::view::{JobView, StrategyView, WorkerView};
 pub use frames::FramesRequest;
 pub use merge::CHECKPOINT_SPACING;
-pub use query::{Metrics, OutputKind};
+pub use query::{JobFilter, Metrics, OutputKind};
 pub use tessera_common::bundle::Bundle;
 pub use upload::BundleUpload;
 

@@ -3,7 +3,7 @@
 
 use super::{Counters, Inner, JobService, ServiceError};
 use crate::serve::job::model::{Event, JobState, Waiting};
-use crate::serve::job::view::JobView;
+use crate::serve::job::view::{JobView, WorkerView};
 use std::collections::BTreeMap;
 
 /// Which finished output.
@@ -42,6 +42,21 @@ impl OutputKind {
     /// Whether only EMIS jobs have it.
     pub fn emis_only(self) -> bool {
         matches!(self, OutputKind::StrategyPng | OutputKind::EmisJson)
+    }
+}
+
+/// Which jobs a list shows: all unless it names states or a part of the name.
+#[derive(Clone, Debug, Default)]
+pub struct JobFilter {
+    /// State names as clients see them (`final` includes finishing); any of them.
+    pub states: Vec<String>,
+    /// A part of the name, case-insensitive.
+    pub name: Option<String>,
+}
+
+impl JobFilter {
+    fn passes_name(&self, name: &str) -> bool {
+        self.name.as_ref().is_none_or(|part| name.to_lowercase().contains(&part.to_lowercase()))
     }
 }
 
@@ -108,25 +123,58 @@ impl JobService {
 
     /// Every job, newest first (committed state, as [`JobService::get`]).
     pub fn list(&self, now_ms: u64) -> Result<Vec<JobView>, ServiceError> {
-        Ok(self.list_page(now_ms, 0, usize::MAX)?.0)
+        Ok(self.list_page(now_ms, 0, usize::MAX, &JobFilter::default())?.0)
     }
 
-    /// Up to `limit` jobs from the `offset`-th, newest first, and how many jobs there are:
-    /// only the page's views are built.
-    pub fn list_page(&self, now_ms: u64, offset: usize, limit: usize) -> Result<(Vec<JobView>, usize), ServiceError> {
+    /// Up to `limit` of the jobs `filter` lets through, from the `offset`-th, newest first, and
+    /// how many it lets through: without a state filter only the page's views are built.
+    pub fn list_page(
+        &self,
+        now_ms: u64,
+        offset: usize,
+        limit: usize,
+        filter: &JobFilter,
+    ) -> Result<(Vec<JobView>, usize), ServiceError> {
         let inner = self.lock();
         // a job of frames is one entry: its frames are in its view
-        let stills = inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| (j.seq, &j.id));
-        let mut jobs: Vec<_> = stills.chain(inner.model.sequences.values().map(|s| (s.seq, &s.id))).collect();
-        jobs.sort_unstable_by_key(|&(seq, _)| std::cmp::Reverse(seq));
-        let total = jobs.len();
+        let stills =
+            inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| (j.seq, &j.id, &j.spec.name));
+        let sequences = inner.model.sequences.values().map(|s| (s.seq, &s.id, &s.spec.name));
+        let mut jobs: Vec<_> = stills.chain(sequences).filter(|(_, _, name)| filter.passes_name(name)).collect();
+        jobs.sort_unstable_by_key(|&(seq, _, _)| std::cmp::Reverse(seq));
         // a list shows a job of frames by its summary: its frames' lines are in its own view
         let summary = |id: &str| JobView { frames: Vec::new(), ..self.view(&inner, id, now_ms) };
-        let views = jobs.into_iter().skip(offset).take(limit).map(|(_, id)| summary(id)).collect();
+        let (views, total) = if filter.states.is_empty() {
+            let total = jobs.len();
+            (jobs.into_iter().skip(offset).take(limit).map(|(_, id, _)| summary(id)).collect(), total)
+        } else {
+            let all: Vec<_> = jobs
+                .into_iter()
+                .map(|(_, id, _)| summary(id))
+                .filter(|v| filter.states.iter().any(|s| s == v.state.as_str()))
+                .collect();
+            let total = all.len();
+            (all.into_iter().skip(offset).take(limit).collect(), total)
+        };
         let ticket = inner.ticket;
         drop(inner);
         self.commits.wait(ticket)?;
         Ok((views, total))
+    }
+
+    /// Every job's whole view (a job of frames with its frames' lines) and every worker: what
+    /// the event stream compares from one moment to the next (committed state, as
+    /// [`JobService::get`]).
+    pub fn watch(&self, now_ms: u64) -> Result<(Vec<JobView>, Vec<WorkerView>), ServiceError> {
+        let inner = self.lock();
+        let stills = inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| &j.id);
+        let ids: Vec<&String> = stills.chain(inner.model.sequences.keys()).collect();
+        let views = ids.into_iter().map(|id| self.view(&inner, id, now_ms)).collect();
+        let workers = inner.workers.values().map(|w| self.worker_view(&inner, w, now_ms)).collect();
+        let ticket = inner.ticket;
+        drop(inner);
+        self.commits.wait(ticket)?;
+        Ok((views, workers))
     }
 
     /// A finished job's output: not found for an EMIS output of another integrator's job

@@ -14,7 +14,7 @@ impl JobService {
         inner.workers.values().map(|w| self.worker_view(&inner, w, now_ms)).collect()
     }
 
-    fn worker_view(&self, inner: &Inner, w: &WorkerRow, now_ms: u64) -> WorkerView {
+    pub(super) fn worker_view(&self, inner: &Inner, w: &WorkerRow, now_ms: u64) -> WorkerView {
         let leases = inner.model.leases_of(&w.id).len();
         let silent_ms = now_ms.saturating_sub(w.last_seen_ms);
         let state = match w.mode {
