@@ -175,3 +175,18 @@ fn the_job_list_filters_by_state_and_name() {
     let link = r.headers()["link"].to_str().unwrap();
     assert!(link.contains("offset=1") && link.contains("name=shot"), "{link}");
 }
+
+/// The OpenAPI document is public and lists the routes; the data behind it is not public, and
+/// a missing token is a problem document too.
+#[test]
+fn the_openapi_document_is_public_and_the_api_is_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--client-token", "t0ken", "--worker-token", "w"]);
+    let (status, doc) = rest::get_json(&format!("{}/api/v1/openapi.json", c.url), None);
+    assert_eq!((status, doc["openapi"].as_str()), (200, Some("3.1.0")));
+    for path in ["/api/v1/jobs", "/api/v1/jobs/{id}/events", "/api/v1/events", "/api/v1/workers/{id}/{action}"] {
+        assert!(doc["paths"][path].is_object(), "{path} is documented");
+    }
+    let (status, problem, kind) = request(reqwest::Method::GET, &format!("{}/api/v1/jobs", c.url), None);
+    assert_eq!((status, kind.as_str(), problem["code"].as_str()), (401, "application/problem+json", Some("unauthenticated")));
+}

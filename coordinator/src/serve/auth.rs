@@ -1,4 +1,4 @@
-//! Bearer-token authentication for every endpoint but `/healthz` and the dashboard page: the worker token guards
+//! Bearer-token authentication for every endpoint but `/healthz`, `/api/v1/openapi.json` and the dashboard page: the worker token guards
 //! `WorkerService`, the client token guards `JobService` and the REST API. A missing or wrong
 //! token gets HTTP 401, or gRPC `UNAUTHENTICATED` on gRPC paths. Without tokens configured,
 //! everything is open (the server refuses to listen beyond loopback then, see `config.rs`).
@@ -31,8 +31,8 @@ fn same(a: &[u8], b: &[u8]) -> bool {
 /// The axum middleware.
 pub async fn require_token(State(tokens): State<Arc<Tokens>>, req: Request, next: Next) -> Response {
     let path = req.uri().path();
-    // liveness and the dashboard page (which carries no data) are public
-    if matches!(path, "/healthz" | "/api/v1/healthz" | "/" | "/dashboard") {
+    // liveness, the API's description and the dashboard page (none carries data) are public
+    if matches!(path, "/healthz" | "/api/v1/healthz" | "/api/v1/openapi.json" | "/" | "/dashboard") {
         return next.run(req).await;
     }
     let expected = if path.starts_with(WORKER_PREFIX) { &tokens.worker } else { &tokens.client };

@@ -6,7 +6,7 @@ use serde::Serialize;
 use tessera_common::settings::RenderSettings;
 
 /// `GET /api/v1/jobs/{id}`.
-#[derive(Serialize)]
+#[derive(Serialize, utoipa::ToSchema)]
 pub struct JobDto {
     /// Id.
     pub id: String,
@@ -26,13 +26,16 @@ pub struct JobDto {
     pub samples_done: u64,
     /// Estimated seconds left.
     pub eta_s: Option<f64>,
-    /// The chosen MIS strategy (EMIS; null before the first update and for other integrators).
+    /// The chosen MIS strategy (EMIS; null before the first update and for other integrators):
+    /// `nu`, `connections`, `mean_connections`, `mean_merge_probability` and every update.
+    #[schema(value_type = Option<Object>)]
     pub strategy: Option<StrategyView>,
     /// Why the job failed.
     pub error: Option<String>,
     /// Priority.
     pub priority: i32,
-    /// Resolved settings.
+    /// Resolved settings (as `tessera render` takes them).
+    #[schema(value_type = Object)]
     pub settings: RenderSettings,
     /// Image width.
     pub width: u32,
@@ -48,6 +51,7 @@ pub struct JobDto {
     /// A job of frames: those planned so far, each `{number, job_id, state, progress, eta_s,
     /// error}`; a frame's outputs are its job's.
     #[serde(skip_serializing_if = "Vec::is_empty")]
+    #[schema(value_type = Vec<Object>)]
     pub frames: Vec<serde_json::Value>,
 }
 
@@ -85,7 +89,7 @@ impl From<JobView> for JobDto {
 }
 
 /// `GET /api/v1/workers`.
-#[derive(Serialize)]
+#[derive(Serialize, utoipa::ToSchema)]
 pub struct WorkerDto {
     /// Id.
     pub id: String,
@@ -108,4 +112,41 @@ impl From<WorkerView> for WorkerDto {
         let (id, name, threads, last_seen_s_ago, leases) = (w.id, w.name, w.threads, w.last_seen_s_ago, w.leases);
         WorkerDto { id, name, threads, last_seen_s_ago, leases, state: w.state, tags: w.tags }
     }
+}
+
+/// The parts of `POST /api/v1/jobs` (documentation only: the handler reads them as a stream).
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+pub struct SubmitForm {
+    /// The scene XML; its file name is its path in the bundle (`scene.xml` if none).
+    #[schema(value_type = String, format = Binary)]
+    scene: (),
+    /// A file the scene refers to, named by its path relative to the scene; one part each.
+    #[schema(value_type = Option<Vec<String>>, format = Binary)]
+    asset: (),
+    /// JSON: render settings (`integrator`, `spp`, `seed`, `time_limit_s`, ...), `name`,
+    /// `priority`, `after` (job ids), `require_tags`, and for frames `frames` (`"1-240"`),
+    /// `frame_param`, `seed_per_frame`, `warm_start`.
+    #[schema(value_type = Option<String>)]
+    settings: (),
+}
+
+/// An RFC 9457 problem document: the body of every error.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct Problem {
+    /// Always `about:blank`: the status says what kind of error it is.
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// The status's reason phrase.
+    pub title: String,
+    /// The HTTP status.
+    pub status: u16,
+    /// What went wrong, naming the field, file or line at fault.
+    pub detail: String,
+    /// The error class: `invalid_argument`, `not_found`, `unauthenticated`,
+    /// `permission_denied`, `failed_precondition`, `payload_too_large`, `resource_exhausted`,
+    /// `insufficient_storage`, `method_not_allowed`, `unsupported_media_type` or `internal`.
+    pub code: String,
+    /// The same as `detail` (the API's error field before problem documents).
+    pub error: String,
 }

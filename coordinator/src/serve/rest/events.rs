@@ -18,6 +18,21 @@ use tokio::sync::{broadcast, mpsc};
 use tokio_stream::wrappers::ReceiverStream;
 
 
+/// One event of a stream, as OpenAPI describes it (documentation only).
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+pub struct SseEvent {
+    /// Increasing number.
+    id: Option<String>,
+    /// `job.state`, `job.progress`, `job.deleted`, `frame.state`, `worker`, `worker.gone` or
+    /// `lagged`.
+    event: Option<String>,
+    /// JSON: the whole new state of what changed (`job_id` names a job).
+    data: Option<String>,
+    /// Unused (the client's default reconnection delay applies).
+    retry: Option<u64>,
+}
+
 fn to_sse(e: &Event) -> sse::Event {
     sse::Event::default().id(e.id.to_string()).event(e.kind).data(&e.data)
 }
@@ -59,12 +74,16 @@ fn stream(
 }
 
 /// `GET /api/v1/events`: every change of every job, frame and worker from now on.
+#[utoipa::path(get, path = "/api/v1/events", tag = "events",
+    responses((status = 200, description = "server-sent events: job.state, job.progress, job.deleted, frame.state, worker, worker.gone, lagged", content_type = "text/event-stream", body = SseEvent)))]
 pub async fn all(State(st): State<Arc<AppState>>) -> Response {
     stream(st.events.subscribe(), Vec::new(), |_| true, |_| false)
 }
 
 /// `GET /api/v1/jobs/{id}/events`: the job's state now (a `job.state` event), then its changes
 /// (a job of frames' frames included) until it ends.
+#[utoipa::path(get, path = "/api/v1/jobs/{id}/events", tag = "events", params(("id" = String, Path, description = "job id or unique prefix")),
+    responses((status = 200, description = "server-sent events of one job, ending with the state it ends in", content_type = "text/event-stream", body = SseEvent)))]
 pub async fn of_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     // subscribed before the state is read, so no change in between is missed
     let rx = st.events.subscribe();

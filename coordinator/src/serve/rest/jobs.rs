@@ -1,12 +1,11 @@
 //! REST handlers: decode → call the job service → encode.
 
-use super::dto::{JobDto, WorkerDto};
+use super::dto::{JobDto, SubmitForm};
 use crate::serve::bundle_stream::StreamedBundle;
 use crate::serve::error::{ApiError, ErrorCode};
-use crate::serve::job::service::{FramesRequest, JobFilter, OutputKind};
+use crate::serve::job::service::{FramesRequest, JobFilter};
 use crate::serve::job::spec::Placement;
 use crate::serve::state::{AppState, blocking, now_ms};
-use crate::serve::storage::WorkerMode;
 use axum::Json;
 use axum::extract::{Multipart, Path, Query, State};
 use axum::http::header;
@@ -91,6 +90,9 @@ const MAX_SETTINGS_BYTES: usize = 1 << 20;
 /// `POST /api/v1/jobs`: a multipart form with a `settings` JSON part, the `scene` part and a
 /// part per further file (its file name the path in the bundle). Files are written to disk as
 /// they arrive.
+#[utoipa::path(post, path = "/api/v1/jobs", tag = "jobs",
+    request_body(content = SubmitForm, content_type = "multipart/form-data"),
+    responses((status = 201, description = "the job, accepted", body = JobDto)))]
 pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoResponse, ApiError> {
     let mut bundle = StreamedBundle::begin(st.svc.clone(), st.max_upload_bytes as u64).await?;
     let mut scene_path = None;
@@ -128,22 +130,18 @@ pub async fn submit(State(st): St, mut form: Multipart) -> Result<impl IntoRespo
     Ok((axum::http::StatusCode::CREATED, Json(JobDto::from(view))))
 }
 
-/// `GET /api/v1/server`: the coordinator's own state: its data folder's free space and the
-/// reserve below which it takes no new work (`disk.low`).
-pub async fn server(State(st): St) -> Json<serde_json::Value> {
-    let svc = st.svc.clone();
-    let disk = tokio::task::spawn_blocking(move || svc.space()).await.ok().flatten();
-    Json(serde_json::json!({ "disk": disk }))
-}
-
 /// A page of `GET /api/v1/jobs`.
-#[derive(serde::Deserialize)]
+#[derive(serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct Page {
     /// Jobs per page: [`DEFAULT_PAGE`] unless given, at most [`MAX_PAGE`].
+    #[param(minimum = 1, maximum = 1000)]
     limit: Option<usize>,
-    /// Jobs to skip, newest first.
+    /// Jobs to skip, newest first (at most [`MAX_OFFSET`]).
+    #[param(minimum = 0, maximum = 1_000_000_000)]
     offset: Option<usize>,
     /// Only jobs in these states (comma-separated names, as in `state`).
+    #[param(pattern = r"^\s*((queued|pilot|optimizing|final|done|failed|cancelled|paused|blocked)?\s*(,\s*|$))*$")]
     state: Option<String>,
     /// Only jobs whose name contains this (case-insensitive).
     name: Option<String>,
@@ -168,16 +166,23 @@ fn filter_of(page: &Page) -> Result<JobFilter, ApiError> {
 pub const DEFAULT_PAGE: usize = 100;
 /// ... and at most.
 pub const MAX_PAGE: usize = 1000;
+/// The most jobs a list may skip (far more than a coordinator holds).
+pub const MAX_OFFSET: usize = 1_000_000_000;
 
 /// `GET /api/v1/jobs?limit=N&offset=M&state=S,T&name=PART`: newest first, one page of the jobs
 /// the filters let through; `X-Total-Count` says how many they let through and a
 /// `Link: <...>; rel="next"` header where the next page is.
+#[utoipa::path(get, path = "/api/v1/jobs", tag = "jobs", params(Page),
+    responses((status = 200, description = "one page of jobs, newest first; `X-Total-Count` and `Link: rel=\"next\"` headers", body = Vec<JobDto>)))]
 pub async fn list(State(st): St, Query(page): Query<Page>) -> Result<Response, ApiError> {
     let limit = page.limit.unwrap_or(DEFAULT_PAGE);
     if !(1..=MAX_PAGE).contains(&limit) {
         return Err(ApiError::new(ErrorCode::InvalidArgument, format!("limit must be 1 to {MAX_PAGE}, got {limit}")));
     }
     let offset = page.offset.unwrap_or(0);
+    if offset > MAX_OFFSET {
+        return Err(invalid(format!("offset must be at most {MAX_OFFSET}, got {offset}")));
+    }
     let filter = filter_of(&page)?;
     let svc = st.svc.clone();
     let (jobs, total) = blocking(move || svc.list_page(now_ms(), offset, limit, &filter)).await?;
@@ -199,52 +204,70 @@ pub async fn list(State(st): St, Query(page): Query<Page>) -> Result<Response, A
 }
 
 /// `GET /api/v1/jobs/{id}`.
+#[utoipa::path(get, path = "/api/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), responses((status = 200, body = JobDto)))]
 pub async fn get_one(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
     let svc = st.svc.clone();
     Ok(Json(blocking(move || svc.get(&id, now_ms())).await?.into()))
 }
 
 /// `POST /api/v1/jobs/{id}/cancel`: the job stops and stays, `cancelled`.
+#[utoipa::path(post, path = "/api/v1/jobs/{id}/cancel", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), responses((status = 200, body = JobDto)))]
 pub async fn cancel(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
     let svc = st.svc.clone();
     Ok(Json(blocking(move || svc.cancel(&id, now_ms())).await?.into()))
 }
 
 /// `POST /api/v1/jobs/{id}/pause`: no more tiles are handed out until it is resumed.
+#[utoipa::path(post, path = "/api/v1/jobs/{id}/pause", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), responses((status = 200, body = JobDto)))]
 pub async fn pause(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
     let svc = st.svc.clone();
     Ok(Json(blocking(move || svc.pause(&id, now_ms())).await?.into()))
 }
 
 /// `POST /api/v1/jobs/{id}/resume`.
+#[utoipa::path(post, path = "/api/v1/jobs/{id}/resume", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), responses((status = 200, body = JobDto)))]
 pub async fn resume(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
     let svc = st.svc.clone();
     Ok(Json(blocking(move || svc.resume_job(&id, now_ms())).await?.into()))
 }
 
 /// `POST /api/v1/jobs/{id}/requeue`: a failed or cancelled job runs on from its checkpoint.
+#[utoipa::path(post, path = "/api/v1/jobs/{id}/requeue", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), responses((status = 200, body = JobDto)))]
 pub async fn requeue(State(st): St, Path(id): Path<String>) -> Result<Json<JobDto>, ApiError> {
     let svc = st.svc.clone();
     Ok(Json(blocking(move || svc.requeue(&id, now_ms())).await?.into()))
 }
 
 /// What `PATCH /api/v1/jobs/{id}` may change.
-#[derive(serde::Deserialize)]
+#[derive(serde::Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JobPatch {
-    /// Higher runs first.
-    priority: Option<i32>,
+    /// Higher runs first (an integer: `3` or `3.0`).
+    #[schema(value_type = Option<i32>)]
+    priority: Option<serde_json::Number>,
+}
+
+/// A JSON number as an `i32` priority: integral values in range only (JSON Schema counts
+/// `3.0` as an integer, so it is one).
+fn priority_of(n: &serde_json::Number) -> Result<i32, ApiError> {
+    let whole = n.as_i64().or_else(|| n.as_f64().filter(|f| f.fract() == 0.0 && f.abs() < 1e15).map(|f| f as i64));
+    whole
+        .and_then(|p| i32::try_from(p).ok())
+        .ok_or_else(|| invalid(format!("field \"priority\" must be an integer from {} to {}, got {n}", i32::MIN, i32::MAX)))
 }
 
 /// `PATCH /api/v1/jobs/{id}` with `{"priority": N}`.
+#[utoipa::path(patch, path = "/api/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")), request_body = JobPatch,
+    responses((status = 200, body = JobDto)))]
 pub async fn patch(
     State(st): St,
     Path(id): Path<String>,
     body: Result<Json<JobPatch>, axum::extract::rejection::JsonRejection>,
 ) -> Result<Json<JobDto>, ApiError> {
     let Json(patch) = body.map_err(|e| ApiError::new(ErrorCode::InvalidArgument, e.body_text()))?;
+    let priority = patch.priority.as_ref().map(priority_of).transpose()?;
     let svc = st.svc.clone();
-    let view = blocking(move || match patch.priority {
+    let view = blocking(move || match priority {
         Some(p) => svc.set_priority(&id, p, now_ms()),
         None => svc.get(&id, now_ms()),
     })
@@ -254,103 +277,12 @@ pub async fn patch(
 
 /// `DELETE /api/v1/jobs/{id}`: removes an ended job and its data (204); an active one is a
 /// conflict (409) until it is cancelled.
+#[utoipa::path(delete, path = "/api/v1/jobs/{id}", tag = "jobs", params(("id" = String, Path, description = "job id or unique prefix")),
+    responses((status = 204, description = "deleted with all its data")))]
 pub async fn delete(State(st): St, Path(id): Path<String>) -> Result<axum::http::StatusCode, ApiError> {
     let svc = st.svc.clone();
     blocking(move || svc.delete(&id)).await?;
     Ok(axum::http::StatusCode::NO_CONTENT)
-}
-
-async fn output(st: Arc<AppState>, id: String, kind: OutputKind) -> Result<impl IntoResponse, ApiError> {
-    let svc = st.svc.clone();
-    let bytes = blocking(move || svc.output(&id, kind)).await?;
-    Ok(([(header::CONTENT_TYPE, kind.mime())], bytes))
-}
-
-/// `GET /api/v1/jobs/{id}/frames.tar`: a job of frames' done frames, each `NAME.NNNN.exr` and
-/// `.png`, as one tar streamed as it is written.
-pub async fn frames_tar(State(st): St, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let svc = st.svc.clone();
-    let files = blocking(move || svc.frame_files(&id)).await?;
-    let (tx, rx) = tokio::sync::mpsc::channel::<std::io::Result<axum::body::Bytes>>(8);
-    tokio::task::spawn_blocking(move || {
-        let mut tar = tar::Builder::new(ChannelWriter(tx.clone()));
-        let written = files.into_iter().try_for_each(|(name, mut file)| {
-            let mut header = tar::Header::new_gnu();
-            header.set_size(file.metadata()?.len());
-            header.set_mode(0o644);
-            header.set_cksum();
-            tar.append_data(&mut header, name, &mut file)
-        });
-        // a failure midway ends the body with an error, so the client sees a broken download
-        if let Err(e) = written.and_then(|()| tar.finish()) {
-            let _ = tx.blocking_send(Err(e));
-        }
-    });
-    let body = axum::body::Body::from_stream(tokio_stream::wrappers::ReceiverStream::new(rx));
-    Ok(([(header::CONTENT_TYPE, "application/x-tar")], body).into_response())
-}
-
-/// Sends what a blocking writer writes to an async body, a chunk at a time.
-struct ChannelWriter(tokio::sync::mpsc::Sender<std::io::Result<axum::body::Bytes>>);
-
-impl std::io::Write for ChannelWriter {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let chunk = axum::body::Bytes::copy_from_slice(buf);
-        self.0.blocking_send(Ok(chunk)).map_err(|_| std::io::Error::other("the client went away"))?;
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-/// `GET /api/v1/jobs/{id}/result.exr`.
-pub async fn result_exr(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
-    output(st, id, OutputKind::Exr).await
-}
-
-/// `GET /api/v1/jobs/{id}/preview.png`.
-pub async fn preview_png(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
-    output(st, id, OutputKind::Png).await
-}
-
-/// `GET /api/v1/jobs/{id}/strategy.png`: EMIS jobs only (404 for others).
-pub async fn strategy_png(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
-    output(st, id, OutputKind::StrategyPng).await
-}
-
-/// `GET /api/v1/jobs/{id}/emis.json`: EMIS jobs only (404 for others).
-pub async fn emis_json(State(st): St, Path(id): Path<String>) -> Result<impl IntoResponse, ApiError> {
-    output(st, id, OutputKind::EmisJson).await
-}
-
-/// `GET /api/v1/workers`.
-pub async fn workers(State(st): St) -> Result<Json<Vec<WorkerDto>>, ApiError> {
-    let svc = st.svc.clone();
-    let workers = blocking(move || Ok(svc.workers(now_ms()))).await?;
-    Ok(Json(workers.into_iter().map(WorkerDto::from).collect()))
-}
-
-/// `POST /api/v1/workers/{id}/disable`, `/enable`, `/drain`.
-pub async fn worker_mode(
-    State(st): St,
-    Path((id, action)): Path<(String, String)>,
-) -> Result<Json<WorkerDto>, ApiError> {
-    let mode = match action.as_str() {
-        "disable" => WorkerMode::Disabled,
-        "enable" => WorkerMode::Enabled,
-        "drain" => WorkerMode::Draining,
-        other => return Err(ApiError::new(ErrorCode::NotFound, format!("no worker action \"{other}\""))),
-    };
-    let svc = st.svc.clone();
-    Ok(Json(blocking(move || svc.set_worker_mode(&id, mode, now_ms())).await?.into()))
-}
-
-/// `GET /metrics`: the OpenMetrics text format, which Prometheus reads.
-pub async fn metrics(State(st): St) -> impl IntoResponse {
-    let body = tokio::task::spawn_blocking(move || st.telemetry.encode()).await.unwrap_or_default();
-    ([(header::CONTENT_TYPE, "application/openmetrics-text; version=1.0.0; charset=utf-8")], body)
 }
 
 #[cfg(test)]
@@ -374,6 +306,16 @@ mod tests {
         assert_eq!(s.integrator, tessera_common::settings::IntegratorName::EmisVcm);
         let e = parse_settings(r#"{"integrator":"emis-vcm","cost_model":"reference"}"#).unwrap_err();
         assert!(e.message.contains("cost_model") && e.message.contains("retired"), "{}", e.message);
+    }
+
+    #[test]
+    fn priorities_are_whole_numbers_in_range() {
+        let n = |text: &str| serde_json::from_str::<serde_json::Number>(text).unwrap();
+        assert_eq!(priority_of(&n("3")).unwrap(), 3);
+        assert_eq!(priority_of(&n("-7.0")).unwrap(), -7);
+        assert!(priority_of(&n("2.5")).unwrap_err().message.contains("priority"));
+        assert!(priority_of(&n("4294967296")).is_err());
+        assert!(priority_of(&n("1e300")).is_err());
     }
 
     #[test]

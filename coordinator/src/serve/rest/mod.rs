@@ -17,6 +17,7 @@
 //! | `POST /api/v1/workers/{id}/disable`, `/enable`, `/drain` | no new tiles; tiles again; no new tiles and stop when idle |
 //! | `GET /api/v1/server` | the coordinator's disk: free bytes, reserve, whether it is below it (`disk.low`) |
 //! | `GET /healthz`, `GET /metrics` | liveness, Prometheus text |
+//! | `GET /api/v1/openapi.json` | the OpenAPI 3.1 document of all of the above, generated from the handlers ([`openapi`]) |
 //! | `GET /` | the dashboard: a static page that polls the API (jobs, progress, EMIS strategy, previews, workers) |
 //!
 //! Every error is an RFC 9457 problem document (`application/problem+json`: `type`, `title`,
@@ -24,40 +25,49 @@
 
 pub mod dto;
 pub mod events;
+pub mod farm;
 pub mod jobs;
+pub mod openapi;
+pub mod outputs;
 
 use crate::serve::state::AppState;
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
-use axum::routing::{get, post};
+use axum::routing::get;
 use std::sync::Arc;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
 
-/// The REST router.
+/// The REST router. Its API routes are registered with their OpenAPI descriptions, so the
+/// document at `/api/v1/openapi.json` lists exactly the routes served.
 pub fn router(state: Arc<AppState>) -> Router {
     let limit = state.max_upload_bytes;
-    Router::new()
-        .route("/api/v1/jobs", get(jobs::list).post(jobs::submit))
-        .route("/api/v1/jobs/{id}", get(jobs::get_one).delete(jobs::delete).patch(jobs::patch))
-        .route("/api/v1/events", get(events::all))
-        .route("/api/v1/jobs/{id}/events", get(events::of_job))
-        .route("/api/v1/jobs/{id}/cancel", post(jobs::cancel))
-        .route("/api/v1/jobs/{id}/pause", post(jobs::pause))
-        .route("/api/v1/jobs/{id}/resume", post(jobs::resume))
-        .route("/api/v1/jobs/{id}/requeue", post(jobs::requeue))
-        .route("/api/v1/jobs/{id}/result.exr", get(jobs::result_exr))
-        .route("/api/v1/jobs/{id}/frames.tar", get(jobs::frames_tar))
-        .route("/api/v1/jobs/{id}/preview.png", get(jobs::preview_png))
-        .route("/api/v1/jobs/{id}/strategy.png", get(jobs::strategy_png))
-        .route("/api/v1/jobs/{id}/emis.json", get(jobs::emis_json))
-        .route("/api/v1/workers", get(jobs::workers))
-        .route("/api/v1/workers/{id}/{action}", post(jobs::worker_mode))
-        .route("/api/v1/server", get(jobs::server))
+    let (api, doc) = OpenApiRouter::<Arc<AppState>>::with_openapi(openapi::base())
+        .routes(routes!(jobs::list, jobs::submit))
+        .routes(routes!(jobs::get_one, jobs::delete, jobs::patch))
+        .routes(routes!(events::all))
+        .routes(routes!(events::of_job))
+        .routes(routes!(jobs::cancel))
+        .routes(routes!(jobs::pause))
+        .routes(routes!(jobs::resume))
+        .routes(routes!(jobs::requeue))
+        .routes(routes!(outputs::result_exr))
+        .routes(routes!(outputs::frames_tar))
+        .routes(routes!(outputs::preview_png))
+        .routes(routes!(outputs::strategy_png))
+        .routes(routes!(outputs::emis_json))
+        .routes(routes!(farm::workers))
+        .routes(routes!(farm::worker_mode))
+        .routes(routes!(farm::server))
+        .routes(routes!(farm::metrics))
+        .routes(routes!(openapi::healthz))
+        .split_for_parts();
+    let doc: Arc<str> = openapi::document(doc).into();
+    api.route("/api/v1/openapi.json", get(move || openapi::serve(doc.clone())))
         .route("/", get(dashboard))
         .route("/dashboard", get(dashboard))
-        .route("/healthz", get(|| async { "ok" }))
-        .route("/api/v1/healthz", get(|| async { "ok" }))
-        .route("/metrics", get(jobs::metrics))
-        .route("/api/v1/metrics", get(jobs::metrics))
+        .route("/healthz", get(openapi::healthz))
+        .route("/metrics", get(farm::metrics))
         .layer(DefaultBodyLimit::max(limit))
         .layer(axum::middleware::from_fn_with_state(limit, refuse_oversized))
         .with_state(state)
