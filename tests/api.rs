@@ -190,3 +190,39 @@ fn the_openapi_document_is_public_and_the_api_is_not() {
     let (status, problem, kind) = request(reqwest::Method::GET, &format!("{}/api/v1/jobs", c.url), None);
     assert_eq!((status, kind.as_str(), problem["code"].as_str()), (401, "application/problem+json", Some("unauthenticated")));
 }
+
+/// gRPC server reflection lists Tessera's services (so grpcurl needs no .proto files), behind
+/// the client token like the services themselves.
+#[test]
+fn grpc_reflection_lists_the_services() {
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--client-token", "t0ken", "--worker-token", "w"]);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let list = |token: &'static str| {
+        rt.block_on(async {
+            let channel = tonic::transport::Channel::from_shared(c.url.clone()).unwrap().connect().await.unwrap();
+            let auth = move |mut req: tonic::Request<()>| {
+                req.metadata_mut().insert("authorization", format!("Bearer {token}").parse().unwrap());
+                Ok(req)
+            };
+            let mut client = ServerReflectionClient::with_interceptor(channel, auth);
+            let ask = ServerReflectionRequest {
+                host: String::new(),
+                message_request: Some(MessageRequest::ListServices(String::new())),
+            };
+            let mut answers = client.server_reflection_info(tokio_stream::iter([ask])).await?.into_inner();
+            let Some(MessageResponse::ListServicesResponse(list)) = answers.message().await?.unwrap().message_response
+            else {
+                panic!("not a list of services")
+            };
+            Ok::<_, tonic::Status>(list.service.into_iter().map(|s| s.name).collect::<Vec<_>>())
+        })
+    };
+    let names = list("t0ken").unwrap();
+    assert!(names.contains(&"tessera.v1.JobService".to_string()) && names.contains(&"tessera.v1.WorkerService".to_string()), "{names:?}");
+    assert_eq!(list("wrong").unwrap_err().code(), tonic::Code::Unauthenticated);
+}

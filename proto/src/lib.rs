@@ -26,6 +26,10 @@ pub mod v1 {
     tonic::include_proto!("tessera.v1");
 }
 
+/// The encoded `FileDescriptorSet` of `tessera.v1`, which the coordinator serves by gRPC server
+/// reflection.
+pub const FILE_DESCRIPTOR_SET: &[u8] = tonic::include_file_descriptor_set!("tessera_descriptor");
+
 /// Upper bound of the EMIS pilot data per pixel a result may carry (moment sums of up to 64
 /// candidates and seven guide channels, all f32); the exact size is checked on decoding.
 pub const MAX_PILOT_BYTES_PER_PIXEL: u64 = (64 + 7) * 4;

@@ -18,7 +18,8 @@ pub struct Tokens {
 }
 
 const WORKER_PREFIX: &str = "/tessera.v1.WorkerService/";
-const GRPC_PREFIX: &str = "/tessera.v1.";
+/// gRPC paths: Tessera's services and server reflection (which needs the client token).
+const GRPC_PREFIXES: [&str; 2] = ["/tessera.v1.", "/grpc.reflection."];
 
 /// Compares in time independent of the contents and of both lengths: the tokens are hashed to
 /// fixed-size digests first, which are compared in constant time.
@@ -46,7 +47,7 @@ pub async fn require_token(State(tokens): State<Arc<Tokens>>, req: Request, next
         return next.run(req).await;
     }
     let message = if given.is_some() { "wrong bearer token" } else { "missing bearer token (authorization header)" };
-    if path.starts_with(GRPC_PREFIX) {
+    if GRPC_PREFIXES.iter().any(|p| path.starts_with(p)) {
         tonic::Status::unauthenticated(message).into_http::<axum::body::Body>().into_response()
     } else {
         crate::serve::error::ApiError::new(crate::serve::error::ErrorCode::Unauthenticated, message).into_response()

@@ -1,6 +1,6 @@
 //! The gRPC side of the coordinator: `JobService` for clients ([`job_api`]) and
-//! `WorkerService` for workers ([`worker_api`]), as one axum router that `app.rs` merges with
-//! the REST API on the same port.
+//! `WorkerService` for workers ([`worker_api`]), plus server reflection, as one axum router
+//! that `app.rs` merges with the REST API on the same port.
 
 pub mod convert;
 pub mod job_api;
@@ -21,7 +21,21 @@ pub fn router(state: Arc<AppState>) -> axum::Router {
     let workers = WorkerServiceServer::new(worker_api::WorkerApi(state))
         .max_decoding_message_size(tessera_proto::MAX_WORKER_MESSAGE_BYTES)
         .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
-    tonic::service::Routes::new(jobs).add_service(workers).into_axum_router()
+    // server reflection (v1 and the v1alpha that older grpcurl builds ask for) describes
+    // tessera.v1, so tools can call the services without the .proto files
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(tessera_proto::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .expect("invariant: the compiled descriptors are valid");
+    let reflection_alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(tessera_proto::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()
+        .expect("invariant: the compiled descriptors are valid");
+    tonic::service::Routes::new(jobs)
+        .add_service(workers)
+        .add_service(reflection)
+        .add_service(reflection_alpha)
+        .into_axum_router()
 }
 
 /// Streams `bytes` as chunks.
