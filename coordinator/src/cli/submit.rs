@@ -35,6 +35,10 @@ pub struct SubmitArgs {
     /// Wait for the job, showing progress, and download the result.
     #[arg(long)]
     pub wait: bool,
+    /// Print the files that would be uploaded (their paths in the bundle, the scene first) and
+    /// exit without contacting the coordinator.
+    #[arg(long, conflicts_with = "wait")]
+    pub list_files: bool,
     /// Where --wait writes the EXR (a PNG goes beside it, and for EMIS NAME.strategy.png and
     /// NAME.emis.json; a NAME.png names the PNG, and the EXR goes to NAME.exr) [default: the
     /// scene's name].
@@ -53,6 +57,12 @@ pub fn submit_command(args: &SubmitArgs) -> anyhow::Result<()> {
         None => tessera_common::bundle::pack(&args.scene, &settings.define_map())?,
         Some(numbers) => pack_frames(&args.scene, &settings, &args.frames, numbers)?,
     };
+    if args.list_files {
+        for (path, _) in &bundle.files {
+            println!("{path}");
+        }
+        return Ok(());
+    }
     let name = super::frames::job_name(&args.scene);
     let output = args.output.clone().unwrap_or_else(|| super::frames::default_output(&args.scene, frames.is_some()));
     runtime()?.block_on(async {

@@ -54,7 +54,12 @@ fn parse_settings(text: &str) -> Result<Submission, ApiError> {
     let frames = frames_of(obj)?;
     let name = obj.remove("name").and_then(|n| n.as_str().map(str::to_string));
     tessera_common::settings::strip_retired(obj).map_err(|e| invalid(e.to_string()))?;
-    let settings = serde_json::from_value(value).map_err(|e| invalid(format!("field \"settings\": {e}")))?;
+    // the error names the setting at fault (`integrator`), not only the part
+    let settings = serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        let at = if path == "." { String::new() } else { format!(" field \"{path}\"") };
+        invalid(format!("settings{at}: {}", e.into_inner()))
+    })?;
     Ok((settings, Placement { priority, after, require_tags }, name, frames))
 }
 
@@ -299,6 +304,8 @@ mod tests {
         assert!(e.message.contains("after"), "{}", e.message);
         let e = parse_settings(r#"{"integrator":"vcm","spq":2}"#).unwrap_err();
         assert!(e.message.contains("spq"), "{}", e.message);
+        let e = parse_settings(r#"{"integrator":"nonsense"}"#).unwrap_err();
+        assert!(e.message.starts_with("settings field \"integrator\": unknown variant"), "{}", e.message);
         let e = parse_settings(r#"{"priority":"high"}"#).unwrap_err();
         assert!(e.message.contains("priority"));
         // retired settings: their old default accepted, a retired variant refused by name
