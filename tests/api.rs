@@ -226,3 +226,40 @@ fn grpc_reflection_lists_the_services() {
     assert!(names.contains(&"tessera.v1.JobService".to_string()) && names.contains(&"tessera.v1.WorkerService".to_string()), "{names:?}");
     assert_eq!(list("wrong").unwrap_err().code(), tonic::Code::Unauthenticated);
 }
+
+/// The viewer token reads jobs, events and metrics over REST and gRPC, and writes nothing: a
+/// submission, a cancel and a worker's call are refused, 403 / PERMISSION_DENIED.
+#[test]
+fn a_viewer_reads_and_cannot_write() {
+    use tessera_proto::v1::job_service_client::JobServiceClient;
+    use tessera_proto::v1::{CancelJobRequest, ListJobsRequest};
+    let dir = tempfile::tempdir().unwrap();
+    let flags = ["--client-token", "writer", "--worker-token", "w", "--viewer-token", "reader"];
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &flags);
+    let xml = std::fs::read(scene("cornell-box")).unwrap();
+    let settings = json!({"integrator": "pt", "spp": 4096, "seed": 1});
+    let (status, job) = rest::submit(&c.url, Some("writer"), ("scene.xml", xml.clone()), vec![], settings.clone());
+    assert_eq!(status, 201, "{job}");
+    let id = job["id"].as_str().unwrap();
+    for path in ["/api/v1/jobs", &format!("/api/v1/jobs/{id}"), "/api/v1/workers", "/metrics"] {
+        assert_eq!(rest::get(&format!("{}{path}", c.url), Some("reader")).0, 200, "{path}");
+    }
+    let (status, problem) = rest::submit(&c.url, Some("reader"), ("scene.xml", xml), vec![], settings);
+    assert_eq!((status, problem["code"].as_str()), (403, Some("permission_denied")), "{problem}");
+    assert!(problem["detail"].as_str().unwrap().contains("only reads"), "{problem}");
+    assert_eq!(rest::post(&format!("{}/api/v1/jobs/{id}/cancel", c.url), Some("reader")).0, 403);
+    assert_eq!(rest::get(&format!("{}/api/v1/jobs", c.url), Some("guess")).0, 401);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let channel = tonic::transport::Channel::from_shared(c.url.clone()).unwrap().connect().await.unwrap();
+        let auth = |mut req: tonic::Request<()>| {
+            req.metadata_mut().insert("authorization", "Bearer reader".parse().unwrap());
+            Ok(req)
+        };
+        let mut client = JobServiceClient::with_interceptor(channel, auth);
+        assert_eq!(client.list_jobs(ListJobsRequest {}).await.unwrap().into_inner().jobs.len(), 1);
+        let cancel = client.cancel_job(CancelJobRequest { id: id.to_string() }).await.unwrap_err();
+        assert_eq!(cancel.code(), tonic::Code::PermissionDenied, "{cancel:?}");
+    });
+    assert_eq!(rest::get_json(&format!("{}/api/v1/jobs/{id}", c.url), Some("writer")).1["state"], "queued");
+}

@@ -146,6 +146,8 @@ mod tests {
             ("worker-token-file", "\"/run/secrets/worker\""),
             ("client-token", "\"c-secret\""),
             ("client-token-file", "\"/run/secrets/client\""),
+            ("viewer-token", "\"v\""),
+            ("viewer-token-file", "\"/run/secrets/viewer\""),
             ("tls-cert", "\"farm.pem\""),
             ("tls-key", "\"farm.key\""),
             ("insecure", "true"),

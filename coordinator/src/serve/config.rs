@@ -38,6 +38,13 @@ pub struct ServeArgs {
     /// File holding the client token.
     #[arg(long, conflicts_with = "client_token")]
     pub client_token_file: Option<PathBuf>,
+    /// Bearer token that only reads: job and worker lists, outputs, events, metrics (for
+    /// dashboards, Prometheus, KEDA). Needs --client-token.
+    #[arg(long, env = "TESSERA_VIEWER_TOKEN", hide_env_values = true)]
+    pub viewer_token: Option<String>,
+    /// File holding the viewer token.
+    #[arg(long, conflicts_with = "viewer_token")]
+    pub viewer_token_file: Option<PathBuf>,
     /// Serve gRPC, REST and the dashboard over TLS with this certificate chain (PEM, the
     /// server's certificate first).
     #[arg(long, value_name = "PEM", requires = "tls_key")]
@@ -145,7 +152,15 @@ impl ServeArgs {
         let tokens = Tokens {
             worker: read_token(&self.worker_token, &self.worker_token_file)?,
             client: read_token(&self.client_token, &self.client_token_file)?,
+            viewer: read_token(&self.viewer_token, &self.viewer_token_file)?,
         };
+        // without a client token everything is open, so a viewer token would protect nothing
+        if tokens.viewer.is_some() && tokens.client.is_none() {
+            bail!("--viewer-token needs --client-token: without it every request may write");
+        }
+        if tokens.viewer.is_some() && tokens.viewer == tokens.client {
+            bail!("--viewer-token must differ from --client-token");
+        }
         let tls = match (&self.tls_cert, &self.tls_key) {
             (Some(cert), Some(key)) => Some(super::tls::server_config(cert, key)?),
             (None, None) => None,
@@ -283,6 +298,16 @@ mod tests {
         std::fs::write(&cert, made.cert.pem()).unwrap();
         std::fs::write(&key, made.signing_key.serialize_pem()).unwrap();
         (cert.to_str().unwrap().to_string(), key.to_str().unwrap().to_string())
+    }
+
+    #[test]
+    fn a_viewer_token_needs_a_client_token_of_its_own() {
+        let e = format!("{:#}", resolve(&["--viewer-token", "v"]).err().unwrap());
+        assert!(e.contains("--viewer-token needs --client-token"), "{e}");
+        let e = format!("{:#}", resolve(&["--viewer-token", "same", "--client-token", "same"]).err().unwrap());
+        assert!(e.contains("must differ"), "{e}");
+        let ok = resolve(&["--viewer-token", "v", "--client-token", "c"]).unwrap();
+        assert_eq!(ok.tokens.viewer.as_deref(), Some("v"));
     }
 
     #[test]
