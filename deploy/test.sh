@@ -53,7 +53,7 @@ step "kubernetes manifests"
 if command -v kubectl >/dev/null; then
     rendered=$(mktemp)
     kubectl kustomize deploy/k8s >"$rendered" || fail "kubectl kustomize deploy/k8s failed"
-    for kind in Namespace Service StatefulSet Deployment ScaledObject TriggerAuthentication; do
+    for kind in Namespace Service StatefulSet Deployment ScaledObject TriggerAuthentication PodDisruptionBudget NetworkPolicy; do
         grep -q "^kind: $kind\$" "$rendered" || fail "kubectl kustomize deploy/k8s renders no $kind"
     done
     note "kubectl kustomize deploy/k8s: $(grep -c '^kind:' "$rendered") objects, a ScaledObject among them"
