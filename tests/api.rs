@@ -60,9 +60,11 @@ fn event_streams_follow_a_job_to_its_end() {
     let all_url = format!("{}/api/v1/events", c.url);
     let (seen_tx, seen_rx) = std::sync::mpsc::channel();
     let everything = std::thread::spawn(move || {
-        read_events(&all_url, || seen_tx.send(()).unwrap(), |e| {
-            e.iter().any(|e| e.event == "job.state" && e.data["state"] == "done")
-        })
+        read_events(
+            &all_url,
+            || seen_tx.send(()).unwrap(),
+            |e| e.iter().any(|e| e.event == "job.state" && e.data["state"] == "done"),
+        )
     });
     seen_rx.recv_timeout(TIMEOUT).unwrap();
     let id = submit(&c, "watched", 64);
@@ -181,26 +183,37 @@ fn the_job_list_filters_by_state_and_name() {
 #[test]
 fn the_openapi_document_is_public_and_the_api_is_not() {
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--client-token", "t0ken", "--worker-token", "w"]);
+    let c = Coordinator::start(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--client-token", "t0ken", "--worker-token", "w"],
+    );
     let (status, doc) = rest::get_json(&format!("{}/api/v1/openapi.json", c.url), None);
     assert_eq!((status, doc["openapi"].as_str()), (200, Some("3.1.0")));
     for path in ["/api/v1/jobs", "/api/v1/jobs/{id}/events", "/api/v1/events", "/api/v1/workers/{id}/{action}"] {
         assert!(doc["paths"][path].is_object(), "{path} is documented");
     }
     let (status, problem, kind) = request(reqwest::Method::GET, &format!("{}/api/v1/jobs", c.url), None);
-    assert_eq!((status, kind.as_str(), problem["code"].as_str()), (401, "application/problem+json", Some("unauthenticated")));
+    assert_eq!(
+        (status, kind.as_str(), problem["code"].as_str()),
+        (401, "application/problem+json", Some("unauthenticated"))
+    );
 }
 
 /// gRPC server reflection lists Tessera's services (so grpcurl needs no .proto files), behind
 /// the client token like the services themselves.
 #[test]
 fn grpc_reflection_lists_the_services() {
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
     use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
     use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
     use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
-    use tonic_reflection::pb::v1::ServerReflectionRequest;
     let dir = tempfile::tempdir().unwrap();
-    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &["--client-token", "t0ken", "--worker-token", "w"]);
+    let c = Coordinator::start(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--client-token", "t0ken", "--worker-token", "w"],
+    );
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     let list = |token: &'static str| {
         rt.block_on(async {
@@ -223,7 +236,10 @@ fn grpc_reflection_lists_the_services() {
         })
     };
     let names = list("t0ken").unwrap();
-    assert!(names.contains(&"tessera.v1.JobService".to_string()) && names.contains(&"tessera.v1.WorkerService".to_string()), "{names:?}");
+    assert!(
+        names.contains(&"tessera.v1.JobService".to_string()) && names.contains(&"tessera.v1.WorkerService".to_string()),
+        "{names:?}"
+    );
     assert_eq!(list("wrong").unwrap_err().code(), tonic::Code::Unauthenticated);
 }
 
@@ -262,4 +278,31 @@ fn a_viewer_reads_and_cannot_write() {
         assert_eq!(cancel.code(), tonic::Code::PermissionDenied, "{cancel:?}");
     });
     assert_eq!(rest::get_json(&format!("{}/api/v1/jobs/{id}", c.url), Some("writer")).1["state"], "queued");
+}
+
+/// `/metrics` names the build, the process, each worker, and counts the samples merged (equal
+/// to the job's own count) and the tile failures.
+#[test]
+fn metrics_show_the_build_the_process_workers_and_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &["--name", "w-metrics"]);
+    let id = submit(&c, "counted", 4);
+    let (events, _) = read_events(&format!("{}/api/v1/jobs/{id}/events", c.url), || {}, |_| false);
+    let done = &events.last().unwrap().data;
+    assert_eq!(done["state"], "done", "{events:?}");
+    let (status, text) = rest::get(&format!("{}/metrics", c.url), None);
+    assert_eq!(status, 200);
+    let text = String::from_utf8(text).unwrap();
+    let value = |name: &str| -> f64 {
+        let line = text.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no {name} in\n{text}"));
+        line.rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    assert_eq!(value("tessera_samples_merged_total"), done["samples_done"].as_f64().unwrap());
+    assert_eq!(value("tessera_tile_failures_total"), 0.0);
+    assert_eq!(value("tessera_build_info{version=\"0.1.0\""), 1.0);
+    assert!(value("process_resident_memory_bytes") > 1e6 && value("process_open_fds") > 3.0);
+    assert!(value("process_start_time_seconds") > 1.6e9 && value("process_cpu_seconds_total") > 0.0);
+    let up = text.lines().find(|l| l.starts_with("tessera_worker_up{") && l.contains("name=\"w-metrics\"")).unwrap();
+    assert!(up.ends_with(" 1"), "{up}");
 }

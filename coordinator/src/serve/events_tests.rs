@@ -65,7 +65,8 @@ fn the_clock_alone_sends_nothing() {
 fn frames_and_workers_become_events() {
     let mut seq = job("s1", JobState::Final, 0);
     seq.frames_total = 2;
-    let frame = |state| FrameView { number: 7, job_id: "s1-0007".into(), state, progress: 0.0, eta_s: None, error: None };
+    let frame =
+        |state| FrameView { number: 7, job_id: "s1-0007".into(), state, progress: 0.0, eta_s: None, error: None };
     seq.frames = vec![frame(JobState::Final)];
     let a = Snapshot::of(&[seq.clone()], &[worker("w1", 0, 0.0), worker("w2", 1, 0.0)]);
     seq.frames = vec![frame(JobState::Done)];
@@ -73,7 +74,12 @@ fn frames_and_workers_become_events() {
     let changes = a.changes(&b);
     assert_eq!(
         kinds(&changes),
-        [("job.progress", Some("s1"), false), ("frame.state", Some("s1"), false), ("worker", None, false), ("worker.gone", None, false)]
+        [
+            ("job.progress", Some("s1"), false),
+            ("frame.state", Some("s1"), false),
+            ("worker", None, false),
+            ("worker.gone", None, false)
+        ]
     );
     assert_eq!(changes[1].2.as_deref(), Some("s1-0007"), "a frame's events name its own job too");
     let frame: serde_json::Value = serde_json::from_str(&changes[1].4).unwrap();

@@ -1,10 +1,12 @@
 //! `/metrics` in the Prometheus text format (prometheus-client): the service's figures, read at
-//! each scrape (jobs per state, queued and leased tiles, live workers, result and lease
-//! counters), and latency histograms of the service calls behind the worker API's uploads and
-//! leases, which the gRPC layer observes.
+//! each scrape (jobs per state, queued and leased tiles, live workers, result, lease, sample and
+//! failure counters, a series per worker), the build and the process
+//! ([`super::metrics_process`]), and latency histograms of the service calls behind the worker
+//! API's uploads and leases, which the gRPC layer observes. Per-worker series are bounded by
+//! the workers the coordinator keeps (`--max-workers`, `--forget-workers-after`).
 
 use super::clock::now_ms;
-use super::job::service::JobService;
+use super::job::service::{JobService, WorkerView};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
 use prometheus_client::metrics::counter::ConstCounter;
@@ -91,6 +93,9 @@ impl Collector for ServiceCollector {
                 ConstGauge::new(n as i64).encode(family.encode_family(&[("state", state)])?)?;
             }
         }
+        build_info(&mut encoder)?;
+        process(&mut encoder)?;
+        per_worker(&mut encoder, &workers)?;
         gauge(&mut encoder, "tessera_tiles_queued", "Tiles waiting for a worker (the backlog).", m.tiles_queued)?;
         gauge(&mut encoder, "tessera_tiles_leased", "Tiles leased to workers.", m.tiles_leased)?;
         let live = workers.iter().filter(|w| w.last_seen_s_ago < LIVE_WORKER_S).count();
@@ -103,10 +108,67 @@ impl Collector for ServiceCollector {
             ("tessera_leases_expired", "Leases that expired.", c.leases_expired),
             ("tessera_coordinator_stalls", "Times the coordinator found itself stalled (leases postponed).", c.stalls),
             ("tessera_tiles_merged", "Tiles merged into films.", c.tiles_merged),
+            ("tessera_samples_merged", "Pixel samples merged into films (rate: samples per second).", c.samples_merged),
+            ("tessera_tile_failures", "Tiles a worker reported it could not render.", c.tile_failures),
         ] {
             let counter = ConstCounter::new(value);
             counter.encode(encoder.encode_descriptor(name, help, None, counter.metric_type())?)?;
         }
         Ok(())
     }
+}
+
+/// `tessera_build_info{version, renderer}` 1: which build serves (workers must match it).
+fn build_info(encoder: &mut DescriptorEncoder) -> Result<(), std::fmt::Error> {
+    let metric = ConstGauge::new(1i64);
+    let mut family = encoder.encode_descriptor(
+        "tessera_build_info",
+        "This build: version and renderer revision.",
+        None,
+        metric.metric_type(),
+    )?;
+    let labels = [("version", env!("CARGO_PKG_VERSION")), ("renderer", tessera_common::RENDERER_REVISION)];
+    metric.encode(family.encode_family(&labels)?)
+}
+
+/// The `process_*` figures, where `/proc` has them.
+fn process(encoder: &mut DescriptorEncoder) -> Result<(), std::fmt::Error> {
+    let Some(p) = super::metrics_process::read() else { return Ok(()) };
+    let cpu = ConstCounter::new(p.cpu_seconds);
+    cpu.encode(encoder.encode_descriptor(
+        "process_cpu",
+        "User and system CPU time.",
+        Some(&Unit::Seconds),
+        cpu.metric_type(),
+    )?)?;
+    let figures = [
+        ("process_resident_memory", "Resident memory.", Some(Unit::Bytes), p.resident_bytes as f64),
+        ("process_open_fds", "Open file descriptors.", None, p.open_fds as f64),
+        ("process_start_time", "Start time since the Unix epoch.", Some(Unit::Seconds), p.start_time_seconds),
+    ];
+    for (name, help, unit, value) in figures {
+        let g = ConstGauge::new(value);
+        g.encode(encoder.encode_descriptor(name, help, unit.as_ref(), g.metric_type())?)?;
+    }
+    Ok(())
+}
+
+/// One figure of a worker.
+type WorkerFigure = fn(&WorkerView) -> i64;
+
+/// A series per worker the coordinator keeps: its leases, threads and whether it is up.
+fn per_worker(encoder: &mut DescriptorEncoder, workers: &[WorkerView]) -> Result<(), std::fmt::Error> {
+    let series: [(&str, &str, WorkerFigure); 3] = [
+        ("tessera_worker_leases", "Tiles leased to the worker.", |w| w.leases as i64),
+        ("tessera_worker_threads", "The worker's render threads.", |w| i64::from(w.threads)),
+        ("tessera_worker_up", "1 unless the worker is offline.", |w| i64::from(w.state != "offline")),
+    ];
+    for (name, help, value) in series {
+        let mut family = encoder.encode_descriptor(name, help, None, ConstGauge::new(0i64).metric_type())?;
+        for w in workers {
+            let labels = [("worker", w.id.as_str()), ("name", w.name.as_str())];
+            ConstGauge::new(value(w)).encode(family.encode_family(&labels)?)?;
+        }
+    }
+    Ok(())
 }

@@ -18,6 +18,7 @@ pub mod events;
 pub mod grpc;
 pub mod job;
 pub mod metrics;
+pub mod metrics_process;
 pub mod origin;
 pub mod rest;
 pub mod state;

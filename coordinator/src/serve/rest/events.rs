@@ -17,7 +17,6 @@ use std::sync::Arc;
 use tokio::sync::{broadcast, mpsc};
 use tokio_stream::wrappers::ReceiverStream;
 
-
 /// One event of a stream, as OpenAPI describes it (documentation only).
 #[derive(utoipa::ToSchema)]
 #[allow(dead_code)]

@@ -153,7 +153,8 @@ pub struct Page {
 }
 
 /// The states a client may filter by.
-const STATES: [&str; 9] = ["queued", "pilot", "optimizing", "final", "done", "failed", "cancelled", "paused", "blocked"];
+const STATES: [&str; 9] =
+    ["queued", "pilot", "optimizing", "final", "done", "failed", "cancelled", "paused", "blocked"];
 
 /// The filter of a list request: unknown state names are refused by name.
 fn filter_of(page: &Page) -> Result<JobFilter, ApiError> {
@@ -256,9 +257,9 @@ pub struct JobPatch {
 /// `3.0` as an integer, so it is one).
 fn priority_of(n: &serde_json::Number) -> Result<i32, ApiError> {
     let whole = n.as_i64().or_else(|| n.as_f64().filter(|f| f.fract() == 0.0 && f.abs() < 1e15).map(|f| f as i64));
-    whole
-        .and_then(|p| i32::try_from(p).ok())
-        .ok_or_else(|| invalid(format!("field \"priority\" must be an integer from {} to {}, got {n}", i32::MIN, i32::MAX)))
+    whole.and_then(|p| i32::try_from(p).ok()).ok_or_else(|| {
+        invalid(format!("field \"priority\" must be an integer from {} to {}, got {n}", i32::MIN, i32::MAX))
+    })
 }
 
 /// `PATCH /api/v1/jobs/{id}` with `{"priority": N}`.
@@ -327,7 +328,8 @@ mod tests {
 
     #[test]
     fn list_filters_name_unknown_states() {
-        let page = |state: &str| Page { limit: None, offset: None, state: Some(state.into()), name: Some("Shot 1".into()) };
+        let page =
+            |state: &str| Page { limit: None, offset: None, state: Some(state.into()), name: Some("Shot 1".into()) };
         let f = filter_of(&page("done, failed")).unwrap();
         assert_eq!((f.states, f.name.as_deref()), (vec!["done".to_string(), "failed".into()], Some("Shot 1")));
         let e = filter_of(&page("done,finished")).unwrap_err();

@@ -47,9 +47,8 @@ pub fn document(api: utoipa::openapi::OpenApi) -> String {
     doc["components"]["securitySchemes"] = json!({"bearer": {"type": "http", "scheme": "bearer"}});
     doc["security"] = json!([{"bearer": []}]);
     let problem = json!({"$ref": "#/components/schemas/Problem"});
-    let error = |what: &str| {
-        json!({"description": what, "content": {"application/problem+json": {"schema": problem.clone()}}})
-    };
+    let error =
+        |what: &str| json!({"description": what, "content": {"application/problem+json": {"schema": problem.clone()}}});
     let openapi_path = json!({"get": {
         "tags": ["farm"], "operationId": "openapi", "summary": "This document.",
         "responses": {"200": {"description": "the OpenAPI 3.1 document", "content": {"application/json": {}}}}
@@ -63,7 +62,8 @@ pub fn document(api: utoipa::openapi::OpenApi) -> String {
                 continue;
             }
             let responses = &mut operation["responses"];
-            responses["4XX"] = error("the request is wrong: a bad field, an unknown job, a state that does not allow it");
+            responses["4XX"] =
+                error("the request is wrong: a bad field, an unknown job, a state that does not allow it");
             responses["5XX"] = error("the coordinator failed (its log says why) or its disk is full");
             for response in responses.as_object_mut().into_iter().flat_map(|r| r.values_mut()) {
                 // `get_mut`: indexing would add a null `content` to responses without a body

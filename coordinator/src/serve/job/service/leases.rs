@@ -247,6 +247,7 @@ impl JobService {
     ) -> Result<(), ServiceError> {
         let mut inner = self.lock();
         let effects = inner.model.apply(Event::Failure { worker, lease, message }, now_ms)?;
+        inner.counters.tile_failures += 1;
         tracing::warn!(job_id = %lease.job, tile = lease.tile, worker_id = worker, message, "worker reported a failure");
         self.persist(&mut inner, &effects.changes, &[])?;
         self.sync(&inner)?;

@@ -166,6 +166,8 @@ impl JobService {
             return Ok(None);
         };
         inner.counters.tiles_merged += range.len() as u64;
+        let tiles = &inner.model.jobs[&job].tiles;
+        inner.counters.samples_merged += tiles[range.clone()].iter().map(|t| t.spec.pixel_samples()).sum::<u64>();
         let mut merged = Effects { changes: pending, then: Vec::new() };
         merged.extend(inner.model.apply(Event::Merged { job: &job, upto: range.end }, now_ms)?);
         inner.job(&job).film = Some(film);

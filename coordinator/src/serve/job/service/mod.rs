@@ -189,6 +189,10 @@ pub struct Counters {
     pub tiles_merged: u64,
     /// Times the expiry timer found the coordinator had stalled (leases postponed).
     pub stalls: u64,
+    /// Pixel samples merged into films (its rate is the farm's samples per second).
+    pub samples_merged: u64,
+    /// Tiles a worker reported it could not render.
+    pub tile_failures: u64,
 }
 
 struct Inner {

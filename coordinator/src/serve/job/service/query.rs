@@ -137,8 +137,7 @@ impl JobService {
     ) -> Result<(Vec<JobView>, usize), ServiceError> {
         let inner = self.lock();
         // a job of frames is one entry: its frames are in its view
-        let stills =
-            inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| (j.seq, &j.id, &j.spec.name));
+        let stills = inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| (j.seq, &j.id, &j.spec.name));
         let sequences = inner.model.sequences.values().map(|s| (s.seq, &s.id, &s.spec.name));
         let mut jobs: Vec<_> = stills.chain(sequences).filter(|(_, _, name)| filter.passes_name(name)).collect();
         jobs.sort_unstable_by_key(|&(seq, _, _)| std::cmp::Reverse(seq));
