@@ -82,6 +82,66 @@ fn tls_end_to_end_with_a_self_signed_certificate_made_in_the_test() {
     assert!(stopped.success(), "{stopped:?}, log: {}", c.log.display());
 }
 
+/// A self-signed certificate marked as a CA, for `names`, as openssl's usual one-liner makes
+/// it (`openssl req -x509 -newkey ... -subj /CN=... -addext subjectAltName=...` sets
+/// `basicConstraints = CA:TRUE`): (cert.pem, key.pem).
+fn self_signed_ca(dir: &Path, names: &[&str]) -> (PathBuf, PathBuf) {
+    let key = rcgen::KeyPair::generate().unwrap();
+    let mut params = rcgen::CertificateParams::new(names.iter().map(|n| n.to_string()).collect::<Vec<_>>()).unwrap();
+    params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    let made = params.self_signed(&key).unwrap();
+    std::fs::create_dir_all(dir).unwrap();
+    let (cert, key_path) = (dir.join("cert.pem"), dir.join("key.pem"));
+    std::fs::write(&cert, made.pem()).unwrap();
+    std::fs::write(&key_path, key.serialize_pem()).unwrap();
+    (cert, key_path)
+}
+
+/// A certificate the user pinned with --ca-cert is trusted though it is marked as a CA (curl
+/// accepts it; the chain check alone refused it with `CaUsedAsEndEntity`): the command and a
+/// worker reach the coordinator. Another such certificate, or the pinned one for a name it
+/// does not hold, is still refused; an http:// URL gets told to use https://.
+#[test]
+fn a_pinned_self_signed_ca_certificate_is_trusted_as_curl_trusts_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cert, key) = self_signed_ca(&dir.path().join("server"), &["127.0.0.1", "localhost"]);
+    let cert_arg = cert.to_str().unwrap();
+    let c = Coordinator::start(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--tls-cert", cert_arg, "--tls-key", key.to_str().unwrap()],
+    );
+    let status = |url: &str, ca: &str| tessera(&["status", "--server", url, "--ca-cert", ca]);
+    let (ok, _, err) = status(&c.url, cert_arg);
+    assert!(ok, "the pinned certificate is trusted: {err}");
+    let (other, _) = self_signed_ca(&dir.path().join("other"), &["127.0.0.1", "localhost"]);
+    let (ok, _, err) = status(&c.url, other.to_str().unwrap());
+    assert!(!ok && err.contains("certificate"), "another certificate is not the pin: {err}");
+    let (only_localhost, only_key) = self_signed_ca(&dir.path().join("named"), &["localhost"]);
+    let named = Coordinator::start(
+        &dir.path().join("data2"),
+        "127.0.0.1:0",
+        &["--tls-cert", only_localhost.to_str().unwrap(), "--tls-key", only_key.to_str().unwrap()],
+    );
+    let (ok, _, err) = status(&named.url, only_localhost.to_str().unwrap());
+    assert!(!ok && err.contains("certificate"), "the pin must still name the server (127.0.0.1): {err}");
+    // http:// to this TLS port: the command and a worker say to use https://, and the worker
+    // stops (retrying cannot mend the URL)
+    let plain = c.url.replacen("https://", "http://", 1);
+    let (ok, _, err) = tessera(&["status", "--server", &plain]);
+    assert!(!ok && err.contains("speaks TLS: use https://"), "{err}");
+    let worker = std::process::Command::new(tessera_tests::bin("tessera-worker"))
+        .args(["--coordinator", &plain, "--cache-dir", dir.path().join("plain-cache").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&worker.stderr);
+    assert!(!worker.status.success() && err.contains("speaks TLS: use https://"), "{err}");
+    let _w = Worker::start(&c.url, &dir.path().join("cache"), &["--ca-cert", cert_arg]);
+    let out = dir.path().join("pinned.exr");
+    let (ok, _, err) = submit_and_wait(&c.url, &scene("cornell-box"), ("pt", 2, 6), &out, &["--ca-cert", cert_arg]);
+    assert!(ok, "a worker and the command over the pinned certificate: {err}");
+}
+
 #[test]
 fn cross_origin_pages_cannot_submit_or_cancel_jobs_with_or_without_tokens() {
     let dir = tempfile::tempdir().unwrap();

@@ -2,7 +2,8 @@
 //! `tessera-proto`: the conversions between `tessera.v1` messages and the renderer's settings and
 //! rectangles ([`convert`]), so the two ends cannot disagree on a default; the layout of the tile
 //! sums a worker uploads ([`payload`]); scene bundles as messages and blobs ([`bundle`]); and how
-//! a client reaches a coordinator over `http://` or `https://` ([`connect`]).
+//! a client reaches a coordinator over `http://` or `https://` ([`connect`], which checks the
+//! coordinator's certificate as [`pinned`] says).
 //!
 //! ```
 //! use tessera_common::settings::RenderSettings;
@@ -20,3 +21,4 @@ pub mod convert;
 pub mod frames;
 pub mod mask;
 pub mod payload;
+pub mod pinned;

@@ -2,8 +2,9 @@
 //! backoff for reconnecting and retrying.
 
 use std::time::Duration;
+use tessera_link::connect::Target;
 use tessera_proto::v1::worker_service_client::WorkerServiceClient;
-use tonic::transport::{Channel, Endpoint};
+use tonic::transport::Channel;
 
 /// A connected client plus its token.
 #[derive(Clone)]
@@ -15,8 +16,8 @@ pub struct Client {
 
 impl Client {
     /// Connects to the coordinator at `endpoint` (see [`tessera_link::connect::endpoint`]).
-    pub async fn connect(endpoint: &Endpoint, token: Option<String>) -> Result<Client, tonic::transport::Error> {
-        let channel = endpoint.clone().connect_timeout(Duration::from_secs(5)).tcp_nodelay(true).connect().await?;
+    pub async fn connect(endpoint: &Target, token: Option<String>) -> Result<Client, tonic::transport::Error> {
+        let channel = endpoint.clone().connect_timeout(Duration::from_secs(5)).connect().await?;
         let inner = WorkerServiceClient::new(channel)
             .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
             .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);

@@ -42,6 +42,27 @@ fn key(l: &pb::LeaseRef) -> (String, u32, u64) {
     (l.job_id.clone(), l.tile, l.epoch)
 }
 
+/// Why registering failed; what retrying cannot mend is [`Fatal`].
+async fn registration_error(s: tonic::Status, url: &str) -> anyhow::Error {
+    match s.code() {
+        // another worker's identity, another build: retrying cannot help
+        tonic::Code::FailedPrecondition | tonic::Code::InvalidArgument => {
+            anyhow::Error::new(Fatal(s.message().to_string()))
+        }
+        tonic::Code::Unauthenticated | tonic::Code::PermissionDenied => anyhow::Error::new(Fatal(format!(
+            "the coordinator refused this worker's token ({}): check --token (TESSERA_TOKEN)",
+            s.message()
+        ))),
+        // an http:// URL of a TLS coordinator answers with bytes that are no HTTP/2
+        tonic::Code::Internal | tonic::Code::Unknown
+            if tessera_link::connect::speaks_tls(url, Duration::from_secs(3)).await =>
+        {
+            anyhow::Error::new(Fatal(tessera_link::connect::use_https(url)))
+        }
+        _ => s.into(),
+    }
+}
+
 /// Runs until drained.
 pub async fn run(args: Args) -> anyhow::Result<()> {
     // a bad URL or CA file is fatal at once; only connecting is retried
@@ -76,19 +97,11 @@ pub async fn run(args: Args) -> anyhow::Result<()> {
                     tags: args.tags.clone(),
                     ..tessera_link::build::registration()
                 }))
-                .await
-                .map_err(|s| match s.code() {
-                    // another worker's identity, another build: retrying cannot help
-                    tonic::Code::FailedPrecondition | tonic::Code::InvalidArgument => {
-                        anyhow::Error::new(Fatal(s.message().to_string()))
-                    }
-                    tonic::Code::Unauthenticated | tonic::Code::PermissionDenied => anyhow::Error::new(Fatal(format!(
-                        "the coordinator refused this worker's token ({}): check --token (TESSERA_TOKEN)",
-                        s.message()
-                    ))),
-                    _ => s.into(),
-                })?
-                .into_inner();
+                .await;
+            let reg = match reg {
+                Ok(reg) => reg.into_inner(),
+                Err(s) => return Err(registration_error(s, &args.coordinator).await),
+            };
             tracing::info!(worker_id = %reg.worker_id, coordinator = %args.coordinator, threads, "registered");
             backoff.reset();
             let held = Arc::new(Mutex::new(Held::default()));

@@ -37,6 +37,9 @@ impl Client {
             .connect()
             .await
             .map_err(|source| Unreachable { url: args.server.clone(), source })?;
+        if args.server.to_ascii_lowercase().starts_with("http://") {
+            refuse_tls_behind_http(&args.server, channel.clone()).await?;
+        }
         let jobs = JobServiceClient::new(channel)
             .max_decoding_message_size(tessera_proto::MAX_MESSAGE_BYTES)
             .max_encoding_message_size(tessera_proto::MAX_MESSAGE_BYTES);
@@ -68,6 +71,22 @@ pub struct Unreachable {
     /// Why.
     #[source]
     pub source: tonic::transport::Error,
+}
+
+/// Over `http://`, a TLS server answers with bytes that are no HTTP/2, which tonic reports as
+/// "transport error (Unknown)": one request to `/healthz` finds out, and a server that then
+/// completes a TLS handshake is named as one (`use https://`).
+async fn refuse_tls_behind_http(url: &str, mut channel: Channel) -> anyhow::Result<()> {
+    use tonic::codegen::Service;
+    let request = http::Request::get("/healthz").body(tonic::body::Body::empty())?;
+    let answered = async {
+        std::future::poll_fn(|cx| channel.poll_ready(cx)).await?;
+        channel.call(request).await
+    };
+    if answered.await.is_err() && tessera_link::connect::speaks_tls(url, std::time::Duration::from_secs(3)).await {
+        bail!(tessera_link::connect::use_https(url));
+    }
+    Ok(())
 }
 
 /// A gRPC error as a one-line message.
