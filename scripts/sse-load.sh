@@ -23,7 +23,7 @@ for _ in $(seq 100); do
 done
 "$bin/tessera-worker" --coordinator "$url" --threads 1 --cache-dir "$work/cache" >"$work/worker.log" 2>&1 &
 job="$(curl -sf -F "scene=@$work/scene.xml;filename=scene.xml" \
-    -F 'settings={"integrator":"pt","spp":100000,"seed":1,"name":"sse load"}' "$url/api/v1/jobs" \
+    -F 'settings={"integrator":"pt","time_s":3600,"seed":1,"name":"sse load"}' "$url/api/v1/jobs" \
     | python3 -c 'import json, sys; print(json.load(sys.stdin)["id"])')"
 until curl -sf "$url/api/v1/jobs/$job" | python3 -c 'import json, sys; sys.exit(json.load(sys.stdin)["tiles_done"] < 2)'; do
     sleep 1
