@@ -27,7 +27,8 @@ pub struct Event {
     pub job: Option<String>,
     /// A frame's own job id, so a frame's job can be watched by its id too.
     pub frame_job: Option<String>,
-    /// After it, the job stays as it is unless a client acts (done, failed, cancelled, deleted).
+    /// After it, the job (for `frame.state`, the frame's job) stays as it is unless a client
+    /// acts: done, failed, cancelled, deleted.
     pub ends_job: bool,
     /// The JSON payload.
     pub data: String,
@@ -37,6 +38,13 @@ impl Event {
     /// Whether a stream of `job` shows it.
     pub fn concerns(&self, job: &str) -> bool {
         self.job.as_deref() == Some(job) || self.frame_job.as_deref() == Some(job)
+    }
+
+    /// Whether a stream of `job` ends with it: `job` (a job, or a frame's job watched by its
+    /// own id) has ended; a frame ending does not end its job of frames' stream.
+    pub fn ends(&self, job: &str) -> bool {
+        let about = if self.kind == "frame.state" { &self.frame_job } else { &self.job };
+        self.ends_job && about.as_deref() == Some(job)
     }
 }
 
@@ -88,7 +96,9 @@ impl JobLine {
     }
 
     fn same_but_eta(&self, other: &JobLine) -> bool {
-        JobLine { eta_s: None, ..self.clone() } == JobLine { eta_s: None, ..other.clone() }
+        let mut same_eta = self.clone();
+        same_eta.eta_s = other.eta_s;
+        same_eta == *other
     }
 }
 
@@ -180,7 +190,8 @@ impl Snapshot {
         }
         for (id, line) in &next.frames {
             if self.frames.get(id).is_none_or(|old| old != line) {
-                out.push(("frame.state", Some(line.job_id.clone()), Some(id.clone()), false, encode(line)));
+                let ends = ended(line.state);
+                out.push(("frame.state", Some(line.job_id.clone()), Some(id.clone()), ends, encode(line)));
             }
         }
         for (id, line) in &next.workers {

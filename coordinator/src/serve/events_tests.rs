@@ -76,12 +76,18 @@ fn frames_and_workers_become_events() {
         kinds(&changes),
         [
             ("job.progress", Some("s1"), false),
-            ("frame.state", Some("s1"), false),
+            ("frame.state", Some("s1"), true),
             ("worker", None, false),
             ("worker.gone", None, false)
         ]
     );
     assert_eq!(changes[1].2.as_deref(), Some("s1-0007"), "a frame's events name its own job too");
+    // the frame's stream ends with it, its job of frames' stream does not
+    let hub = Hub::default();
+    let mut rx = hub.subscribe();
+    hub.publish(vec![changes[1].clone()]);
+    let done = rx.try_recv().unwrap();
+    assert!(done.ends("s1-0007") && !done.ends("s1"));
     let frame: serde_json::Value = serde_json::from_str(&changes[1].4).unwrap();
     assert_eq!((frame["frame"].as_u64(), frame["state"].as_str()), (Some(7), Some("done")));
     let job: serde_json::Value = serde_json::from_str(&changes[0].4).unwrap();

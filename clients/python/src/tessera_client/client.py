@@ -164,7 +164,7 @@ class Job:
                 raise TimeoutError(f"job {self.id} is still {self.state} after {timeout} s")
             try:
                 self._follow(deadline, progress)
-            except (httpx.TransportError, httpx.RemoteProtocolError):
+            except httpx.TransportError:
                 time.sleep(1.0)  # the stream broke: read the state, then follow again
         if self.state != "done":
             raise JobFailed(self.info)

@@ -97,5 +97,5 @@ pub async fn of_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> 
         return Ok(Sse::new(once).into_response());
     }
     let keep_id = id.clone();
-    Ok(stream(rx, first, move |e| e.concerns(&keep_id), move |e| e.ends_job && e.job.as_deref() == Some(&id)))
+    Ok(stream(rx, first, move |e| e.concerns(&keep_id), move |e| e.ends(&id)))
 }

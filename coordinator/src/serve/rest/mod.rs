@@ -62,7 +62,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .routes(routes!(farm::metrics))
         .routes(routes!(openapi::healthz))
         .split_for_parts();
-    let doc: Arc<str> = openapi::document(doc).into();
+    let doc = axum::body::Bytes::from(openapi::document(doc));
     api.route("/api/v1/openapi.json", get(move || openapi::serve(doc.clone())))
         .route("/", get(dashboard))
         .route("/dashboard", get(dashboard))

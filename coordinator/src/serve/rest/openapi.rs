@@ -7,7 +7,6 @@ use super::dto::Problem;
 use axum::http::header;
 use axum::response::IntoResponse;
 use serde_json::{Value, json};
-use std::sync::Arc;
 use utoipa::OpenApi;
 
 #[derive(OpenApi)]
@@ -79,9 +78,9 @@ pub fn document(api: utoipa::openapi::OpenApi) -> String {
     serde_json::to_string_pretty(&doc).expect("invariant: JSON values serialise")
 }
 
-/// `GET /api/v1/openapi.json`.
-pub async fn serve(doc: Arc<str>) -> impl IntoResponse {
-    ([(header::CONTENT_TYPE, "application/json")], doc.to_string())
+/// `GET /api/v1/openapi.json`: the document made at start-up, shared without copying.
+pub async fn serve(doc: axum::body::Bytes) -> impl IntoResponse {
+    ([(header::CONTENT_TYPE, "application/json")], doc)
 }
 
 /// `GET /api/v1/healthz` (and `/healthz`): `ok` while the coordinator serves.

@@ -176,7 +176,7 @@ impl JobService {
     pub(super) fn sequence_view(&self, inner: &Inner, id: &str, now_ms: u64) -> JobView {
         let s = &inner.model.sequences[id];
         let frames = inner.model.frames_of(id);
-        let views: Vec<JobView> = frames.iter().map(|j| self.view(inner, &j.id, now_ms)).collect();
+        let views: Vec<JobView> = frames.iter().map(|j| self.view_without_strategy(inner, &j.id, now_ms)).collect();
         let total = s.spec.frames.len();
         let progress = views.iter().map(|v| v.progress).sum::<f64>() / total.max(1) as f64;
         let count = |state: JobState| views.iter().filter(|v| v.state == state).count();

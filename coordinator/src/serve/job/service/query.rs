@@ -76,6 +76,16 @@ pub struct Metrics {
 impl JobService {
     /// A job's view with its EMIS decisions (kept after the job ends).
     pub(super) fn view(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
+        let mut view = self.view_without_strategy(inner, job, now_ms);
+        if !inner.model.sequences.contains_key(job) {
+            view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
+        }
+        view
+    }
+
+    /// [`JobService::view`] without the EMIS decisions, which copy every update's report: for
+    /// the event stream's comparisons and a job of frames' lines, which show none of it.
+    pub(super) fn view_without_strategy(&self, inner: &Inner, job: &str, now_ms: u64) -> JobView {
         if inner.model.sequences.contains_key(job) {
             return self.sequence_view(inner, job, now_ms);
         }
@@ -89,7 +99,6 @@ impl JobService {
         } else if !j.spec.require_tags.is_empty() && !j.state.is_terminal() && !self.anyone_serves(inner, j, now_ms) {
             view.phase = format!("waiting for a worker with tags {}", j.spec.require_tags.join(", "));
         }
-        view.strategy = inner.jobs.get(job).and_then(|r| r.strategy());
         view
     }
 
@@ -147,13 +156,15 @@ impl JobService {
             let total = jobs.len();
             (jobs.into_iter().skip(offset).take(limit).map(|(_, id, _)| summary(id)).collect(), total)
         } else {
-            let all: Vec<_> = jobs
+            // states are read off views without the EMIS decisions; only the page gets them
+            let state = |id: &str| self.view_without_strategy(&inner, id, now_ms).state;
+            let all: Vec<&String> = jobs
                 .into_iter()
-                .map(|(_, id, _)| summary(id))
-                .filter(|v| filter.states.iter().any(|s| s == v.state.as_str()))
+                .map(|(_, id, _)| id)
+                .filter(|id| filter.states.iter().any(|s| s == state(id).as_str()))
                 .collect();
             let total = all.len();
-            (all.into_iter().skip(offset).take(limit).collect(), total)
+            (all.into_iter().skip(offset).take(limit).map(|id| summary(id)).collect(), total)
         };
         let ticket = inner.ticket;
         drop(inner);
@@ -168,7 +179,7 @@ impl JobService {
         let inner = self.lock();
         let stills = inner.model.jobs.values().filter(|j| j.spec.frame.is_none()).map(|j| &j.id);
         let ids: Vec<&String> = stills.chain(inner.model.sequences.keys()).collect();
-        let views = ids.into_iter().map(|id| self.view(&inner, id, now_ms)).collect();
+        let views = ids.into_iter().map(|id| self.view_without_strategy(&inner, id, now_ms)).collect();
         let workers = inner.workers.values().map(|w| self.worker_view(&inner, w, now_ms)).collect();
         let ticket = inner.ticket;
         drop(inner);
